@@ -1,0 +1,76 @@
+//! Triangle meshes from STL (binary and ASCII), OBJ and COLLADA/DAE files.
+
+use std::path::Path;
+
+use crate::math::Vector;
+
+/// An indexed triangle mesh in the mesh's own frame, in metres (scale applied).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TriMesh {
+    pub vertices: Vec<Vector>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl TriMesh {
+    /// Reads a mesh file (format from the extension and content) and scales it per axis.
+    ///
+    /// All sub-meshes of a scene are merged. A file with no triangle, a non-finite vertex or a
+    /// face that indexes past the vertices is an error.
+    ///
+    /// # Errors
+    /// A message saying what is wrong with the file.
+    pub fn load(path: &Path, scale: [f64; 3]) -> Result<Self, String> {
+        let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        Self::from_bytes(&bytes, path, scale)
+    }
+
+    /// Like [`TriMesh::load`] on bytes already read; `path` only tells the format.
+    ///
+    /// # Errors
+    /// A message saying what is wrong with the bytes.
+    pub fn from_bytes(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, String> {
+        let loader = mesh_loader::Loader::default().merge_meshes(true);
+        // OBJ files may name material libraries; those are not needed for geometry.
+        let scene = loader
+            .load_from_slice_with_reader(bytes, path, |_| Ok(Vec::new()))
+            .map_err(|e| format!("cannot decode {}: {e}", path.display()))?;
+        let mut mesh = TriMesh {
+            vertices: Vec::new(),
+            triangles: Vec::new(),
+        };
+        let s = Vector::from_array(scale);
+        for part in &scene.meshes {
+            let base = u32::try_from(mesh.vertices.len()).map_err(|_| "mesh too large".to_string())?;
+            for v in &part.vertices {
+                let p = Vector::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])) * s;
+                if !p.is_finite() {
+                    return Err(format!("{} has a non-finite vertex", path.display()));
+                }
+                mesh.vertices.push(p);
+            }
+            let count = part.vertices.len();
+            for f in &part.faces {
+                if f.iter().any(|&i| i as usize >= count) {
+                    return Err(format!(
+                        "{} has a face that indexes past its {count} vertices",
+                        path.display()
+                    ));
+                }
+                mesh.triangles.push([f[0] + base, f[1] + base, f[2] + base]);
+            }
+        }
+        if mesh.triangles.is_empty() {
+            return Err(format!("{} holds no triangle", path.display()));
+        }
+        Ok(mesh)
+    }
+
+    /// Axis-aligned bounds `(min, max)` of the vertices.
+    #[must_use]
+    pub fn bounds(&self) -> (Vector, Vector) {
+        self.vertices.iter().fold(
+            (Vector::splat(f64::INFINITY), Vector::splat(f64::NEG_INFINITY)),
+            |(lo, hi), v| (lo.min(*v), hi.max(*v)),
+        )
+    }
+}

@@ -1,0 +1,435 @@
+//! Loading URDF into a [`RobotModel`], with every field read and checked.
+//!
+//! urdf-rs parses the XML; this module turns it into our model and rejects what is not a
+//! valid robot: a missing parent or child, a link with two parents, a cycle, several roots,
+//! non-finite or negative numbers, a zero joint axis, a mimic of an unknown joint, a mesh that
+//! cannot be found or decoded. Each error names the file and the element.
+
+use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::error::{Result, RobotError};
+use crate::math::{Pose, Vector, all_finite, pose_from_xyz_rpy};
+use crate::mesh::TriMesh;
+use crate::model::{
+    Coordinate, Geometry, Inertial, Joint, JointKind, JointLimits, Link, RobotModel,
+    SafetyController, Shape,
+};
+use crate::package::PackageMap;
+
+impl RobotModel {
+    /// Loads a URDF file; meshes are resolved through `packages`, then the URDF's ancestors.
+    ///
+    /// # Errors
+    /// [`RobotError`] naming the file and the element that is wrong.
+    pub fn from_urdf_file(path: impl AsRef<Path>, packages: &PackageMap) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| RobotError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_urdf_str(&text, path, packages)
+    }
+
+    /// Loads URDF text; `path` names it in errors and anchors relative mesh paths.
+    ///
+    /// # Errors
+    /// [`RobotError`] naming `path` and the element that is wrong.
+    pub fn from_urdf_str(text: &str, path: &Path, packages: &PackageMap) -> Result<Self> {
+        let robot = urdf_rs::read_from_string(text).map_err(|e| RobotError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        Builder {
+            path,
+            urdf_dir: path.parent().unwrap_or(Path::new(".")),
+            packages,
+            meshes: HashMap::new(),
+        }
+        .build(&robot)
+    }
+}
+
+struct Builder<'a> {
+    path: &'a Path,
+    urdf_dir: &'a Path,
+    packages: &'a PackageMap,
+    meshes: HashMap<(PathBuf, [u64; 3]), Arc<TriMesh>>,
+}
+
+impl Builder<'_> {
+    fn invalid(&self, element: impl Into<String>, message: impl Into<String>) -> RobotError {
+        RobotError::invalid(self.path, element, message)
+    }
+
+    fn build(mut self, robot: &urdf_rs::Robot) -> Result<RobotModel> {
+        if robot.links.is_empty() {
+            return Err(self.invalid(format!("robot '{}'", robot.name), "has no link"));
+        }
+        let materials: HashMap<&str, [f64; 4]> = robot
+            .materials
+            .iter()
+            .filter_map(|m| m.color.as_ref().map(|c| (m.name.as_str(), c.rgba.0)))
+            .collect();
+
+        // Links, by name.
+        let mut link_ids = HashMap::new();
+        let mut links = Vec::with_capacity(robot.links.len());
+        for (id, l) in robot.links.iter().enumerate() {
+            if link_ids.insert(l.name.as_str(), id).is_some() {
+                return Err(self.invalid(format!("link '{}'", l.name), "is defined twice"));
+            }
+            links.push(self.link(l, &materials)?);
+        }
+
+        // Joints: endpoints, one parent per link, values.
+        let mut joint_names = HashMap::new();
+        let mut raw = Vec::with_capacity(robot.joints.len());
+        for j in &robot.joints {
+            let element = format!("joint '{}'", j.name);
+            if joint_names.insert(j.name.as_str(), raw.len()).is_some() {
+                return Err(self.invalid(element, "is defined twice"));
+            }
+            let parent = *link_ids.get(j.parent.link.as_str()).ok_or_else(|| {
+                self.invalid(&element, format!("parent link '{}' does not exist", j.parent.link))
+            })?;
+            let child = *link_ids.get(j.child.link.as_str()).ok_or_else(|| {
+                self.invalid(&element, format!("child link '{}' does not exist", j.child.link))
+            })?;
+            if parent == child {
+                return Err(self.invalid(element, "connects a link to itself"));
+            }
+            if let Some(other) = links[child].parent_joint {
+                return Err(self.invalid(
+                    element,
+                    format!(
+                        "link '{}' already has parent joint '{}'",
+                        j.child.link, robot.joints[other].name
+                    ),
+                ));
+            }
+            links[child].parent_joint = Some(raw.len());
+            raw.push(self.joint(j, parent, child)?);
+        }
+
+        // The root, then a breadth-first order that reaches every link exactly once.
+        let roots: Vec<usize> = (0..links.len()).filter(|&l| links[l].parent_joint.is_none()).collect();
+        let root = match roots.as_slice() {
+            [root] => *root,
+            [] => {
+                return Err(self.invalid(
+                    format!("robot '{}'", robot.name),
+                    "every link has a parent joint: the joints form a cycle",
+                ));
+            }
+            many => {
+                let names: Vec<&str> = many.iter().map(|&l| links[l].name.as_str()).collect();
+                return Err(self.invalid(
+                    format!("robot '{}'", robot.name),
+                    format!("has {} root links ({}); joints must connect them into one tree", many.len(), names.join(", ")),
+                ));
+            }
+        };
+        let mut order = Vec::with_capacity(raw.len());
+        let mut queue = VecDeque::from([root]);
+        while let Some(link) = queue.pop_front() {
+            for (j, joint) in raw.iter().enumerate() {
+                if joint.parent == link {
+                    order.push(j);
+                    queue.push_back(joint.child);
+                }
+            }
+        }
+        if order.len() != raw.len() {
+            let stuck = (0..raw.len()).find(|j| !order.contains(j)).unwrap_or(0);
+            return Err(self.invalid(
+                format!("joint '{}'", raw[stuck].name),
+                "is part of a cycle not connected to the root link",
+            ));
+        }
+
+        // Renumber joints in topological order.
+        let mut new_id = vec![0; raw.len()];
+        for (new, &old) in order.iter().enumerate() {
+            new_id[old] = new;
+        }
+        let mut joints: Vec<Joint> = order.iter().map(|&old| raw[old].clone()).collect();
+        for link in &mut links {
+            link.parent_joint = link.parent_joint.map(|old| new_id[old]);
+        }
+
+        // Coordinates: every movable joint that is not a mimic, in topological order.
+        let mut actuated = Vec::new();
+        for (id, joint) in joints.iter_mut().enumerate() {
+            if joint.kind.is_movable() && joint.mimic.is_none() {
+                joint.coordinate = Coordinate::Own { index: actuated.len() };
+                actuated.push(id);
+            }
+        }
+        self.resolve_mimics(&mut joints)?;
+
+        Ok(RobotModel {
+            name: robot.name.clone(),
+            source: self.path.to_path_buf(),
+            links,
+            joints,
+            actuated,
+            root,
+        })
+    }
+
+    /// Resolves each mimic joint to the coordinate it follows, through chains of mimics.
+    fn resolve_mimics(&self, joints: &mut [Joint]) -> Result<()> {
+        let by_name: BTreeMap<String, usize> =
+            joints.iter().enumerate().map(|(i, j)| (j.name.clone(), i)).collect();
+        for id in 0..joints.len() {
+            let Some((_, _, _)) = joints[id].mimic else {
+                continue;
+            };
+            let element = format!("joint '{}'", joints[id].name);
+            let (mut multiplier, mut offset) = (1.0, 0.0);
+            let mut current = id;
+            let mut hops = 0;
+            loop {
+                let Some((target, m, o)) = joints[current].mimic.clone() else {
+                    break;
+                };
+                let next = *by_name.get(&target).ok_or_else(|| {
+                    self.invalid(&element, format!("mimics joint '{target}', which does not exist"))
+                })?;
+                if !joints[next].kind.is_movable() {
+                    return Err(self.invalid(&element, format!("mimics fixed joint '{target}'")));
+                }
+                // q_current = m * q_next + o, and q_next = multiplier' * q_root + offset'.
+                offset += multiplier * o;
+                multiplier *= m;
+                current = next;
+                hops += 1;
+                if hops > joints.len() {
+                    return Err(self.invalid(&element, "mimic joints form a cycle"));
+                }
+            }
+            let Coordinate::Own { index } = joints[current].coordinate else {
+                return Err(self.invalid(&element, "mimics a joint with no coordinate"));
+            };
+            joints[id].coordinate = Coordinate::Mimic { index, multiplier, offset };
+        }
+        Ok(())
+    }
+
+    fn joint(&self, j: &urdf_rs::Joint, parent: usize, child: usize) -> Result<Joint> {
+        let element = format!("joint '{}'", j.name);
+        let kind = match j.joint_type {
+            urdf_rs::JointType::Revolute => JointKind::Revolute,
+            urdf_rs::JointType::Continuous => JointKind::Continuous,
+            urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+            urdf_rs::JointType::Fixed => JointKind::Fixed,
+            ref other => {
+                return Err(self.invalid(
+                    element,
+                    format!("joint type '{other:?}' is not supported (revolute, continuous, prismatic, fixed)").to_lowercase(),
+                ));
+            }
+        };
+        let X_PJ = self.origin(&element, &j.origin)?;
+        let axis = Vector::from_array(j.axis.xyz.0);
+        let axis = if kind.is_movable() {
+            if !axis.is_finite() || axis.length() < 1e-9 {
+                return Err(self.invalid(element, format!("axis {:?} is not a direction", j.axis.xyz.0)));
+            }
+            axis.normalize()
+        } else {
+            Vector::X
+        };
+        let l = &j.limit;
+        for (name, v) in [("velocity", l.velocity), ("effort", l.effort)] {
+            if v.is_nan() || v < 0.0 {
+                return Err(self.invalid(&element, format!("limit {name}={v} must be >= 0")));
+            }
+        }
+        if l.lower.is_nan() || l.upper.is_nan() || l.acceleration.is_nan() || l.acceleration < 0.0 {
+            return Err(self.invalid(&element, "limit has a NaN or negative value"));
+        }
+        let (lower, upper) = match kind {
+            JointKind::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
+            JointKind::Fixed => (0.0, 0.0),
+            JointKind::Revolute | JointKind::Prismatic => {
+                if l.lower > l.upper {
+                    return Err(self.invalid(
+                        element,
+                        format!("limit lower={} is above upper={}", l.lower, l.upper),
+                    ));
+                }
+                (l.lower, l.upper)
+            }
+        };
+        let safety_controller = match &j.safety_controller {
+            Some(s) => {
+                let v = [s.soft_lower_limit, s.soft_upper_limit, s.k_position, s.k_velocity];
+                if !all_finite(&v) || s.k_velocity < 0.0 || s.k_position < 0.0 {
+                    return Err(self.invalid(element, "safety_controller has a non-finite or negative value"));
+                }
+                Some(SafetyController {
+                    soft_lower_limit: s.soft_lower_limit,
+                    soft_upper_limit: s.soft_upper_limit,
+                    k_position: s.k_position,
+                    k_velocity: s.k_velocity,
+                })
+            }
+            None => None,
+        };
+        let mimic = match &j.mimic {
+            Some(m) => {
+                let multiplier = m.multiplier.unwrap_or(1.0);
+                let offset = m.offset.unwrap_or(0.0);
+                if !all_finite(&[multiplier, offset]) {
+                    return Err(self.invalid(element, "mimic has a non-finite multiplier or offset"));
+                }
+                if !kind.is_movable() {
+                    return Err(self.invalid(element, "a fixed joint cannot mimic"));
+                }
+                Some((m.joint.clone(), multiplier, offset))
+            }
+            None => None,
+        };
+        let (damping, friction) = j.dynamics.as_ref().map_or((0.0, 0.0), |d| (d.damping, d.friction));
+        if !all_finite(&[damping, friction]) || damping < 0.0 || friction < 0.0 {
+            return Err(self.invalid(element, "dynamics damping/friction must be finite and >= 0"));
+        }
+        Ok(Joint {
+            name: j.name.clone(),
+            kind,
+            parent,
+            child,
+            X_PJ,
+            axis,
+            limits: JointLimits {
+                lower,
+                upper,
+                velocity: l.velocity,
+                effort: l.effort,
+                acceleration: l.acceleration,
+            },
+            safety_controller,
+            mimic,
+            damping,
+            friction,
+            coordinate: Coordinate::None,
+        })
+    }
+
+    fn origin(&self, element: &str, origin: &urdf_rs::Pose) -> Result<Pose> {
+        if !all_finite(&origin.xyz.0) || !all_finite(&origin.rpy.0) {
+            return Err(self.invalid(element, "origin has a non-finite value"));
+        }
+        Ok(pose_from_xyz_rpy(origin.xyz.0, origin.rpy.0))
+    }
+
+    fn link(&mut self, l: &urdf_rs::Link, materials: &HashMap<&str, [f64; 4]>) -> Result<Link> {
+        let element = format!("link '{}'", l.name);
+        let i = &l.inertial;
+        let tensor = [i.inertia.ixx, i.inertia.ixy, i.inertia.ixz, i.inertia.iyy, i.inertia.iyz, i.inertia.izz];
+        if !i.mass.value.is_finite() || i.mass.value < 0.0 {
+            return Err(self.invalid(element, format!("inertial mass {} must be finite and >= 0", i.mass.value)));
+        }
+        if !all_finite(&tensor) || tensor[0] < 0.0 || tensor[3] < 0.0 || tensor[5] < 0.0 {
+            return Err(self.invalid(element, "inertia has a non-finite or negative diagonal value"));
+        }
+        let inertial = (i.mass.value > 0.0).then(|| -> Result<Inertial> {
+            Ok(Inertial {
+                mass_kg: i.mass.value,
+                X_LI: self.origin(&element, &i.origin)?,
+                inertia_kgm2: tensor,
+            })
+        });
+        let inertial = inertial.transpose()?;
+
+        let mut visuals = Vec::with_capacity(l.visual.len());
+        for (k, v) in l.visual.iter().enumerate() {
+            let el = format!("{element} visual {k}");
+            let rgba = v.material.as_ref().and_then(|m| {
+                m.color.as_ref().map(|c| c.rgba.0).or_else(|| materials.get(m.name.as_str()).copied())
+            });
+            visuals.push(Geometry {
+                name: v.name.clone(),
+                X_LG: self.origin(&el, &v.origin)?,
+                shape: self.shape(&el, &v.geometry)?,
+                rgba,
+            });
+        }
+        let mut collisions = Vec::with_capacity(l.collision.len());
+        for (k, c) in l.collision.iter().enumerate() {
+            let el = format!("{element} collision {k}");
+            collisions.push(Geometry {
+                name: c.name.clone(),
+                X_LG: self.origin(&el, &c.origin)?,
+                shape: self.shape(&el, &c.geometry)?,
+                rgba: None,
+            });
+        }
+        Ok(Link {
+            name: l.name.clone(),
+            parent_joint: None,
+            inertial,
+            visuals,
+            collisions,
+        })
+    }
+
+    fn shape(&mut self, element: &str, g: &urdf_rs::Geometry) -> Result<Shape> {
+        let positive = |what: &str, v: &[f64]| -> Result<()> {
+            if v.iter().all(|x| x.is_finite() && *x >= 0.0) {
+                Ok(())
+            } else {
+                Err(self.invalid(element, format!("{what} {v:?} must be finite and >= 0")))
+            }
+        };
+        Ok(match g {
+            urdf_rs::Geometry::Box { size } => {
+                positive("box size", &size.0)?;
+                Shape::Box { size_m: size.0 }
+            }
+            urdf_rs::Geometry::Cylinder { radius, length } => {
+                positive("cylinder radius/length", &[*radius, *length])?;
+                Shape::Cylinder { radius_m: *radius, length_m: *length }
+            }
+            urdf_rs::Geometry::Capsule { radius, length } => {
+                positive("capsule radius/length", &[*radius, *length])?;
+                Shape::Capsule { radius_m: *radius, length_m: *length }
+            }
+            urdf_rs::Geometry::Sphere { radius } => {
+                positive("sphere radius", &[*radius])?;
+                Shape::Sphere { radius_m: *radius }
+            }
+            urdf_rs::Geometry::Mesh { filename, scale } => {
+                let scale = scale.map_or([1.0; 3], |s| s.0);
+                if !all_finite(&scale) {
+                    return Err(self.invalid(element, "mesh scale has a non-finite value"));
+                }
+                let mesh_error = |message: String| RobotError::Mesh {
+                    path: self.path.to_path_buf(),
+                    element: element.to_string(),
+                    uri: filename.clone(),
+                    message,
+                };
+                let path = self.packages.resolve(filename, self.urdf_dir).map_err(mesh_error)?;
+                let key = (path.clone(), scale.map(f64::to_bits));
+                let mesh = match self.meshes.get(&key) {
+                    Some(mesh) => mesh.clone(),
+                    None => {
+                        let mesh = Arc::new(TriMesh::load(&path, scale).map_err(|message| RobotError::Mesh {
+                            path: self.path.to_path_buf(),
+                            element: element.to_string(),
+                            uri: filename.clone(),
+                            message,
+                        })?);
+                        self.meshes.insert(key, mesh.clone());
+                        mesh
+                    }
+                };
+                Shape::Mesh { uri: filename.clone(), path, scale, mesh }
+            }
+        })
+    }
+}

@@ -1,0 +1,50 @@
+//! The one error type of this crate.
+
+use std::path::PathBuf;
+
+use workcell_robots::RobotError;
+
+/// What can go wrong while reading a scenario or building and running a cell.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimError {
+    /// The scenario file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The scenario is not valid TOML for a scenario (syntax, unknown key, wrong type).
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    /// A scenario value is out of range; `key` is its dotted path (e.g. `robot.base.xyz`).
+    #[error("{path}: {key}: {message}")]
+    Invalid {
+        path: PathBuf,
+        key: String,
+        message: String,
+    },
+    /// A robot or human model named by the scenario failed to load.
+    #[error("{path}: {key}: {source}")]
+    Robot {
+        path: PathBuf,
+        key: String,
+        #[source]
+        source: RobotError,
+    },
+    /// Inverse kinematics found no configuration for a task waypoint.
+    #[error("{path}: {key}: no joint configuration reaches {target:?} (residual {residual_m:.4} m)")]
+    Unreachable {
+        path: PathBuf,
+        key: String,
+        target: [f64; 3],
+        residual_m: f64,
+    },
+    /// A command given to `step` does not fit the robot.
+    #[error("{message}")]
+    InvalidCommand { message: String },
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = SimError> = std::result::Result<T, E>;
