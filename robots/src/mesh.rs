@@ -29,6 +29,7 @@ impl TriMesh {
     /// # Errors
     /// A message saying what is wrong with the bytes.
     pub fn from_bytes(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, String> {
+        check_binary_stl_length(bytes, path)?;
         let loader = mesh_loader::Loader::default().merge_meshes(true);
         // OBJ files may name material libraries; those are not needed for geometry.
         let scene = loader
@@ -62,6 +63,10 @@ impl TriMesh {
         if mesh.triangles.is_empty() {
             return Err(format!("{} holds no triangle", path.display()));
         }
+        let (lo, hi) = mesh.bounds();
+        if (hi - lo).max_element() <= 0.0 {
+            return Err(format!("{} is degenerate: all its vertices coincide", path.display()));
+        }
         Ok(mesh)
     }
 
@@ -73,4 +78,25 @@ impl TriMesh {
             |(lo, hi), v| (lo.min(*v), hi.max(*v)),
         )
     }
+}
+
+/// A binary STL states its triangle count in its header: a file shorter than that is
+/// truncated (decoders tend to read what is there and say nothing).
+fn check_binary_stl_length(bytes: &[u8], path: &Path) -> Result<(), String> {
+    let is_stl = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("stl"));
+    if !is_stl || bytes.len() < 84 || bytes.starts_with(b"solid") && bytes.is_ascii() {
+        return Ok(());
+    }
+    let count = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
+    let expected = 84 + 50 * count;
+    if bytes.len() < expected {
+        return Err(format!(
+            "{} is a truncated binary STL: its header counts {count} triangles ({expected} bytes), the file has {} bytes",
+            path.display(),
+            bytes.len()
+        ));
+    }
+    Ok(())
 }

@@ -1,0 +1,74 @@
+//! Mesh files of every supported format load to the same geometry; scale applies per axis.
+
+use std::path::{Path, PathBuf};
+
+use approx::assert_relative_eq;
+use workcell_robots::collision::link_collision_shape;
+use workcell_robots::math::Pose;
+use workcell_robots::{Coordinate, PackageMap, RobotModel, Shape, TriMesh};
+
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
+}
+
+#[test]
+fn unit_cube_in_every_format() {
+    for file in ["cube_binary.stl", "cube_ascii.stl", "cube.obj", "cube.dae"] {
+        let mesh = TriMesh::load(&fixtures().join("meshes").join(file), [1.0, 2.0, 3.0])
+            .unwrap_or_else(|e| panic!("{file}: {e}"));
+        assert_eq!(mesh.triangles.len(), 12, "{file}");
+        let (lo, hi) = mesh.bounds();
+        for (axis, scale) in [(0, 1.0), (1, 2.0), (2, 3.0)] {
+            assert_relative_eq!(lo.to_array()[axis], -0.5 * scale, epsilon = 1e-6);
+            assert_relative_eq!(hi.to_array()[axis], 0.5 * scale, epsilon = 1e-6);
+        }
+        // The convex hull of the scaled cube has volume 1 * 2 * 3.
+        let hull = parry3d_f64::shape::SharedShape::convex_hull(&mesh.vertices).expect("hull");
+        assert_relative_eq!(hull.mass_properties(1.0).mass(), 6.0, epsilon = 1e-6);
+    }
+}
+
+#[test]
+fn package_uris_relative_paths_and_mimic_joints() {
+    let path = fixtures().join("pkg/my_robot/urdf/gripper.urdf");
+    let robot = RobotModel::from_urdf_file(&path, &PackageMap::new()).expect("loads");
+    assert_eq!(robot.dof(), 3, "lift, wrist, left finger; the right finger mimics");
+    let right = &robot.joints()[robot.joint_id("finger_right_joint").expect("joint")];
+    let left_index = match robot.joints()[robot.joint_id("finger_left_joint").expect("joint")].coordinate {
+        Coordinate::Own { index } => index,
+        other => panic!("left finger should be a coordinate, is {other:?}"),
+    };
+    assert_eq!(right.coordinate, Coordinate::Mimic { index: left_index, multiplier: -1.0, offset: 0.0 });
+
+    // Limits, safety controller, dynamics and acceleration are all read.
+    let lift = &robot.joints()[robot.joint_id("lift").expect("joint")];
+    assert_eq!((lift.limits.lower, lift.limits.upper, lift.limits.velocity), (0.0, 0.5, 0.3));
+    assert_eq!(lift.limits.acceleration, 2.0);
+    assert_eq!(lift.safety_controller.expect("safety controller").k_velocity, 100.0);
+    let wrist = &robot.joints()[robot.joint_id("wrist").expect("joint")];
+    assert!(wrist.limits.lower.is_infinite() && wrist.limits.upper.is_infinite());
+    assert_eq!((wrist.damping, wrist.friction), (0.5, 0.1));
+    assert_relative_eq!(robot.mass_kg(), 2.0);
+
+    // Meshes: package:// STL scaled for collision, DAE visual with the named material colour.
+    let base = &robot.links()[robot.link_id("base").expect("link")];
+    match &base.collisions[0].shape {
+        Shape::Mesh { path, scale, mesh, .. } => {
+            assert!(path.ends_with(Path::new("my_robot/meshes/cube.stl")));
+            assert_eq!(*scale, [0.2, 0.2, 0.1]);
+            assert_relative_eq!(mesh.bounds().1.z, 0.05, epsilon = 1e-7);
+        }
+        other => panic!("expected a mesh, got {other:?}"),
+    }
+    assert_eq!(base.visuals[0].rgba, Some([0.5, 0.5, 0.5, 1.0]));
+    let shape = link_collision_shape(&robot, robot.link_id("carriage").expect("link")).expect("shape");
+    assert_relative_eq!(shape.compute_aabb(&Pose::IDENTITY).maxs.x, 0.05, epsilon = 1e-7);
+
+    // Mimic in FK: opening the left finger by 3 cm moves the right one 3 cm the other way.
+    let state = robot.fk(Pose::IDENTITY, &[0.0, 0.0, 0.03]).expect("fk");
+    let palm = state.link_pose(robot.link_id("palm").expect("link"));
+    let fl = palm.inverse() * *state.link_pose(robot.link_id("finger_left").expect("link"));
+    let fr = palm.inverse() * *state.link_pose(robot.link_id("finger_right").expect("link"));
+    assert_relative_eq!(fl.translation.y, 0.05, epsilon = 1e-12);
+    assert_relative_eq!(fr.translation.y, -0.05, epsilon = 1e-12);
+}
