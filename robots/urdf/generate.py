@@ -41,7 +41,7 @@ def cylinder_inertia(mass, radius, length):
 def inertial(mass, com, ixx, iyy, izz, rpy=(0, 0, 0)):
     return (
         f'    <inertial>\n      <origin xyz="{fmt(*com)}" rpy="{fmt(*rpy)}"/>\n'
-        f'      <mass value="{mass:.6g}"/>\n'
+        f'      <mass value="{mass:.10g}"/>\n'
         f'      <inertia ixx="{ixx:.6g}" ixy="0" ixz="0" iyy="{iyy:.6g}" iyz="0" izz="{izz:.6g}"/>\n'
         f"    </inertial>\n"
     )
@@ -158,8 +158,8 @@ def ur5e():
     v = deg(180)
     limits = [(-2 * pi, 2 * pi, v, 150), (-2 * pi, 2 * pi, v, 150), (-pi, pi, v, 150),
               (-2 * pi, 2 * pi, v, 28), (-2 * pi, 2 * pi, v, 28), (-2 * pi, 2 * pi, v, 28)]
-    # base mass is not in the DH sheet: 4.0 kg for the base housing (total 20.6 kg per spec).
-    masses = [4.0, 3.761, 8.058, 2.846, 1.37, 1.3, 0.365]
+    # base mass is not in the DH sheet: the rest of the 20.6 kg the specification gives.
+    masses = [2.9, 3.761, 8.058, 2.846, 1.37, 1.3, 0.365]
     radii = [0.075, 0.065, 0.06, 0.045, 0.04, 0.04, 0.035]
     colors = {"base": (0.2, 0.2, 0.22, 1), "body": (0.75, 0.78, 0.82, 1), "joint": (0.25, 0.45, 0.75, 1)}
     return dh_arm("ur5e_kinematics", "6-DoF arm with UR5e kinematics and published limits; primitive geometry, not the vendor model.",
