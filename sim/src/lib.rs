@@ -1,1 +1,30 @@
+//! The simulated collaborative work-cell of workcell.
+//!
+//! A [`Scenario`] (TOML) describes the cell; [`CellModel`] is what it builds and never
+//! changes; [`CellState`] is the running world, advanced by [`step`]. The same seed gives
+//! bit-identical states after any number of steps on the same machine.
+//!
+//! ```
+//! use workcell_sim::{CellModel, CellState, RobotCommand, Scenario, step};
+//!
+//! let scenario = Scenario { seed: 3, ..Scenario::default() };
+//! let model = CellModel::new(&scenario, std::path::Path::new("inline.toml"))?;
+//! let mut state = CellState::new(&model)?;
+//! for _ in 0..100 {
+//!     step(&model, &mut state, &RobotCommand::Nominal)?;
+//! }
+//! assert!((state.time_s() - 0.1).abs() < 1e-12);
+//! # Ok::<(), workcell_sim::SimError>(())
+//! ```
+#![allow(non_snake_case)] // monogram frame notation: X_WB, p_WC
 
+mod cell;
+mod error;
+pub mod human;
+pub mod ik;
+pub mod scenario;
+pub mod trajectory;
+
+pub use cell::{CellModel, CellState, ClutterBox, RobotCommand, step};
+pub use error::{Result, SimError};
+pub use scenario::Scenario;

@@ -1,0 +1,453 @@
+//! Scenario files: a TOML description of a work-cell. Every field has a documented default;
+//! unknown keys are rejected, and [`Scenario::validate`] checks ranges.
+//!
+//! ```toml
+//! seed = 7
+//! time_step_s = 0.001
+//!
+//! [robot]
+//! model = "iiwa14_kinematics"          # catalogue name or path to a URDF
+//! base = { xyz = [0.0, 0.0, 0.75] }
+//!
+//! [human]
+//! base = { xyz = [1.05, 0.0, 0.0], rpy = [0.0, 0.0, 3.14159] }
+//!
+//! [[clutter]]
+//! kind = "box"
+//! size_m = [1.2, 0.8, 0.75]
+//! pose = { xyz = [0.45, 0.0, 0.375] }
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use workcell_robots::math::{Pose, pose_from_xyz_rpy};
+
+use crate::error::{Result, SimError};
+
+/// A whole work-cell: robot, human, clutter, cameras, time step and seed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Scenario {
+    /// Seed of every random choice (trajectories, human motions). Default 0.
+    pub seed: u64,
+    /// Physics time step in seconds. Default 0.001 (1 kHz).
+    pub time_step_s: f64,
+    /// Gravity in the world frame (z up), m/s^2. Default `[0, 0, -9.81]`.
+    pub gravity_m_s2: [f64; 3],
+    pub robot: RobotConfig,
+    pub human: HumanConfig,
+    /// Static obstacles: tables, shelves, boxes.
+    pub clutter: Vec<ClutterConfig>,
+    /// Cameras (poses and intrinsics; rendering is a later stage).
+    pub cameras: Vec<CameraConfig>,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            time_step_s: 0.001,
+            gravity_m_s2: [0.0, 0.0, -9.81],
+            robot: RobotConfig::default(),
+            human: HumanConfig::default(),
+            clutter: Vec::new(),
+            cameras: Vec::new(),
+        }
+    }
+}
+
+/// A pose written as URDF writes origins: translation in metres, fixed-axis roll-pitch-yaw in
+/// radians.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct PoseConfig {
+    pub xyz: [f64; 3],
+    pub rpy: [f64; 3],
+}
+
+impl PoseConfig {
+    /// The pose as a rigid transform.
+    #[must_use]
+    pub fn to_pose(&self) -> Pose {
+        pose_from_xyz_rpy(self.xyz, self.rpy)
+    }
+}
+
+/// The robot arm.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RobotConfig {
+    /// Catalogue name (`iiwa14_kinematics`, `ur5e_kinematics`) or path to a URDF file,
+    /// relative to the scenario file. Default `iiwa14_kinematics`.
+    pub model: String,
+    /// Pose of the robot's root link in the world. Default: origin.
+    pub base: PoseConfig,
+    /// Joint configuration at t = 0; empty means the middle of the joint ranges.
+    pub initial_q: Vec<f64>,
+    /// Link whose origin task waypoints refer to. Default `tool0`.
+    pub tool_link: String,
+    /// Stiffness of the joint position servos, 1/s^2 (rapier's acceleration-based motors:
+    /// gains act on accelerations, independent of link inertia). Default 20000.
+    pub stiffness: f64,
+    /// Damping of the joint servos, 1/s; also the gain of velocity control. Default 200.
+    pub damping: f64,
+    /// What the robot does.
+    pub motion: RobotMotionConfig,
+}
+
+impl Default for RobotConfig {
+    fn default() -> Self {
+        Self {
+            model: "iiwa14_kinematics".into(),
+            base: PoseConfig::default(),
+            initial_q: Vec::new(),
+            tool_link: "tool0".into(),
+            stiffness: 20_000.0,
+            damping: 200.0,
+            motion: RobotMotionConfig::default(),
+        }
+    }
+}
+
+/// The robot's nominal motion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum RobotMotionConfig {
+    /// Stay at the initial configuration.
+    Hold,
+    /// Random rest-to-rest quintic moves between random waypoints in the workspace, within
+    /// the position, velocity and acceleration limits (the paper's training motion).
+    Random {
+        /// Fraction of each joint's velocity limit to plan with, in (0, 1]. Default 0.5.
+        #[serde(default = "default_speed_scale")]
+        speed_scale: f64,
+        /// Joint acceleration limit used where the URDF gives none, rad/s^2. Default 4.
+        #[serde(default = "default_acceleration")]
+        acceleration_rad_s2: f64,
+        /// Keep waypoints this far inside the position limits, rad. Default 0.1.
+        #[serde(default = "default_margin")]
+        margin_rad: f64,
+        /// Every link origin stays above this height (world z) along the motion, m. Default 0.
+        #[serde(default)]
+        min_height_m: f64,
+        /// Number of waypoints before the motion repeats. Default 32.
+        #[serde(default = "default_waypoints")]
+        waypoints: usize,
+    },
+    /// Pick-and-place: the tool visits Cartesian waypoints (world frame) with the tool's z
+    /// axis pointing down, dwelling at each; inverse kinematics gives the joint targets.
+    PickAndPlace {
+        /// Tool positions in the world, m.
+        waypoints: Vec<[f64; 3]>,
+        /// Time spent at each waypoint, s. Default 0.3.
+        #[serde(default = "default_dwell")]
+        dwell_s: f64,
+        /// Fraction of the velocity limits, in (0, 1]. Default 0.5.
+        #[serde(default = "default_speed_scale")]
+        speed_scale: f64,
+        /// Acceleration limit where the URDF gives none, rad/s^2. Default 4.
+        #[serde(default = "default_acceleration")]
+        acceleration_rad_s2: f64,
+    },
+}
+
+fn default_speed_scale() -> f64 {
+    0.5
+}
+fn default_acceleration() -> f64 {
+    4.0
+}
+fn default_margin() -> f64 {
+    0.1
+}
+fn default_waypoints() -> usize {
+    32
+}
+fn default_dwell() -> f64 {
+    0.3
+}
+
+impl Default for RobotMotionConfig {
+    fn default() -> Self {
+        Self::Random {
+            speed_scale: default_speed_scale(),
+            acceleration_rad_s2: default_acceleration(),
+            margin_rad: default_margin(),
+            min_height_m: 0.0,
+            waypoints: default_waypoints(),
+        }
+    }
+}
+
+/// The human arm.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HumanConfig {
+    /// Catalogue name or URDF path of the human arm model. Default `human_arm`.
+    pub model: String,
+    /// Pose of the torso (pelvis centre, z up, facing +x) in the world.
+    pub base: PoseConfig,
+    /// The motions the human cycles through; the seed picks durations and targets.
+    /// Default: rest, reach, withdraw, wave.
+    pub motions: Vec<HumanMotionKind>,
+    /// Shuffle the order of `motions` with the seed. Default false.
+    pub shuffle: bool,
+}
+
+impl Default for HumanConfig {
+    fn default() -> Self {
+        Self {
+            model: "human_arm".into(),
+            base: PoseConfig::default(),
+            motions: vec![
+                HumanMotionKind::Rest,
+                HumanMotionKind::Reach,
+                HumanMotionKind::Withdraw,
+                HumanMotionKind::Wave,
+            ],
+            shuffle: false,
+        }
+    }
+}
+
+/// A primitive of human arm motion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HumanMotionKind {
+    /// Arm hanging, small sway.
+    Rest,
+    /// Shoulder flexed forward, elbow extending: the hand enters the shared space.
+    Reach,
+    /// Arm raised, forearm swinging about the elbow.
+    Wave,
+    /// A quick return to the side.
+    Withdraw,
+}
+
+/// A static obstacle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClutterConfig {
+    /// `box` (a solid box) or `shelf` (an open rack of boards on four posts).
+    pub kind: ClutterKind,
+    /// Outer size (x, y, z) in metres.
+    pub size_m: [f64; 3],
+    /// Pose of the box centre (shelf: of its bounding box centre).
+    #[serde(default)]
+    pub pose: PoseConfig,
+    /// Boards of a shelf, bottom and top included. Default 4.
+    #[serde(default = "default_boards")]
+    pub boards: usize,
+}
+
+fn default_boards() -> usize {
+    4
+}
+
+/// Kinds of clutter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ClutterKind {
+    Box,
+    Shelf,
+}
+
+/// A pinhole camera.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraConfig {
+    pub name: String,
+    /// Camera centre in the world, m.
+    pub eye: [f64; 3],
+    /// The point it looks at, m.
+    pub target: [f64; 3],
+    /// World direction that appears up in the image. Default `[0, 0, 1]`.
+    pub up: [f64; 3],
+    pub width_px: u32,
+    pub height_px: u32,
+    /// Vertical field of view, degrees. Default 60.
+    pub fov_y_deg: f64,
+    /// Frames per second. Default 30.
+    pub rate_hz: f64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self {
+            name: "camera".into(),
+            eye: [2.0, 0.0, 1.5],
+            target: [0.5, 0.0, 0.9],
+            up: [0.0, 0.0, 1.0],
+            width_px: 128,
+            height_px: 128,
+            fov_y_deg: 60.0,
+            rate_hz: 30.0,
+        }
+    }
+}
+
+impl CameraConfig {
+    /// Focal lengths and principal point `(fx, fy, cx, cy)` in pixels.
+    #[must_use]
+    pub fn intrinsics(&self) -> (f64, f64, f64, f64) {
+        let fy = 0.5 * f64::from(self.height_px) / (0.5 * self.fov_y_deg.to_radians()).tan();
+        (fy, fy, 0.5 * f64::from(self.width_px), 0.5 * f64::from(self.height_px))
+    }
+}
+
+impl Scenario {
+    /// Reads and validates a scenario file.
+    ///
+    /// # Errors
+    /// [`SimError::Io`], [`SimError::Parse`] (with TOML's line and column) or
+    /// [`SimError::Invalid`] naming the key.
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// Parses and validates scenario text; `path` names it in errors.
+    ///
+    /// # Errors
+    /// As [`Scenario::from_file`].
+    pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
+        let scenario: Scenario = toml::from_str(text).map_err(|e| SimError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        scenario.validate(path)?;
+        Ok(scenario)
+    }
+
+    /// The scenario as TOML text (every default written out).
+    #[must_use]
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// Checks ranges that types cannot: positive time step, finite poses, sane sizes.
+    ///
+    /// # Errors
+    /// [`SimError::Invalid`] naming the first bad key.
+    pub fn validate(&self, path: &Path) -> Result<()> {
+        let bad = |key: &str, message: String| SimError::Invalid {
+            path: path.to_path_buf(),
+            key: key.to_string(),
+            message,
+        };
+        let finite = |key: &str, v: &[f64]| -> Result<()> {
+            if v.iter().all(|x| x.is_finite()) {
+                Ok(())
+            } else {
+                Err(bad(key, format!("{v:?} has a non-finite value")))
+            }
+        };
+        if !(self.time_step_s > 0.0 && self.time_step_s <= 0.05) {
+            return Err(bad("time_step_s", format!("{} must be in (0, 0.05] s", self.time_step_s)));
+        }
+        finite("gravity_m_s2", &self.gravity_m_s2)?;
+        finite("robot.base.xyz", &self.robot.base.xyz)?;
+        finite("robot.base.rpy", &self.robot.base.rpy)?;
+        finite("robot.initial_q", &self.robot.initial_q)?;
+        finite("human.base.xyz", &self.human.base.xyz)?;
+        finite("human.base.rpy", &self.human.base.rpy)?;
+        if !(self.robot.stiffness >= 0.0 && self.robot.damping >= 0.0)
+            || !self.robot.stiffness.is_finite()
+            || !self.robot.damping.is_finite()
+        {
+            return Err(bad("robot.stiffness", "stiffness and damping must be finite and >= 0".into()));
+        }
+        match &self.robot.motion {
+            RobotMotionConfig::Hold => {}
+            RobotMotionConfig::Random { speed_scale, acceleration_rad_s2, margin_rad, min_height_m, waypoints } => {
+                check_speed(*speed_scale, *acceleration_rad_s2).map_err(|m| bad("robot.motion", m))?;
+                finite("robot.motion.min_height_m", &[*min_height_m])?;
+                if !(margin_rad.is_finite() && *margin_rad >= 0.0) {
+                    return Err(bad("robot.motion.margin_rad", format!("{margin_rad} must be >= 0")));
+                }
+                if *waypoints < 2 {
+                    return Err(bad("robot.motion.waypoints", "at least 2 waypoints".into()));
+                }
+            }
+            RobotMotionConfig::PickAndPlace { waypoints, dwell_s, speed_scale, acceleration_rad_s2 } => {
+                check_speed(*speed_scale, *acceleration_rad_s2).map_err(|m| bad("robot.motion", m))?;
+                if waypoints.len() < 2 {
+                    return Err(bad("robot.motion.waypoints", "at least 2 waypoints".into()));
+                }
+                for w in waypoints {
+                    finite("robot.motion.waypoints", w)?;
+                }
+                if !(dwell_s.is_finite() && *dwell_s >= 0.0) {
+                    return Err(bad("robot.motion.dwell_s", format!("{dwell_s} must be >= 0")));
+                }
+            }
+        }
+        if self.human.motions.is_empty() {
+            return Err(bad("human.motions", "list at least one motion".into()));
+        }
+        for (i, c) in self.clutter.iter().enumerate() {
+            let key = format!("clutter[{i}]");
+            finite(&key, &c.pose.xyz)?;
+            finite(&key, &c.pose.rpy)?;
+            if !c.size_m.iter().all(|s| s.is_finite() && *s > 0.0) {
+                return Err(bad(&format!("{key}.size_m"), format!("{:?} must be > 0", c.size_m)));
+            }
+            if c.kind == ClutterKind::Shelf && c.boards < 2 {
+                return Err(bad(&format!("{key}.boards"), "a shelf has at least 2 boards".into()));
+            }
+        }
+        for (i, c) in self.cameras.iter().enumerate() {
+            let key = format!("cameras[{i}]");
+            finite(&key, &c.eye)?;
+            finite(&key, &c.target)?;
+            finite(&key, &c.up)?;
+            if c.width_px == 0 || c.height_px == 0 || c.width_px > 8192 || c.height_px > 8192 {
+                return Err(bad(&key, "image size must be 1..=8192 pixels".into()));
+            }
+            if !(c.fov_y_deg > 1.0 && c.fov_y_deg < 179.0) {
+                return Err(bad(&format!("{key}.fov_y_deg"), format!("{} must be in (1, 179)", c.fov_y_deg)));
+            }
+            if !(c.rate_hz > 0.0 && c.rate_hz.is_finite()) {
+                return Err(bad(&format!("{key}.rate_hz"), "must be > 0".into()));
+            }
+            let forward: Vec<f64> = (0..3).map(|k| c.target[k] - c.eye[k]).collect();
+            let cross = [
+                forward[1] * c.up[2] - forward[2] * c.up[1],
+                forward[2] * c.up[0] - forward[0] * c.up[2],
+                forward[0] * c.up[1] - forward[1] * c.up[0],
+            ];
+            if cross.iter().map(|x| x * x).sum::<f64>() < 1e-12 {
+                return Err(bad(&key, "eye, target and up must not be collinear".into()));
+            }
+        }
+        Ok(())
+    }
+
+    /// Resolves a model name given in the scenario: a catalogue name stays as is, a path is
+    /// taken relative to the scenario's folder.
+    #[must_use]
+    pub fn resolve_model_path(model: &str, scenario_path: &Path) -> String {
+        let candidate = PathBuf::from(model);
+        if model.ends_with(".urdf") && candidate.is_relative() {
+            if let Some(dir) = scenario_path.parent() {
+                return dir.join(candidate).to_string_lossy().into_owned();
+            }
+        }
+        model.to_string()
+    }
+}
+
+fn check_speed(speed_scale: f64, acceleration: f64) -> Result<(), String> {
+    if !(speed_scale > 0.0 && speed_scale <= 1.0) {
+        return Err(format!("speed_scale {speed_scale} must be in (0, 1]"));
+    }
+    if !(acceleration > 0.0 && acceleration.is_finite()) {
+        return Err(format!("acceleration_rad_s2 {acceleration} must be > 0"));
+    }
+    Ok(())
+}

@@ -1,0 +1,224 @@
+//! The simulated cell: rapier's robot matches our kinematics, motors track commands within
+//! limits, the human follows its motion, and a seed fixes an episode bit for bit.
+
+use std::path::{Path, PathBuf};
+
+use approx::assert_relative_eq;
+use workcell_sim::scenario::{HumanMotionKind, RobotMotionConfig};
+use workcell_sim::{CellModel, CellState, RobotCommand, Scenario, SimError, step};
+
+fn default_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/default.toml")
+}
+
+fn default_model() -> CellModel {
+    CellModel::from_file(default_path()).expect("default cell")
+}
+
+/// Largest distance between rapier's link positions and our forward kinematics.
+fn fk_mismatch(model: &CellModel, state: &CellState) -> f64 {
+    let fk = model.robot.fk(model.X_WR, state.q()).expect("fk");
+    state
+        .robot_link_poses()
+        .iter()
+        .enumerate()
+        .map(|(l, p)| (p.translation - fk.link_pose(l).translation).length())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn rapier_links_match_forward_kinematics() {
+    let model = default_model();
+    let mut state = CellState::new(&model).expect("state");
+    for (a, b) in state.q().iter().zip(&model.initial_q) {
+        assert_relative_eq!(*a, *b, epsilon = 1e-9);
+    }
+    assert!(fk_mismatch(&model, &state) < 1e-9, "at t=0: {}", fk_mismatch(&model, &state));
+    for _ in 0..500 {
+        step(&model, &mut state, &RobotCommand::Nominal).expect("step");
+    }
+    // Multibody coordinates and body poses agree while moving.
+    assert!(fk_mismatch(&model, &state) < 1e-6, "moving: {}", fk_mismatch(&model, &state));
+}
+
+#[test]
+fn position_control_settles_on_the_target_under_gravity() {
+    let mut scenario = Scenario::from_file(default_path()).expect("scenario");
+    scenario.robot.motion = RobotMotionConfig::Hold;
+    let model = CellModel::new(&scenario, &default_path()).expect("model");
+    let mut state = CellState::new(&model).expect("state");
+    let target = [0.3, 0.8, -0.2, -1.2, 0.3, 0.6, 0.5];
+    let zero = [0.0; 7];
+    for _ in 0..2000 {
+        step(&model, &mut state, &RobotCommand::Position { q: &target, qd: &zero }).expect("step");
+    }
+    for (q, t) in state.q().iter().zip(&target) {
+        assert!((q - t).abs() < 5e-3, "q {q} target {t}");
+    }
+    for qd in state.qd() {
+        assert!(qd.abs() < 1e-2, "still moving: {qd}");
+    }
+}
+
+#[test]
+fn nominal_motion_is_tracked_and_stays_in_limits() {
+    let model = default_model();
+    let mut state = CellState::new(&model).expect("state");
+    let limits = model.robot.position_limits();
+    let velocity = model.robot.velocity_limits();
+    let (mut q, mut qd, mut qdd) = (vec![0.0; 7], vec![0.0; 7], vec![0.0; 7]);
+    let mut worst = 0.0_f64;
+    for _ in 0..3000 {
+        step(&model, &mut state, &RobotCommand::Nominal).expect("step");
+        model.robot_motion.sample(state.time_s(), &mut q, &mut qd, &mut qdd);
+        for i in 0..7 {
+            worst = worst.max((state.q()[i] - q[i]).abs());
+            assert!(state.q()[i] >= limits[i][0] - 1e-3 && state.q()[i] <= limits[i][1] + 1e-3);
+            assert!(state.qd()[i].abs() <= velocity[i] * 1.05, "joint {i} at {} rad/s", state.qd()[i]);
+        }
+    }
+    assert!(worst < 0.02, "tracking error {worst} rad");
+}
+
+#[test]
+fn velocity_commands_stop_at_position_limits() {
+    let mut scenario = Scenario::from_file(default_path()).expect("scenario");
+    scenario.robot.motion = RobotMotionConfig::Hold;
+    let model = CellModel::new(&scenario, &default_path()).expect("model");
+    let mut state = CellState::new(&model).expect("state");
+    // Turn joint 7 (range +-175 deg) at 10 rad/s, beyond its 2.36 rad/s limit, for 3 s.
+    let qd = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0];
+    let mut fastest = 0.0_f64;
+    for _ in 0..3000 {
+        step(&model, &mut state, &RobotCommand::Velocity { qd: &qd }).expect("step");
+        fastest = fastest.max(state.qd()[6].abs());
+    }
+    let upper = model.robot.position_limits()[6][1];
+    assert!(state.q()[6] <= upper + 1e-3, "{} beyond {upper}", state.q()[6]);
+    assert!(state.q()[6] > upper - 0.01, "did not reach the limit: {}", state.q()[6]);
+    assert!(fastest <= model.robot.velocity_limits()[6] * 1.05, "{fastest}");
+}
+
+#[test]
+fn human_links_follow_the_motion() {
+    let model = default_model();
+    let mut state = CellState::new(&model).expect("state");
+    let (mut q, mut qd) = (vec![0.0; 3], vec![0.0; 3]);
+    for _ in 0..1500 {
+        step(&model, &mut state, &RobotCommand::Nominal).expect("step");
+    }
+    model.human_motion.sample(state.time_s(), &mut q, &mut qd);
+    assert_eq!(state.human_q(), q.as_slice());
+    let fk = model.human.fk(model.X_WH, &q).expect("fk");
+    let forearm = model.human.link_id("forearm").expect("forearm");
+    assert_eq!(state.human_link_poses()[forearm], *fk.link_pose(forearm));
+    // The kinematic body in rapier is where the motion says.
+    let body_pose = state
+        .world()
+        .bodies
+        .iter()
+        .filter(|(_, b)| b.is_kinematic())
+        .map(|(_, b)| *b.position())
+        .find(|p| (p.translation - fk.link_pose(forearm).translation).length() < 1e-9);
+    assert!(body_pose.is_some(), "no kinematic body at the forearm pose");
+}
+
+/// Every robot and human pose of `steps` steps, as bits.
+fn trace(seed: u64, steps: usize) -> Vec<u64> {
+    let mut scenario = Scenario::from_file(default_path()).expect("scenario");
+    scenario.seed = seed;
+    let model = CellModel::new(&scenario, &default_path()).expect("model");
+    let mut state = CellState::new(&model).expect("state");
+    let mut bits = Vec::new();
+    for _ in 0..steps {
+        step(&model, &mut state, &RobotCommand::Nominal).expect("step");
+    }
+    for p in state.robot_link_poses().iter().chain(state.human_link_poses()) {
+        bits.extend(p.translation.to_array().map(f64::to_bits));
+        bits.extend(p.rotation.to_array().map(f64::to_bits));
+    }
+    bits.extend(state.qd().iter().map(|v| v.to_bits()));
+    bits
+}
+
+#[test]
+fn same_seed_gives_bit_identical_states() {
+    assert_eq!(trace(11, 1500), trace(11, 1500));
+    assert_ne!(trace(11, 1500), trace(12, 1500));
+}
+
+#[test]
+fn bad_commands_are_errors() {
+    let model = default_model();
+    let mut state = CellState::new(&model).expect("state");
+    let short = [0.0; 3];
+    let err = step(&model, &mut state, &RobotCommand::Velocity { qd: &short }).expect_err("short");
+    assert!(matches!(err, SimError::InvalidCommand { .. }));
+    let nan = [f64::NAN; 7];
+    assert!(step(&model, &mut state, &RobotCommand::Position { q: &nan, qd: &nan }).is_err());
+}
+
+#[test]
+fn pick_and_place_visits_its_waypoints() {
+    let mut scenario = Scenario::from_file(default_path()).expect("scenario");
+    let waypoints = vec![[0.5, -0.3, 1.0], [0.5, -0.3, 0.9], [0.4, 0.35, 1.0], [0.4, 0.35, 0.9]];
+    scenario.robot.motion = RobotMotionConfig::PickAndPlace {
+        waypoints: waypoints.clone(),
+        dwell_s: 0.2,
+        speed_scale: 0.5,
+        acceleration_rad_s2: 4.0,
+    };
+    let model = CellModel::new(&scenario, &default_path()).expect("model");
+    // At the middle of each dwell the planned tool pose is the waypoint.
+    let (mut q, mut qd, mut qdd) = (vec![0.0; 7], vec![0.0; 7], vec![0.0; 7]);
+    let mut visited = 0;
+    let n = 4000;
+    for k in 0..n {
+        let t = model.robot_motion.period_s() * k as f64 / n as f64;
+        model.robot_motion.sample(t, &mut q, &mut qd, &mut qdd);
+        let tool = model.robot.fk(model.X_WR, &q).expect("fk").link_pose(model.tool_link).translation;
+        if qd.iter().all(|v| *v == 0.0) {
+            let near = waypoints.iter().any(|w| (tool.to_array().iter().zip(w).map(|(a, b)| (a - b).powi(2)).sum::<f64>()).sqrt() < 2e-4);
+            assert!(near, "resting at {tool:?}, not at a waypoint");
+            visited += 1;
+        }
+    }
+    assert!(visited > 0);
+    // An unreachable waypoint is a typed error naming it.
+    scenario.robot.motion = RobotMotionConfig::PickAndPlace {
+        waypoints: vec![[0.5, 0.0, 1.0], [3.0, 0.0, 1.0]],
+        dwell_s: 0.2,
+        speed_scale: 0.5,
+        acceleration_rad_s2: 4.0,
+    };
+    match CellModel::new(&scenario, &default_path()) {
+        Err(SimError::Unreachable { key, .. }) => assert_eq!(key, "robot.motion.waypoints[1]"),
+        other => panic!("expected Unreachable, got {other:?}"),
+    }
+}
+
+#[test]
+fn scenario_errors_name_the_key() {
+    let path = Path::new("bad.toml");
+    let unknown = Scenario::from_toml("seed = 1\n[robot]\nmodle = \"x\"\n", path).expect_err("unknown key");
+    assert!(unknown.to_string().contains("modle"), "{unknown}");
+    let dt = Scenario::from_toml("time_step_s = -1.0\n", path).expect_err("negative dt");
+    assert!(matches!(dt, SimError::Invalid { ref key, .. } if key == "time_step_s"), "{dt}");
+    let size = Scenario::from_toml("[[clutter]]\nkind = \"box\"\nsize_m = [1.0, -1.0, 1.0]\n", path).expect_err("size");
+    assert!(matches!(size, SimError::Invalid { ref key, .. } if key == "clutter[0].size_m"), "{size}");
+    let kind = Scenario::from_toml("[human]\nmotions = [\"dance\"]\n", path).expect_err("kind");
+    assert!(kind.to_string().contains("dance"), "{kind}");
+    let q = Scenario::from_toml("[robot]\ninitial_q = [0.0, 1.0]\n", path).expect("parses");
+    let err = CellModel::new(&q, path).expect_err("wrong length");
+    assert!(matches!(err, SimError::Invalid { ref key, .. } if key == "robot.initial_q"), "{err}");
+    let missing = Scenario::from_toml("[robot]\nmodel = \"nowhere/robot.urdf\"\n", path).expect("parses");
+    assert!(matches!(CellModel::new(&missing, path), Err(SimError::Robot { .. })));
+}
+
+#[test]
+fn defaults_round_trip_through_toml() {
+    let scenario = Scenario::from_file(default_path()).expect("scenario");
+    let again = Scenario::from_toml(&scenario.to_toml(), Path::new("again.toml")).expect("round trip");
+    assert_eq!(scenario, again);
+    assert_eq!(Scenario::default().human.motions[1], HumanMotionKind::Reach);
+}
