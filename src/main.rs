@@ -1,1 +1,68 @@
-fn main() {}
+//! The `workcell` command line.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cli;
+
+#[derive(Debug, Parser)]
+#[command(name = "workcell", version, about = "Safety of human-robot collaboration: simulated work-cells, robots from URDF")]
+struct Args {
+    /// Log filter (e.g. `info`, `workcell_sim=debug`); also read from RUST_LOG.
+    #[arg(long, global = true, default_value = "warn")]
+    log: String,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Robots: check a URDF or catalogue model, list the catalogue.
+    Robot {
+        #[command(subcommand)]
+        command: RobotCommand,
+    },
+    /// Run a scenario and write joint trajectories and human part poses (CSV) and a plot.
+    Simulate(cli::simulate::SimulateArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum RobotCommand {
+    /// Parse a URDF (or catalogue name), resolve its meshes, load it into rapier, report.
+    Check(cli::robot::CheckArgs),
+    /// List the built-in robots.
+    List,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .or_else(|_| tracing_subscriber::EnvFilter::try_new(&args.log))
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    let result = match args.command {
+        Command::Robot { command: RobotCommand::Check(a) } => cli::robot::check(&a),
+        Command::Robot { command: RobotCommand::List } => cli::robot::list(),
+        Command::Simulate(a) => cli::simulate::run(&a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Parses `name=folder` package mappings.
+fn parse_package(text: &str) -> Result<(String, PathBuf), String> {
+    let (name, dir) = text
+        .split_once('=')
+        .ok_or_else(|| format!("'{text}' is not NAME=FOLDER"))?;
+    if name.is_empty() || dir.is_empty() {
+        return Err(format!("'{text}' is not NAME=FOLDER"));
+    }
+    Ok((name.to_string(), PathBuf::from(dir)))
+}

@@ -26,28 +26,27 @@ impl LinkCapsule {
     }
 }
 
-/// The parry3d shape of one URDF geometry, in the geometry's frame G.
+/// The parry3d shape of one URDF geometry and its pose in the link frame, `X_LS`.
 ///
-/// Meshes become their convex hull (distances to it are a little smaller than to the mesh:
-/// the safe side). Returns `None` for degenerate geometry (zero size, flat mesh).
+/// The pose is the geometry's `<origin>`, turned for cylinders (parry's run along y, URDF's
+/// along z). Meshes become their convex hull (distances to it are a little smaller than to the
+/// mesh: the safe side). Returns `None` for degenerate geometry (zero size, flat mesh).
 #[must_use]
-pub fn geometry_shape(geometry: &Geometry) -> Option<SharedShape> {
+pub fn geometry_shape(geometry: &Geometry) -> Option<(Pose, SharedShape)> {
+    let X_LG = geometry.X_LG;
     match &geometry.shape {
         // parry takes half extents.
         Shape::Box { size_m } => (size_m.iter().all(|s| *s > 0.0))
-            .then(|| SharedShape::cuboid(size_m[0] / 2.0, size_m[1] / 2.0, size_m[2] / 2.0)),
-        // parry's cylinder is along y, URDF's along z.
+            .then(|| (X_LG, SharedShape::cuboid(size_m[0] / 2.0, size_m[1] / 2.0, size_m[2] / 2.0))),
         Shape::Cylinder { radius_m, length_m } => (*radius_m > 0.0 && *length_m > 0.0).then(|| {
-            SharedShape::compound(vec![(
-                Pose::from_rotation(Rotation::from_rotation_x(std::f64::consts::FRAC_PI_2)),
-                SharedShape::cylinder(length_m / 2.0, *radius_m),
-            )])
+            let y_to_z = Pose::from_rotation(Rotation::from_rotation_x(std::f64::consts::FRAC_PI_2));
+            (X_LG * y_to_z, SharedShape::cylinder(length_m / 2.0, *radius_m))
         }),
         Shape::Capsule { radius_m, length_m } => {
-            (*radius_m > 0.0).then(|| SharedShape::capsule_z(length_m / 2.0, *radius_m))
+            (*radius_m > 0.0).then(|| (X_LG, SharedShape::capsule_z(length_m / 2.0, *radius_m)))
         }
-        Shape::Sphere { radius_m } => (*radius_m > 0.0).then(|| SharedShape::ball(*radius_m)),
-        Shape::Mesh { mesh, .. } => SharedShape::convex_hull(&mesh.vertices),
+        Shape::Sphere { radius_m } => (*radius_m > 0.0).then(|| (X_LG, SharedShape::ball(*radius_m))),
+        Shape::Mesh { mesh, .. } => SharedShape::convex_hull(&mesh.vertices).map(|s| (X_LG, s)),
     }
 }
 
@@ -58,7 +57,7 @@ pub fn link_collision_shape(model: &RobotModel, link: LinkId) -> Option<SharedSh
     let parts: Vec<(Pose, SharedShape)> = model.links()[link]
         .collisions
         .iter()
-        .filter_map(|g| geometry_shape(g).map(|s| (g.X_LG, s)))
+        .filter_map(geometry_shape)
         .collect();
     (!parts.is_empty()).then(|| SharedShape::compound(parts))
 }
@@ -225,5 +224,41 @@ mod tests {
         for (p, _) in &corners {
             assert!(distance_point_segment(*p, a, b) <= r + 1e-12);
         }
+    }
+}
+
+#[cfg(test)]
+mod shape_tests {
+    use super::*;
+    use crate::RobotModel;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn link_shapes_of_cylinders_have_the_urdf_extent() {
+        // ur5e link2 holds cylinders; the whole compound must build (no nested compounds).
+        let robot = RobotModel::from_catalogue("ur5e_kinematics").expect("catalogue");
+        for l in 0..robot.links().len() {
+            if robot.links()[l].collisions.is_empty() {
+                continue;
+            }
+            let shape = link_collision_shape(&robot, l).expect("shape");
+            let capsule = link_bounding_capsule(&robot, l).expect("capsule");
+            // The capsule bounds the exact shape: the AABB of the shape fits in the capsule's.
+            let aabb = shape.compute_aabb(&Pose::IDENTITY);
+            let lo = capsule.a_L.min(capsule.b_L) - Vector::splat(capsule.radius_m + 1e-9);
+            let hi = capsule.a_L.max(capsule.b_L) + Vector::splat(capsule.radius_m + 1e-9);
+            assert!(aabb.mins.cmpge(lo).all() && aabb.maxs.cmple(hi).all(), "link {l}");
+        }
+        // A z-cylinder of radius r and length h: AABB half extents (r, r, h/2).
+        let g = Geometry {
+            name: None,
+            X_LG: Pose::IDENTITY,
+            shape: Shape::Cylinder { radius_m: 0.1, length_m: 0.6 },
+            rgba: None,
+        };
+        let (X, s) = geometry_shape(&g).expect("cylinder");
+        let aabb = s.compute_aabb(&X);
+        assert_relative_eq!(aabb.maxs.z, 0.3, epsilon = 1e-12);
+        assert_relative_eq!(aabb.maxs.x, 0.1, epsilon = 1e-12);
     }
 }

@@ -356,7 +356,7 @@ impl CellState {
             world.insert_collider(ColliderBuilder::cuboid(hx, hy, hz).position(c.X_WC), None);
         }
 
-        let (robot_links, coordinates) = build_robot(&mut world, model)?;
+        let (robot_links, coordinates) = build_robot(&mut world, &model.robot, model.X_WR, &model.initial_q)?;
 
         // Human: one kinematic body per link with collision geometry.
         let human = &model.human;
@@ -370,7 +370,7 @@ impl CellState {
             .map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
         let mut human_bodies = Vec::with_capacity(human.links().len());
         for (l, link) in human.links().iter().enumerate() {
-            let shapes: Vec<_> = link.collisions.iter().filter_map(|g| geometry_shape(g).map(|s| (g.X_LG, s))).collect();
+            let shapes: Vec<_> = link.collisions.iter().filter_map(geometry_shape).collect();
             if shapes.is_empty() {
                 human_bodies.push(None);
                 continue;
@@ -378,8 +378,8 @@ impl CellState {
             let body = world.insert_body(
                 RigidBodyBuilder::kinematic_position_based().pose(*human_kinematics.link_pose(l)).can_sleep(false),
             );
-            for (X_LG, shape) in shapes {
-                world.insert_collider(ColliderBuilder::new(shape).position(X_LG).density(0.0), Some(body));
+            for (X_LS, shape) in shapes {
+                world.insert_collider(ColliderBuilder::new(shape).position(X_LS).density(0.0), Some(body));
             }
             human_bodies.push(Some(body));
         }
@@ -473,10 +473,14 @@ impl CellState {
 
 /// Inserts the robot as a multibody; returns the body of every link and the rapier handle of
 /// every coordinate.
-fn build_robot(world: &mut PhysicsWorld, model: &CellModel) -> Result<(Vec<LinkBody>, Vec<CoordinateHandle>)> {
-    let robot = &model.robot;
+fn build_robot(
+    world: &mut PhysicsWorld,
+    robot: &RobotModel,
+    X_WR: Pose,
+    initial_q: &[f64],
+) -> Result<(Vec<LinkBody>, Vec<CoordinateHandle>)> {
     let fk = robot
-        .fk(model.X_WR, &model.initial_q)
+        .fk(X_WR, initial_q)
         .map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
     // Each link's body: itself if its parent joint moves (or it is the root), else its parent's.
     let mut body_link: Vec<LinkId> = (0..robot.links().len()).collect();
@@ -515,8 +519,8 @@ fn build_robot(world: &mut PhysicsWorld, model: &CellModel) -> Result<(Vec<LinkB
         let body = bodies[b].ok_or_else(|| SimError::InvalidCommand { message: "link without body".into() })?;
         let X_BL = X_WBody.inverse() * *fk.link_pose(l);
         for g in &robot.links()[l].collisions {
-            if let Some(shape) = geometry_shape(g) {
-                world.insert_collider(ColliderBuilder::new(shape).position(X_BL * g.X_LG).density(0.0), Some(body));
+            if let Some((X_LS, shape)) = geometry_shape(g) {
+                world.insert_collider(ColliderBuilder::new(shape).position(X_BL * X_LS).density(0.0), Some(body));
             }
         }
         links.push(LinkBody { body, X_BL });
@@ -574,7 +578,7 @@ fn build_robot(world: &mut PhysicsWorld, model: &CellModel) -> Result<(Vec<LinkB
         let link_id = world.multibody_joints.rigid_body_link(handle_body(handle)).map(|l| l.id).unwrap_or(0);
         let Some((mb, _)) = world.multibody_joints.get(handle) else { continue };
         let Some(link) = mb.link(link_id) else { continue };
-        displacement[link.assembly_id()] = joint.position(&model.initial_q);
+        displacement[link.assembly_id()] = joint.position(initial_q);
         if let Coordinate::Mimic { index, multiplier, offset } = joint.coordinate {
             let (src, _, src_coord) = joint_handles[robot.actuated_joints()[index]].ok_or_else(|| refused(&joint.name))?;
             let src_link = world.multibody_joints.rigid_body_link(handle_body(src)).map(|l| l.id).unwrap_or(0);
@@ -686,4 +690,67 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
     state.steps += 1;
     state.read_robot();
     Ok(())
+}
+
+/// What [`check_in_rapier`] found.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RapierCheck {
+    pub rigid_bodies: usize,
+    pub colliders: usize,
+    pub multibody_dofs: usize,
+    /// Largest distance between rapier's link origins and forward kinematics at `q`, m.
+    pub fk_mismatch_m: f64,
+    /// Largest joint error after holding `q` for one second under gravity, rad or m.
+    pub hold_error: f64,
+}
+
+/// Loads `robot` alone into a rapier world (base fixed at the origin, gravity on), checks that
+/// rapier's link poses agree with forward kinematics at `q`, then holds `q` with the joint
+/// servos for one second.
+///
+/// # Errors
+/// [`SimError::InvalidCommand`] when `q` does not fit or rapier refuses the joint tree.
+pub fn check_in_rapier(robot: &RobotModel, q: &[f64]) -> Result<RapierCheck> {
+    robot.check_configuration(q).map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vector::new(0.0, 0.0, -9.81);
+    world.integration_parameters.dt = 0.001;
+    let (links, coordinates) = build_robot(&mut world, robot, Pose::IDENTITY, q)?;
+    let fk = robot.fk(Pose::IDENTITY, q).map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
+    let pose_of = |world: &PhysicsWorld, l: usize| {
+        world.bodies.get(links[l].body).map_or(Pose::IDENTITY, |b| *b.position() * links[l].X_BL)
+    };
+    let fk_mismatch_m = (0..links.len())
+        .map(|l| (pose_of(&world, l).translation - fk.link_pose(l).translation).length())
+        .fold(0.0, f64::max);
+    let defaults = crate::scenario::RobotConfig::default();
+    for _ in 0..1000 {
+        for (i, c) in coordinates.iter().enumerate() {
+            if let Some((mb, link)) = world.multibody_joints.get_mut(c.joint)
+                && let Some(link) = mb.link_mut(link)
+            {
+                link.joint.data.set_motor(c.axis, q[i], 0.0, defaults.stiffness, defaults.damping);
+            }
+        }
+        world.step();
+    }
+    let mut hold_error = 0.0_f64;
+    for (i, c) in coordinates.iter().enumerate() {
+        if let Some((mb, link)) = world.multibody_joints.get(c.joint)
+            && let Some(l) = mb.link(link)
+        {
+            hold_error = hold_error.max((l.joint().coords()[c.coord] - q[i]).abs());
+        }
+    }
+    let multibody_dofs = coordinates
+        .first()
+        .and_then(|c| world.multibody_joints.get(c.joint))
+        .map_or(0, |(mb, _)| mb.ndofs());
+    Ok(RapierCheck {
+        rigid_bodies: world.bodies.len(),
+        colliders: world.colliders.len(),
+        multibody_dofs,
+        fk_mismatch_m,
+        hold_error,
+    })
 }

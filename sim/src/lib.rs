@@ -25,6 +25,6 @@ pub mod ik;
 pub mod scenario;
 pub mod trajectory;
 
-pub use cell::{CellModel, CellState, ClutterBox, RobotCommand, step};
+pub use cell::{CellModel, CellState, ClutterBox, RapierCheck, RobotCommand, check_in_rapier, step};
 pub use error::{Result, SimError};
 pub use scenario::Scenario;

@@ -1,0 +1,4 @@
+//! Subcommands of the `workcell` binary.
+
+pub mod robot;
+pub mod simulate;

@@ -1,0 +1,271 @@
+//! `workcell robot check` and `workcell robot list`.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use serde::Serialize;
+use workcell::robots::collision::{link_bounding_capsule, link_collision_shape};
+use workcell::robots::math::{Pose, pose_to_xyz_rpy};
+use workcell::robots::{CATALOGUE, Coordinate, JointKind, PackageMap, RobotModel, Shape};
+
+#[derive(Debug, clap::Args)]
+pub struct CheckArgs {
+    /// Catalogue name (see `workcell robot list`) or path to a URDF file.
+    pub robot: String,
+    /// Map a ROS package to its folder, NAME=FOLDER (repeatable). WORKCELL_PACKAGE_PATH and
+    /// ROS_PACKAGE_PATH are searched too, then the URDF's own ancestors.
+    #[arg(long = "package", value_parser = crate::parse_package)]
+    pub packages: Vec<(String, PathBuf)>,
+    /// Joint positions q1,q2,... (rad or m): print every link's pose there.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub fk: Option<Vec<f64>>,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Serialize)]
+struct JointReport {
+    name: String,
+    kind: &'static str,
+    parent: String,
+    child: String,
+    axis: [f64; 3],
+    coordinate: String,
+    lower: f64,
+    upper: f64,
+    velocity: f64,
+    effort: f64,
+    soft_limits: Option<[f64; 2]>,
+}
+
+#[derive(Debug, Serialize)]
+struct LinkPose {
+    link: String,
+    xyz: [f64; 3],
+    rpy: [f64; 3],
+    quaternion_xyzw: [f64; 4],
+}
+
+#[derive(Debug, Serialize)]
+struct Report {
+    name: String,
+    source: String,
+    dof: usize,
+    links: usize,
+    mass_kg: f64,
+    joints: Vec<JointReport>,
+    meshes: BTreeMap<String, usize>,
+    rapier: workcell::sim::RapierCheck,
+    problems: Vec<String>,
+    fk: Option<Vec<LinkPose>>,
+}
+
+pub fn list() -> Result<ExitCode> {
+    for entry in CATALOGUE {
+        println!("{:<20} {}", entry.name, entry.summary);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn check(args: &CheckArgs) -> Result<ExitCode> {
+    let mut packages = PackageMap::from_env();
+    for (name, dir) in &args.packages {
+        packages.insert(name.clone(), dir.clone());
+    }
+    let robot = RobotModel::load(&args.robot, &packages).with_context(|| format!("loading '{}'", args.robot))?;
+    let q_check = robot.neutral_configuration();
+    let rapier = workcell::sim::check_in_rapier(&robot, &q_check).context("loading into rapier")?;
+    let fk = match &args.fk {
+        None => None,
+        Some(q) => {
+            if q.len() != robot.dof() {
+                bail!("--fk has {} values; '{}' has {} joints ({})", q.len(), robot.name(), robot.dof(), coordinate_names(&robot).join(", "));
+            }
+            let state = robot.fk(Pose::IDENTITY, q)?;
+            Some(
+                robot
+                    .links()
+                    .iter()
+                    .enumerate()
+                    .map(|(l, link)| {
+                        let pose = state.link_pose(l);
+                        let (xyz, rpy) = pose_to_xyz_rpy(pose);
+                        LinkPose { link: link.name.clone(), xyz, rpy, quaternion_xyzw: pose.rotation.to_array() }
+                    })
+                    .collect(),
+            )
+        }
+    };
+    let report = Report {
+        name: robot.name().to_string(),
+        source: robot.source().display().to_string(),
+        dof: robot.dof(),
+        links: robot.links().len(),
+        mass_kg: robot.mass_kg(),
+        joints: joints(&robot),
+        meshes: meshes(&robot),
+        problems: problems(&robot, &rapier),
+        rapier,
+        fk,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_report(&report);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn coordinate_names(robot: &RobotModel) -> Vec<String> {
+    robot.actuated_joints().iter().map(|&j| robot.joints()[j].name.clone()).collect()
+}
+
+fn joints(robot: &RobotModel) -> Vec<JointReport> {
+    robot
+        .joints()
+        .iter()
+        .map(|j| JointReport {
+            name: j.name.clone(),
+            kind: j.kind.as_str(),
+            parent: robot.links()[j.parent].name.clone(),
+            child: robot.links()[j.child].name.clone(),
+            axis: j.axis.to_array(),
+            coordinate: match j.coordinate {
+                Coordinate::None => "-".into(),
+                Coordinate::Own { index } => format!("q{}", index + 1),
+                Coordinate::Mimic { index, multiplier, offset } => format!("{multiplier}*q{}{offset:+}", index + 1),
+            },
+            lower: j.limits.lower,
+            upper: j.limits.upper,
+            velocity: j.limits.velocity,
+            effort: j.limits.effort,
+            soft_limits: j.safety_controller.map(|s| [s.soft_lower_limit, s.soft_upper_limit]),
+        })
+        .collect()
+}
+
+fn meshes(robot: &RobotModel) -> BTreeMap<String, usize> {
+    let mut counts = BTreeMap::new();
+    for link in robot.links() {
+        for (role, list) in [("visual", &link.visuals), ("collision", &link.collisions)] {
+            for g in list {
+                let kind = match &g.shape {
+                    Shape::Mesh { path, .. } => format!(
+                        "{role} mesh .{}",
+                        path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default()
+                    ),
+                    Shape::Box { .. } => format!("{role} box"),
+                    Shape::Cylinder { .. } => format!("{role} cylinder"),
+                    Shape::Capsule { .. } => format!("{role} capsule"),
+                    Shape::Sphere { .. } => format!("{role} sphere"),
+                };
+                *counts.entry(kind).or_insert(0) += 1;
+            }
+        }
+    }
+    counts
+}
+
+/// Things that load but deserve a look before the robot is trusted in a safety evaluation.
+fn problems(robot: &RobotModel, rapier: &workcell::sim::RapierCheck) -> Vec<String> {
+    let mut found = Vec::new();
+    for j in robot.joints() {
+        if !j.kind.is_movable() || j.mimic.is_some() {
+            continue;
+        }
+        if j.limits.velocity <= 0.0 {
+            found.push(format!("joint '{}' has no velocity limit: trajectories and the safety filter need one", j.name));
+        }
+        if j.limits.effort <= 0.0 {
+            found.push(format!("joint '{}' has no effort limit: its motor is unbounded in simulation", j.name));
+        }
+        if j.kind == JointKind::Revolute && !(j.limits.lower.is_finite() && j.limits.upper.is_finite()) {
+            found.push(format!("revolute joint '{}' has no finite position limits", j.name));
+        }
+    }
+    for (l, link) in robot.links().iter().enumerate() {
+        let moves = link.parent_joint.is_some_and(|j| robot.joints()[j].kind.is_movable());
+        if moves && link.inertial.is_none() {
+            found.push(format!("moving link '{}' has no inertial: simulated with 0.01 kg", link.name));
+        }
+        if !link.collisions.is_empty() && link_collision_shape(robot, l).is_none() {
+            found.push(format!("link '{}': collision geometry is degenerate (no convex shape)", link.name));
+        }
+        if link.collisions.is_empty() && !link.visuals.is_empty() {
+            found.push(format!("link '{}' has visuals but no collision geometry: invisible to distance checks", link.name));
+        }
+        if let Some(c) = link_bounding_capsule(robot, l)
+            && c.radius_m > 0.25
+        {
+            found.push(format!("link '{}': bounding capsule radius {:.3} m is coarse", link.name, c.radius_m));
+        }
+    }
+    if rapier.fk_mismatch_m > 1e-6 {
+        found.push(format!("rapier and forward kinematics disagree by {:.2e} m", rapier.fk_mismatch_m));
+    }
+    if rapier.hold_error > 0.05 {
+        found.push(format!(
+            "holding the neutral configuration under gravity leaves a {:.3} error: check masses, efforts and limits",
+            rapier.hold_error
+        ));
+    }
+    found
+}
+
+fn limit(v: f64) -> String {
+    if v.is_finite() { format!("{v:.4}") } else { "inf".into() }
+}
+
+fn print_report(r: &Report) {
+    println!("robot    {}", r.name);
+    println!("source   {}", r.source);
+    println!("dof      {}    links {}    mass {:.3} kg", r.dof, r.links, r.mass_kg);
+    println!();
+    println!("{:<24} {:<10} {:<7} {:>9} {:>9} {:>8} {:>8}  {}", "joint", "type", "coord", "lower", "upper", "vel", "effort", "parent -> child");
+    for j in &r.joints {
+        println!(
+            "{:<24} {:<10} {:<7} {:>9} {:>9} {:>8} {:>8}  {} -> {}",
+            j.name,
+            j.kind,
+            j.coordinate,
+            limit(j.lower),
+            limit(j.upper),
+            limit(j.velocity),
+            limit(j.effort),
+            j.parent,
+            j.child
+        );
+    }
+    println!();
+    println!("geometry");
+    for (kind, count) in &r.meshes {
+        println!("  {count:>4}  {kind}");
+    }
+    println!();
+    println!(
+        "rapier   {} bodies, {} colliders, {} multibody dofs; FK mismatch {:.1e} m; hold error after 1 s {:.1e}",
+        r.rapier.rigid_bodies, r.rapier.colliders, r.rapier.multibody_dofs, r.rapier.fk_mismatch_m, r.rapier.hold_error
+    );
+    println!();
+    if r.problems.is_empty() {
+        println!("problems none found");
+    } else {
+        println!("problems {}", r.problems.len());
+        for p in &r.problems {
+            println!("  - {p}");
+        }
+    }
+    if let Some(fk) = &r.fk {
+        println!();
+        println!("{:<24} {:>10} {:>10} {:>10} {:>9} {:>9} {:>9}", "link", "x [m]", "y [m]", "z [m]", "roll", "pitch", "yaw");
+        for p in fk {
+            println!(
+                "{:<24} {:>10.6} {:>10.6} {:>10.6} {:>9.5} {:>9.5} {:>9.5}",
+                p.link, p.xyz[0], p.xyz[1], p.xyz[2], p.rpy[0], p.rpy[1], p.rpy[2]
+            );
+        }
+    }
+}
