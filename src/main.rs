@@ -8,7 +8,11 @@ use clap::{Parser, Subcommand};
 mod cli;
 
 #[derive(Debug, Parser)]
-#[command(name = "workcell", version, about = "Safety of human-robot collaboration: simulated work-cells, robots from URDF")]
+#[command(
+    name = "workcell",
+    version,
+    about = "Safety of human-robot collaboration: simulated work-cells, robots from URDF"
+)]
 struct Args {
     /// Log filter (e.g. `info`, `workcell_sim=debug`); also read from RUST_LOG.
     #[arg(long, global = true, default_value = "warn")]
@@ -41,10 +45,17 @@ fn main() -> ExitCode {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .or_else(|_| tracing_subscriber::EnvFilter::try_new(&args.log))
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
     let result = match args.command {
-        Command::Robot { command: RobotCommand::Check(a) } => cli::robot::check(&a),
-        Command::Robot { command: RobotCommand::List } => cli::robot::list(),
+        Command::Robot {
+            command: RobotCommand::Check(a),
+        } => cli::robot::check(&a),
+        Command::Robot {
+            command: RobotCommand::List,
+        } => cli::robot::list(),
         Command::Simulate(a) => cli::simulate::run(&a),
     };
     match result {

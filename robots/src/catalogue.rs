@@ -42,12 +42,14 @@ impl RobotModel {
     /// # Errors
     /// [`RobotError::UnknownRobot`] for a name the catalogue does not have.
     pub fn from_catalogue(name: &str) -> Result<Self> {
-        let entry = CATALOGUE.iter().find(|e| e.name == name).ok_or_else(|| {
-            RobotError::UnknownRobot {
-                name: name.to_string(),
-                available: CATALOGUE.map(|e| e.name).join(", "),
-            }
-        })?;
+        let entry =
+            CATALOGUE
+                .iter()
+                .find(|e| e.name == name)
+                .ok_or_else(|| RobotError::UnknownRobot {
+                    name: name.to_string(),
+                    available: CATALOGUE.map(|e| e.name).join(", "),
+                })?;
         let path = PathBuf::from(format!("catalogue/{name}/{name}.urdf"));
         Self::from_urdf_str(entry.urdf, &path, &PackageMap::new())
     }
@@ -60,7 +62,9 @@ impl RobotModel {
     pub fn load(name_or_path: &str, packages: &PackageMap) -> Result<Self> {
         let path = Path::new(name_or_path);
         let looks_like_path = name_or_path.contains(std::path::MAIN_SEPARATOR)
-            || path.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+            || path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
         if looks_like_path {
             Self::from_urdf_file(path, packages)
         } else {

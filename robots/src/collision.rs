@@ -22,7 +22,10 @@ impl LinkCapsule {
     /// The capsule's segment end points in the world, given the link pose `X_WL`.
     #[must_use]
     pub fn segment_in_world(&self, X_WL: &Pose) -> (Vector, Vector) {
-        (X_WL.transform_point(self.a_L), X_WL.transform_point(self.b_L))
+        (
+            X_WL.transform_point(self.a_L),
+            X_WL.transform_point(self.b_L),
+        )
     }
 }
 
@@ -36,16 +39,26 @@ pub fn geometry_shape(geometry: &Geometry) -> Option<(Pose, SharedShape)> {
     let X_LG = geometry.X_LG;
     match &geometry.shape {
         // parry takes half extents.
-        Shape::Box { size_m } => (size_m.iter().all(|s| *s > 0.0))
-            .then(|| (X_LG, SharedShape::cuboid(size_m[0] / 2.0, size_m[1] / 2.0, size_m[2] / 2.0))),
+        Shape::Box { size_m } => (size_m.iter().all(|s| *s > 0.0)).then(|| {
+            (
+                X_LG,
+                SharedShape::cuboid(size_m[0] / 2.0, size_m[1] / 2.0, size_m[2] / 2.0),
+            )
+        }),
         Shape::Cylinder { radius_m, length_m } => (*radius_m > 0.0 && *length_m > 0.0).then(|| {
-            let y_to_z = Pose::from_rotation(Rotation::from_rotation_x(std::f64::consts::FRAC_PI_2));
-            (X_LG * y_to_z, SharedShape::cylinder(length_m / 2.0, *radius_m))
+            let y_to_z =
+                Pose::from_rotation(Rotation::from_rotation_x(std::f64::consts::FRAC_PI_2));
+            (
+                X_LG * y_to_z,
+                SharedShape::cylinder(length_m / 2.0, *radius_m),
+            )
         }),
         Shape::Capsule { radius_m, length_m } => {
             (*radius_m > 0.0).then(|| (X_LG, SharedShape::capsule_z(length_m / 2.0, *radius_m)))
         }
-        Shape::Sphere { radius_m } => (*radius_m > 0.0).then(|| (X_LG, SharedShape::ball(*radius_m))),
+        Shape::Sphere { radius_m } => {
+            (*radius_m > 0.0).then(|| (X_LG, SharedShape::ball(*radius_m)))
+        }
         Shape::Mesh { mesh, .. } => SharedShape::convex_hull(&mesh.vertices).map(|s| (X_LG, s)),
     }
 }
@@ -83,7 +96,10 @@ fn cover_points(geometry: &Geometry, out: &mut Vec<(Vector, f64)>) {
             for k in 0..RIM_POINTS {
                 let t = 2.0 * std::f64::consts::PI * k as f64 / RIM_POINTS as f64;
                 for z in [-length_m / 2.0, length_m / 2.0] {
-                    out.push((X.transform_point(Vector::new(r * t.cos(), r * t.sin(), z)), 0.0));
+                    out.push((
+                        X.transform_point(Vector::new(r * t.cos(), r * t.sin(), z)),
+                        0.0,
+                    ));
                 }
             }
         }
@@ -112,7 +128,12 @@ pub fn link_bounding_capsule(model: &RobotModel, link: LinkId) -> Option<LinkCap
         cover_points(g, &mut points);
     }
     let (a_L, b_L, radius_m) = bounding_capsule(&points)?;
-    Some(LinkCapsule { link, a_L, b_L, radius_m })
+    Some(LinkCapsule {
+        link,
+        a_L,
+        b_L,
+        radius_m,
+    })
 }
 
 /// Bounding capsule `(a, b, radius)` of balls `(centre, radius)`; `None` for no ball.
@@ -171,7 +192,9 @@ fn dominant_eigenvector(m: parry3d_f64::math::Matrix) -> Vector {
     // unless the matrix is zero.
     let mut v = [m.x_axis, m.y_axis, m.z_axis]
         .into_iter()
-        .fold(Vector::ZERO, |best, c| if c.length() > best.length() { c } else { best });
+        .fold(Vector::ZERO, |best, c| {
+            if c.length() > best.length() { c } else { best }
+        });
     if v.length() < 1e-300 {
         return Vector::Z;
     }
@@ -191,7 +214,11 @@ fn dominant_eigenvector(m: parry3d_f64::math::Matrix) -> Vector {
 pub fn distance_point_segment(p: Vector, a: Vector, b: Vector) -> f64 {
     let ab = b - a;
     let len2 = ab.length_squared();
-    let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if len2 > 0.0 {
+        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     (p - (a + ab * t)).length()
 }
 
@@ -202,7 +229,10 @@ mod tests {
 
     #[test]
     fn capsule_of_a_capsule_is_itself() {
-        let balls = [(Vector::new(0.0, 0.0, -0.2), 0.05), (Vector::new(0.0, 0.0, 0.2), 0.05)];
+        let balls = [
+            (Vector::new(0.0, 0.0, -0.2), 0.05),
+            (Vector::new(0.0, 0.0, 0.2), 0.05),
+        ];
         let (a, b, r) = bounding_capsule(&balls).expect("capsule");
         assert_relative_eq!(r, 0.05, epsilon = 1e-12);
         assert_relative_eq!((b - a).length(), 0.4, epsilon = 1e-12);
@@ -247,13 +277,19 @@ mod shape_tests {
             let aabb = shape.compute_aabb(&Pose::IDENTITY);
             let lo = capsule.a_L.min(capsule.b_L) - Vector::splat(capsule.radius_m + 1e-9);
             let hi = capsule.a_L.max(capsule.b_L) + Vector::splat(capsule.radius_m + 1e-9);
-            assert!(aabb.mins.cmpge(lo).all() && aabb.maxs.cmple(hi).all(), "link {l}");
+            assert!(
+                aabb.mins.cmpge(lo).all() && aabb.maxs.cmple(hi).all(),
+                "link {l}"
+            );
         }
         // A z-cylinder of radius r and length h: AABB half extents (r, r, h/2).
         let g = Geometry {
             name: None,
             X_LG: Pose::IDENTITY,
-            shape: Shape::Cylinder { radius_m: 0.1, length_m: 0.6 },
+            shape: Shape::Cylinder {
+                radius_m: 0.1,
+                length_m: 0.6,
+            },
             rgba: None,
         };
         let (X, s) = geometry_shape(&g).expect("cylinder");

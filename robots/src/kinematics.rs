@@ -91,7 +91,9 @@ impl Jacobian {
         self.columns
             .iter()
             .zip(qdot)
-            .fold(Vector::ZERO, |acc, (c, qd)| acc + Vector::new(c[0], c[1], c[2]) * *qd)
+            .fold(Vector::ZERO, |acc, (c, qd)| {
+                acc + Vector::new(c[0], c[1], c[2]) * *qd
+            })
     }
     /// Angular velocity of the link for configuration velocity `qdot`.
     #[must_use]
@@ -99,7 +101,9 @@ impl Jacobian {
         self.columns
             .iter()
             .zip(qdot)
-            .fold(Vector::ZERO, |acc, (c, qd)| acc + Vector::new(c[3], c[4], c[5]) * *qd)
+            .fold(Vector::ZERO, |acc, (c, qd)| {
+                acc + Vector::new(c[3], c[4], c[5]) * *qd
+            })
     }
 }
 
@@ -134,7 +138,10 @@ impl RobotModel {
     pub fn forward_kinematics(&self, q: &[f64], state: &mut KinematicState) -> Result<()> {
         self.check_configuration(q)?;
         if state.X_WL.len() != self.links.len() || state.axis_W.len() != self.joints.len() {
-            *state = KinematicState { X_WB: state.X_WB, ..KinematicState::new(self) };
+            *state = KinematicState {
+                X_WB: state.X_WB,
+                ..KinematicState::new(self)
+            };
         }
         state.X_WL[self.root] = state.X_WB;
         // Joints are in topological order: the parent pose is always ready.
@@ -182,7 +189,9 @@ impl RobotModel {
             let (index, scale) = match joint.coordinate {
                 Coordinate::None => (usize::MAX, 0.0),
                 Coordinate::Own { index } => (index, 1.0),
-                Coordinate::Mimic { index, multiplier, .. } => (index, multiplier),
+                Coordinate::Mimic {
+                    index, multiplier, ..
+                } => (index, multiplier),
             };
             if index != usize::MAX {
                 let a = state.axis_W[j];
@@ -214,7 +223,12 @@ impl RobotModel {
     #[must_use]
     pub fn link_jacobian(&self, state: &KinematicState, link: LinkId) -> Jacobian {
         let mut jacobian = Jacobian::zeros(self.dof());
-        self.point_jacobian(state, link, state.link_pose(link).translation, &mut jacobian);
+        self.point_jacobian(
+            state,
+            link,
+            state.link_pose(link).translation,
+            &mut jacobian,
+        );
         jacobian
     }
 }

@@ -19,7 +19,6 @@
 //! assert!((state.link_pose(flange).translation.z - 1.306).abs() < 1e-9);
 //! # Ok::<(), workcell_robots::RobotError>(())
 //! ```
-#![allow(non_snake_case)] // monogram frame notation: X_WB, p_WC
 
 mod catalogue;
 pub mod collision;

@@ -12,12 +12,7 @@ pub use parry3d_f64::math::{Pose, Rotation, Vector};
 /// matrix is `Rz(yaw) * Ry(pitch) * Rx(roll)` (URDF XML specification, `<origin>`).
 #[must_use]
 pub fn pose_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Pose {
-    let rotation = Rotation::from_euler(
-        parry3d_f64::glamx::EulerRot::ZYX,
-        rpy[2],
-        rpy[1],
-        rpy[0],
-    );
+    let rotation = Rotation::from_euler(parry3d_f64::glamx::EulerRot::ZYX, rpy[2], rpy[1], rpy[0]);
     Pose::from_parts(Vector::new(xyz[0], xyz[1], xyz[2]), rotation)
 }
 
@@ -25,9 +20,7 @@ pub fn pose_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Pose {
 /// pitch in [-pi/2, pi/2].
 #[must_use]
 pub fn pose_to_xyz_rpy(pose: &Pose) -> ([f64; 3], [f64; 3]) {
-    let (yaw, pitch, roll) = pose
-        .rotation
-        .to_euler(parry3d_f64::glamx::EulerRot::ZYX);
+    let (yaw, pitch, roll) = pose.rotation.to_euler(parry3d_f64::glamx::EulerRot::ZYX);
     (pose.translation.to_array(), [roll, pitch, yaw])
 }
 
@@ -49,7 +42,14 @@ mod tests {
         let v = yaw.transform_vector(Vector::X);
         assert_relative_eq!(v.y, 1.0, epsilon = 1e-12);
         // roll then pitch (fixed axes): Ry(pi/2) * Rx(pi/2) maps y to x.
-        let rp = pose_from_xyz_rpy([0.0; 3], [std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2, 0.0]);
+        let rp = pose_from_xyz_rpy(
+            [0.0; 3],
+            [
+                std::f64::consts::FRAC_PI_2,
+                std::f64::consts::FRAC_PI_2,
+                0.0,
+            ],
+        );
         let v = rp.transform_vector(Vector::Y);
         assert_relative_eq!(v.x, 1.0, epsilon = 1e-12);
     }

@@ -20,7 +20,8 @@ impl TriMesh {
     /// # Errors
     /// A message saying what is wrong with the file.
     pub fn load(path: &Path, scale: [f64; 3]) -> Result<Self, String> {
-        let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let bytes =
+            std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         Self::from_bytes(&bytes, path, scale)
     }
 
@@ -41,7 +42,8 @@ impl TriMesh {
         };
         let s = Vector::from_array(scale);
         for part in &scene.meshes {
-            let base = u32::try_from(mesh.vertices.len()).map_err(|_| "mesh too large".to_string())?;
+            let base =
+                u32::try_from(mesh.vertices.len()).map_err(|_| "mesh too large".to_string())?;
             for v in &part.vertices {
                 let p = Vector::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])) * s;
                 if !p.is_finite() {
@@ -65,7 +67,10 @@ impl TriMesh {
         }
         let (lo, hi) = mesh.bounds();
         if (hi - lo).max_element() <= 0.0 {
-            return Err(format!("{} is degenerate: all its vertices coincide", path.display()));
+            return Err(format!(
+                "{} is degenerate: all its vertices coincide",
+                path.display()
+            ));
         }
         Ok(mesh)
     }
@@ -74,7 +79,10 @@ impl TriMesh {
     #[must_use]
     pub fn bounds(&self) -> (Vector, Vector) {
         self.vertices.iter().fold(
-            (Vector::splat(f64::INFINITY), Vector::splat(f64::NEG_INFINITY)),
+            (
+                Vector::splat(f64::INFINITY),
+                Vector::splat(f64::NEG_INFINITY),
+            ),
             |(lo, hi), v| (lo.min(*v), hi.max(*v)),
         )
     }

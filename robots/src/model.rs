@@ -162,12 +162,22 @@ pub struct Geometry {
 #[derive(Debug, Clone)]
 pub enum Shape {
     /// A box centred at the origin with the given full edge lengths.
-    Box { size_m: [f64; 3] },
+    Box {
+        size_m: [f64; 3],
+    },
     /// A cylinder along z, centred at the origin.
-    Cylinder { radius_m: f64, length_m: f64 },
+    Cylinder {
+        radius_m: f64,
+        length_m: f64,
+    },
     /// A capsule along z: a cylinder of `length_m` with hemispheres on both ends.
-    Capsule { radius_m: f64, length_m: f64 },
-    Sphere { radius_m: f64 },
+    Capsule {
+        radius_m: f64,
+        length_m: f64,
+    },
+    Sphere {
+        radius_m: f64,
+    },
     /// A triangle mesh, already loaded and scaled.
     Mesh {
         /// The filename as the URDF wrote it (`package://...`).
@@ -265,7 +275,8 @@ impl Joint {
         match self.kind {
             JointKind::Fixed => self.X_PJ,
             JointKind::Revolute | JointKind::Continuous => {
-                self.X_PJ * Pose::from_rotation(crate::math::Rotation::from_axis_angle(self.axis, theta))
+                self.X_PJ
+                    * Pose::from_rotation(crate::math::Rotation::from_axis_angle(self.axis, theta))
             }
             JointKind::Prismatic => self.X_PJ * Pose::from_translation(self.axis * theta),
         }

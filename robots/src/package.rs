@@ -221,7 +221,9 @@ mod tests {
         // Relative paths may climb inside the package but not out of it.
         let ok = map.resolve("../meshes/a.stl", &urdf_dir).expect("inside");
         assert!(ok.is_file());
-        let err = map.resolve("../../../x.stl", &urdf_dir).expect_err("escape");
+        let err = map
+            .resolve("../../../x.stl", &urdf_dir)
+            .expect_err("escape");
         assert!(err.contains("escapes"), "{err}");
     }
 
@@ -244,8 +246,16 @@ mod tests {
     fn unknown_package_and_scheme() {
         let dir = tree();
         let map = PackageMap::new();
-        assert!(map.resolve("package://nope/a.stl", dir.path()).unwrap_err().contains("not found"));
-        assert!(map.resolve("http://x/a.stl", dir.path()).unwrap_err().contains("scheme"));
+        assert!(
+            map.resolve("package://nope/a.stl", dir.path())
+                .unwrap_err()
+                .contains("not found")
+        );
+        assert!(
+            map.resolve("http://x/a.stl", dir.path())
+                .unwrap_err()
+                .contains("scheme")
+        );
         assert!(map.resolve("package://nope", dir.path()).is_err());
     }
 }

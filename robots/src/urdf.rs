@@ -92,10 +92,16 @@ impl Builder<'_> {
                 return Err(self.invalid(element, "is defined twice"));
             }
             let parent = *link_ids.get(j.parent.link.as_str()).ok_or_else(|| {
-                self.invalid(&element, format!("parent link '{}' does not exist", j.parent.link))
+                self.invalid(
+                    &element,
+                    format!("parent link '{}' does not exist", j.parent.link),
+                )
             })?;
             let child = *link_ids.get(j.child.link.as_str()).ok_or_else(|| {
-                self.invalid(&element, format!("child link '{}' does not exist", j.child.link))
+                self.invalid(
+                    &element,
+                    format!("child link '{}' does not exist", j.child.link),
+                )
             })?;
             if parent == child {
                 return Err(self.invalid(element, "connects a link to itself"));
@@ -114,7 +120,9 @@ impl Builder<'_> {
         }
 
         // The root, then a breadth-first order that reaches every link exactly once.
-        let roots: Vec<usize> = (0..links.len()).filter(|&l| links[l].parent_joint.is_none()).collect();
+        let roots: Vec<usize> = (0..links.len())
+            .filter(|&l| links[l].parent_joint.is_none())
+            .collect();
         let root = match roots.as_slice() {
             [root] => *root,
             [] => {
@@ -127,7 +135,11 @@ impl Builder<'_> {
                 let names: Vec<&str> = many.iter().map(|&l| links[l].name.as_str()).collect();
                 return Err(self.invalid(
                     format!("robot '{}'", robot.name),
-                    format!("has {} root links ({}); joints must connect them into one tree", many.len(), names.join(", ")),
+                    format!(
+                        "has {} root links ({}); joints must connect them into one tree",
+                        many.len(),
+                        names.join(", ")
+                    ),
                 ));
             }
         };
@@ -163,7 +175,9 @@ impl Builder<'_> {
         let mut actuated = Vec::new();
         for (id, joint) in joints.iter_mut().enumerate() {
             if joint.kind.is_movable() && joint.mimic.is_none() {
-                joint.coordinate = Coordinate::Own { index: actuated.len() };
+                joint.coordinate = Coordinate::Own {
+                    index: actuated.len(),
+                };
                 actuated.push(id);
             }
         }
@@ -181,8 +195,11 @@ impl Builder<'_> {
 
     /// Resolves each mimic joint to the coordinate it follows, through chains of mimics.
     fn resolve_mimics(&self, joints: &mut [Joint]) -> Result<()> {
-        let by_name: BTreeMap<String, usize> =
-            joints.iter().enumerate().map(|(i, j)| (j.name.clone(), i)).collect();
+        let by_name: BTreeMap<String, usize> = joints
+            .iter()
+            .enumerate()
+            .map(|(i, j)| (j.name.clone(), i))
+            .collect();
         for id in 0..joints.len() {
             let Some((_, _, _)) = joints[id].mimic else {
                 continue;
@@ -191,12 +208,12 @@ impl Builder<'_> {
             let (mut multiplier, mut offset) = (1.0, 0.0);
             let mut current = id;
             let mut hops = 0;
-            loop {
-                let Some((target, m, o)) = joints[current].mimic.clone() else {
-                    break;
-                };
+            while let Some((target, m, o)) = joints[current].mimic.clone() {
                 let next = *by_name.get(&target).ok_or_else(|| {
-                    self.invalid(&element, format!("mimics joint '{target}', which does not exist"))
+                    self.invalid(
+                        &element,
+                        format!("mimics joint '{target}', which does not exist"),
+                    )
                 })?;
                 if !joints[next].kind.is_movable() {
                     return Err(self.invalid(&element, format!("mimics fixed joint '{target}'")));
@@ -213,7 +230,11 @@ impl Builder<'_> {
             let Coordinate::Own { index } = joints[current].coordinate else {
                 return Err(self.invalid(&element, "mimics a joint with no coordinate"));
             };
-            joints[id].coordinate = Coordinate::Mimic { index, multiplier, offset };
+            joints[id].coordinate = Coordinate::Mimic {
+                index,
+                multiplier,
+                offset,
+            };
         }
         Ok(())
     }
@@ -236,7 +257,10 @@ impl Builder<'_> {
         let axis = Vector::from_array(j.axis.xyz.0);
         let axis = if kind.is_movable() {
             if !axis.is_finite() || axis.length() < 1e-9 {
-                return Err(self.invalid(element, format!("axis {:?} is not a direction", j.axis.xyz.0)));
+                return Err(self.invalid(
+                    element,
+                    format!("axis {:?} is not a direction", j.axis.xyz.0),
+                ));
             }
             axis.normalize()
         } else {
@@ -266,9 +290,17 @@ impl Builder<'_> {
         };
         let safety_controller = match &j.safety_controller {
             Some(s) => {
-                let v = [s.soft_lower_limit, s.soft_upper_limit, s.k_position, s.k_velocity];
+                let v = [
+                    s.soft_lower_limit,
+                    s.soft_upper_limit,
+                    s.k_position,
+                    s.k_velocity,
+                ];
                 if !all_finite(&v) || s.k_velocity < 0.0 || s.k_position < 0.0 {
-                    return Err(self.invalid(element, "safety_controller has a non-finite or negative value"));
+                    return Err(self.invalid(
+                        element,
+                        "safety_controller has a non-finite or negative value",
+                    ));
                 }
                 Some(SafetyController {
                     soft_lower_limit: s.soft_lower_limit,
@@ -284,7 +316,9 @@ impl Builder<'_> {
                 let multiplier = m.multiplier.unwrap_or(1.0);
                 let offset = m.offset.unwrap_or(0.0);
                 if !all_finite(&[multiplier, offset]) {
-                    return Err(self.invalid(element, "mimic has a non-finite multiplier or offset"));
+                    return Err(
+                        self.invalid(element, "mimic has a non-finite multiplier or offset")
+                    );
                 }
                 if !kind.is_movable() {
                     return Err(self.invalid(element, "a fixed joint cannot mimic"));
@@ -293,7 +327,10 @@ impl Builder<'_> {
             }
             None => None,
         };
-        let (damping, friction) = j.dynamics.as_ref().map_or((0.0, 0.0), |d| (d.damping, d.friction));
+        let (damping, friction) = j
+            .dynamics
+            .as_ref()
+            .map_or((0.0, 0.0), |d| (d.damping, d.friction));
         if !all_finite(&[damping, friction]) || damping < 0.0 || friction < 0.0 {
             return Err(self.invalid(element, "dynamics damping/friction must be finite and >= 0"));
         }
@@ -329,12 +366,25 @@ impl Builder<'_> {
     fn link(&mut self, l: &urdf_rs::Link, materials: &HashMap<&str, [f64; 4]>) -> Result<Link> {
         let element = format!("link '{}'", l.name);
         let i = &l.inertial;
-        let tensor = [i.inertia.ixx, i.inertia.ixy, i.inertia.ixz, i.inertia.iyy, i.inertia.iyz, i.inertia.izz];
+        let tensor = [
+            i.inertia.ixx,
+            i.inertia.ixy,
+            i.inertia.ixz,
+            i.inertia.iyy,
+            i.inertia.iyz,
+            i.inertia.izz,
+        ];
         if !i.mass.value.is_finite() || i.mass.value < 0.0 {
-            return Err(self.invalid(element, format!("inertial mass {} must be finite and >= 0", i.mass.value)));
+            return Err(self.invalid(
+                element,
+                format!("inertial mass {} must be finite and >= 0", i.mass.value),
+            ));
         }
         if !all_finite(&tensor) || tensor[0] < 0.0 || tensor[3] < 0.0 || tensor[5] < 0.0 {
-            return Err(self.invalid(element, "inertia has a non-finite or negative diagonal value"));
+            return Err(self.invalid(
+                element,
+                "inertia has a non-finite or negative diagonal value",
+            ));
         }
         let inertial = (i.mass.value > 0.0).then(|| -> Result<Inertial> {
             Ok(Inertial {
@@ -349,7 +399,10 @@ impl Builder<'_> {
         for (k, v) in l.visual.iter().enumerate() {
             let el = format!("{element} visual {k}");
             let rgba = v.material.as_ref().and_then(|m| {
-                m.color.as_ref().map(|c| c.rgba.0).or_else(|| materials.get(m.name.as_str()).copied())
+                m.color
+                    .as_ref()
+                    .map(|c| c.rgba.0)
+                    .or_else(|| materials.get(m.name.as_str()).copied())
             });
             visuals.push(Geometry {
                 name: v.name.clone(),
@@ -392,11 +445,17 @@ impl Builder<'_> {
             }
             urdf_rs::Geometry::Cylinder { radius, length } => {
                 positive("cylinder radius/length", &[*radius, *length])?;
-                Shape::Cylinder { radius_m: *radius, length_m: *length }
+                Shape::Cylinder {
+                    radius_m: *radius,
+                    length_m: *length,
+                }
             }
             urdf_rs::Geometry::Capsule { radius, length } => {
                 positive("capsule radius/length", &[*radius, *length])?;
-                Shape::Capsule { radius_m: *radius, length_m: *length }
+                Shape::Capsule {
+                    radius_m: *radius,
+                    length_m: *length,
+                }
             }
             urdf_rs::Geometry::Sphere { radius } => {
                 positive("sphere radius", &[*radius])?;
@@ -413,22 +472,32 @@ impl Builder<'_> {
                     uri: filename.clone(),
                     message,
                 };
-                let path = self.packages.resolve(filename, self.urdf_dir).map_err(mesh_error)?;
+                let path = self
+                    .packages
+                    .resolve(filename, self.urdf_dir)
+                    .map_err(mesh_error)?;
                 let key = (path.clone(), scale.map(f64::to_bits));
                 let mesh = match self.meshes.get(&key) {
                     Some(mesh) => mesh.clone(),
                     None => {
-                        let mesh = Arc::new(TriMesh::load(&path, scale).map_err(|message| RobotError::Mesh {
-                            path: self.path.to_path_buf(),
-                            element: element.to_string(),
-                            uri: filename.clone(),
-                            message,
+                        let mesh = Arc::new(TriMesh::load(&path, scale).map_err(|message| {
+                            RobotError::Mesh {
+                                path: self.path.to_path_buf(),
+                                element: element.to_string(),
+                                uri: filename.clone(),
+                                message,
+                            }
                         })?);
                         self.meshes.insert(key, mesh.clone());
                         mesh
                     }
                 };
-                Shape::Mesh { uri: filename.clone(), path, scale, mesh }
+                Shape::Mesh {
+                    uri: filename.clone(),
+                    path,
+                    scale,
+                    mesh,
+                }
             }
         })
     }

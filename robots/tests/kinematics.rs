@@ -1,5 +1,6 @@
 //! Forward kinematics against closed-form Denavit-Hartenberg products, Jacobians against
 //! finite differences of forward kinematics.
+#![allow(clippy::needless_range_loop)] // 4 x 4 matrices read best with indices
 
 use approx::assert_relative_eq;
 use rand::{Rng, SeedableRng};
@@ -33,7 +34,12 @@ fn dh(theta: f64, d: f64, a: f64, alpha: f64) -> Mat4 {
 }
 
 fn dh_chain(rows: &[(f64, f64, f64)], q: &[f64]) -> Mat4 {
-    let mut t = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+    let mut t = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
     for ((alpha, a, d), theta) in rows.iter().zip(q) {
         t = mul(&t, &dh(*theta, *d, *a, *alpha));
     }
@@ -105,7 +111,11 @@ fn iiwa14_flange_is_the_dh_product_and_base_pose_composes() {
         assert_pose_matches(at_origin.link_pose(tool0), &dh_chain(&rows, &q));
         let moved = robot.fk(X_WB, &q).expect("fk");
         let expected = X_WB * *at_origin.link_pose(tool0);
-        assert_relative_eq!(moved.link_pose(tool0).translation, expected.translation, epsilon = 1e-12);
+        assert_relative_eq!(
+            moved.link_pose(tool0).translation,
+            expected.translation,
+            epsilon = 1e-12
+        );
     }
 }
 
@@ -146,7 +156,11 @@ fn jacobians_match_finite_differences() {
             let q = random_q(robot, &mut rng);
             let state = robot.fk(Pose::IDENTITY, &q).expect("fk");
             for link in 0..robot.links().len() {
-                let p_L = Vector::new(rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1));
+                let p_L = Vector::new(
+                    rng.random_range(-0.1..0.1),
+                    rng.random_range(-0.1..0.1),
+                    rng.random_range(-0.1..0.1),
+                );
                 let p_W = state.link_pose(link).transform_point(p_L);
                 robot.point_jacobian(&state, link, p_W, &mut jacobian);
                 let numeric = numeric_jacobian(robot, &q, link, p_L);
@@ -171,7 +185,11 @@ fn jacobians_match_finite_differences() {
 fn wrong_configuration_is_an_error_not_a_panic() {
     let robot = RobotModel::from_catalogue("ur5e_kinematics").expect("catalogue");
     assert!(robot.fk(Pose::IDENTITY, &[0.0; 5]).is_err());
-    assert!(robot.fk(Pose::IDENTITY, &[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0]).is_err());
+    assert!(
+        robot
+            .fk(Pose::IDENTITY, &[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0])
+            .is_err()
+    );
 }
 
 #[test]
@@ -188,12 +206,23 @@ fn catalogue_models_are_complete() {
         assert_relative_eq!(robot.mass_kg(), mass_kg, epsilon = 1e-9);
         for &j in robot.actuated_joints() {
             let l = robot.joints()[j].limits;
-            assert!(l.lower < l.upper && l.velocity > 0.0 && l.effort > 0.0, "{name}: limits of joint {j}");
+            assert!(
+                l.lower < l.upper && l.velocity > 0.0 && l.effort > 0.0,
+                "{name}: limits of joint {j}"
+            );
         }
         for link in robot.links() {
             // every link with geometry is covered by its bounding capsule
-            if let Some(c) = workcell_robots::collision::link_bounding_capsule(&robot, robot.link_id(&link.name).expect("id")) {
-                assert!(c.radius_m > 0.0 && c.radius_m < 0.3, "{name}/{}: radius {}", link.name, c.radius_m);
+            if let Some(c) = workcell_robots::collision::link_bounding_capsule(
+                &robot,
+                robot.link_id(&link.name).expect("id"),
+            ) {
+                assert!(
+                    c.radius_m > 0.0 && c.radius_m < 0.3,
+                    "{name}/{}: radius {}",
+                    link.name,
+                    c.radius_m
+                );
             }
         }
     }

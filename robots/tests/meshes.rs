@@ -32,19 +32,39 @@ fn unit_cube_in_every_format() {
 fn package_uris_relative_paths_and_mimic_joints() {
     let path = fixtures().join("pkg/my_robot/urdf/gripper.urdf");
     let robot = RobotModel::from_urdf_file(&path, &PackageMap::new()).expect("loads");
-    assert_eq!(robot.dof(), 3, "lift, wrist, left finger; the right finger mimics");
+    assert_eq!(
+        robot.dof(),
+        3,
+        "lift, wrist, left finger; the right finger mimics"
+    );
     let right = &robot.joints()[robot.joint_id("finger_right_joint").expect("joint")];
-    let left_index = match robot.joints()[robot.joint_id("finger_left_joint").expect("joint")].coordinate {
-        Coordinate::Own { index } => index,
-        other => panic!("left finger should be a coordinate, is {other:?}"),
-    };
-    assert_eq!(right.coordinate, Coordinate::Mimic { index: left_index, multiplier: -1.0, offset: 0.0 });
+    let left_index =
+        match robot.joints()[robot.joint_id("finger_left_joint").expect("joint")].coordinate {
+            Coordinate::Own { index } => index,
+            other => panic!("left finger should be a coordinate, is {other:?}"),
+        };
+    assert_eq!(
+        right.coordinate,
+        Coordinate::Mimic {
+            index: left_index,
+            multiplier: -1.0,
+            offset: 0.0
+        }
+    );
 
     // Limits, safety controller, dynamics and acceleration are all read.
     let lift = &robot.joints()[robot.joint_id("lift").expect("joint")];
-    assert_eq!((lift.limits.lower, lift.limits.upper, lift.limits.velocity), (0.0, 0.5, 0.3));
+    assert_eq!(
+        (lift.limits.lower, lift.limits.upper, lift.limits.velocity),
+        (0.0, 0.5, 0.3)
+    );
     assert_eq!(lift.limits.acceleration, 2.0);
-    assert_eq!(lift.safety_controller.expect("safety controller").k_velocity, 100.0);
+    assert_eq!(
+        lift.safety_controller
+            .expect("safety controller")
+            .k_velocity,
+        100.0
+    );
     let wrist = &robot.joints()[robot.joint_id("wrist").expect("joint")];
     assert!(wrist.limits.lower.is_infinite() && wrist.limits.upper.is_infinite());
     assert_eq!((wrist.damping, wrist.friction), (0.5, 0.1));
@@ -53,7 +73,9 @@ fn package_uris_relative_paths_and_mimic_joints() {
     // Meshes: package:// STL scaled for collision, DAE visual with the named material colour.
     let base = &robot.links()[robot.link_id("base").expect("link")];
     match &base.collisions[0].shape {
-        Shape::Mesh { path, scale, mesh, .. } => {
+        Shape::Mesh {
+            path, scale, mesh, ..
+        } => {
             assert!(path.ends_with(Path::new("my_robot/meshes/cube.stl")));
             assert_eq!(*scale, [0.2, 0.2, 0.1]);
             assert_relative_eq!(mesh.bounds().1.z, 0.05, epsilon = 1e-7);
@@ -61,8 +83,13 @@ fn package_uris_relative_paths_and_mimic_joints() {
         other => panic!("expected a mesh, got {other:?}"),
     }
     assert_eq!(base.visuals[0].rgba, Some([0.5, 0.5, 0.5, 1.0]));
-    let shape = link_collision_shape(&robot, robot.link_id("carriage").expect("link")).expect("shape");
-    assert_relative_eq!(shape.compute_aabb(&Pose::IDENTITY).maxs.x, 0.05, epsilon = 1e-7);
+    let shape =
+        link_collision_shape(&robot, robot.link_id("carriage").expect("link")).expect("shape");
+    assert_relative_eq!(
+        shape.compute_aabb(&Pose::IDENTITY).maxs.x,
+        0.05,
+        epsilon = 1e-7
+    );
 
     // Mimic in FK: opening the left finger by 3 cm moves the right one 3 cm the other way.
     let state = robot.fk(Pose::IDENTITY, &[0.0, 0.0, 0.03]).expect("fk");

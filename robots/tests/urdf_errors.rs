@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use workcell_robots::{PackageMap, RobotError, RobotModel};
 
 fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/broken").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/broken")
+        .join(name)
 }
 
 fn load(name: &str) -> RobotError {
@@ -14,7 +16,10 @@ fn load(name: &str) -> RobotError {
         Ok(_) => panic!("{name} loaded although it is broken"),
         Err(e) => {
             // Every error message names the file.
-            assert!(e.to_string().contains(name), "{name}: message does not name the file: {e}");
+            assert!(
+                e.to_string().contains(name),
+                "{name}: message does not name the file: {e}"
+            );
             e
         }
     }
@@ -22,9 +27,16 @@ fn load(name: &str) -> RobotError {
 
 fn assert_invalid(name: &str, element: &str, needle: &str) {
     match load(name) {
-        RobotError::Invalid { element: el, message, .. } => {
+        RobotError::Invalid {
+            element: el,
+            message,
+            ..
+        } => {
             assert_eq!(el, element, "{name}");
-            assert!(message.contains(needle), "{name}: '{message}' lacks '{needle}'");
+            assert!(
+                message.contains(needle),
+                "{name}: '{message}' lacks '{needle}'"
+            );
         }
         other => panic!("{name}: expected Invalid, got {other:?}"),
     }
@@ -32,21 +44,41 @@ fn assert_invalid(name: &str, element: &str, needle: &str) {
 
 #[test]
 fn structural_errors_name_the_element() {
-    assert_invalid("missing_parent.urdf", "joint 'j'", "parent link 'nowhere' does not exist");
-    assert_invalid("missing_child.urdf", "joint 'j'", "child link 'missing_child' does not exist");
+    assert_invalid(
+        "missing_parent.urdf",
+        "joint 'j'",
+        "parent link 'nowhere' does not exist",
+    );
+    assert_invalid(
+        "missing_child.urdf",
+        "joint 'j'",
+        "child link 'missing_child' does not exist",
+    );
     assert_invalid("cycle.urdf", "joint 'ab'", "cycle");
     assert_invalid("two_roots.urdf", "robot 'broken'", "2 root links (a, b)");
     assert_invalid("duplicate_link.urdf", "link 'a'", "defined twice");
     assert_invalid("floating_joint.urdf", "joint 'j'", "not supported");
-    assert_invalid("mimic_unknown.urdf", "joint 'j'", "'ghost', which does not exist");
+    assert_invalid(
+        "mimic_unknown.urdf",
+        "joint 'j'",
+        "'ghost', which does not exist",
+    );
 }
 
 #[test]
 fn bad_numbers_are_rejected() {
     assert_invalid("negative_mass.urdf", "link 'a'", "mass -2");
-    assert_invalid("negative_radius.urdf", "link 'a' collision 0", "sphere radius");
+    assert_invalid(
+        "negative_radius.urdf",
+        "link 'a' collision 0",
+        "sphere radius",
+    );
     assert_invalid("zero_axis.urdf", "joint 'j'", "not a direction");
-    assert_invalid("lower_above_upper.urdf", "joint 'j'", "lower=1 is above upper=-1");
+    assert_invalid(
+        "lower_above_upper.urdf",
+        "joint 'j'",
+        "lower=1 is above upper=-1",
+    );
     assert_invalid("negative_velocity.urdf", "joint 'j'", "velocity=-3");
 }
 
@@ -74,13 +106,25 @@ fn mesh_problems_name_the_mesh() {
         ("missing_mesh.urdf", "does_not_exist.stl", "cannot read"),
         ("broken_mesh.urdf", "truncated.stl", "truncated binary STL"),
         ("broken_dae.urdf", "garbage.dae", "cannot decode"),
-        ("escaping_mesh.urdf", "../../../../../../etc/hostname", "escapes"),
+        (
+            "escaping_mesh.urdf",
+            "../../../../../../etc/hostname",
+            "escapes",
+        ),
     ] {
         match load(name) {
-            RobotError::Mesh { uri: u, message, element, .. } => {
+            RobotError::Mesh {
+                uri: u,
+                message,
+                element,
+                ..
+            } => {
                 assert_eq!(u, uri, "{name}");
                 assert!(element.starts_with("link 'a'"), "{name}: {element}");
-                assert!(message.contains(needle), "{name}: '{message}' lacks '{needle}'");
+                assert!(
+                    message.contains(needle),
+                    "{name}: '{message}' lacks '{needle}'"
+                );
             }
             other => panic!("{name}: expected Mesh, got {other:?}"),
         }

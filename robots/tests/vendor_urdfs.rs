@@ -1,7 +1,7 @@
 //! Real vendor URDFs from the PyPI package example-robot-data (6.0.0): package:// URIs, DAE
-//! visuals, STL collision meshes. `.ci/run` downloads the wheel and sets
-//! `WORKCELL_EXAMPLE_ROBOT_DATA` to its `share/example-robot-data` folder; without it these
-//! tests say so and pass, except on CI where they fail.
+//! visuals, STL collision meshes. `scripts/fetch-example-robot-data.sh` downloads the wheel
+//! into `~/.cache/workcell`, where these tests find it (or set `WORKCELL_EXAMPLE_ROBOT_DATA`).
+//! Without the data they say so and pass, except on CI (`CI` set), where they fail.
 
 use std::path::PathBuf;
 
@@ -10,13 +10,24 @@ use workcell_robots::math::Pose;
 use workcell_robots::{PackageMap, RobotModel, Shape};
 
 fn data_dir() -> Option<PathBuf> {
-    match std::env::var_os("WORKCELL_EXAMPLE_ROBOT_DATA") {
-        Some(dir) => Some(PathBuf::from(dir)),
-        None if std::env::var_os("CI").is_some() => {
-            panic!("CI must set WORKCELL_EXAMPLE_ROBOT_DATA (see .ci/run)")
+    let cached = std::env::var_os("HOME").map(|home| {
+        PathBuf::from(home)
+            .join(".cache/workcell/example-robot-data-6.0.0/cmeel.prefix/share/example-robot-data")
+    });
+    let dir = std::env::var_os("WORKCELL_EXAMPLE_ROBOT_DATA")
+        .map(PathBuf::from)
+        .or(cached);
+    match dir {
+        Some(dir) if dir.is_dir() => Some(dir),
+        _ if std::env::var_os("CI").is_some() => {
+            panic!(
+                "CI needs example-robot-data: run scripts/fetch-example-robot-data.sh (see .ci/run)"
+            )
         }
-        None => {
-            eprintln!("WORKCELL_EXAMPLE_ROBOT_DATA is not set: vendor URDF tests not run (see README)");
+        _ => {
+            eprintln!(
+                "example-robot-data not found: vendor URDF tests not run (scripts/fetch-example-robot-data.sh)"
+            );
             None
         }
     }
@@ -28,21 +39,34 @@ fn load(relative: &str) -> Option<RobotModel> {
 }
 
 fn count_meshes(robot: &RobotModel) -> (usize, usize) {
-    let meshes = |g: &[workcell_robots::Geometry]| g.iter().filter(|g| matches!(g.shape, Shape::Mesh { .. })).count();
-    robot.links().iter().fold((0, 0), |(v, c), l| (v + meshes(&l.visuals), c + meshes(&l.collisions)))
+    let meshes = |g: &[workcell_robots::Geometry]| {
+        g.iter()
+            .filter(|g| matches!(g.shape, Shape::Mesh { .. }))
+            .count()
+    };
+    robot.links().iter().fold((0, 0), |(v, c), l| {
+        (v + meshes(&l.visuals), c + meshes(&l.collisions))
+    })
 }
 
 #[test]
 fn ur5_tool0_matches_pinocchio() {
-    let Some(robot) = load("robots/ur_description/urdf/ur5_robot.urdf") else { return };
+    let Some(robot) = load("robots/ur_description/urdf/ur5_robot.urdf") else {
+        return;
+    };
     assert_eq!(robot.dof(), 6);
     let (visual, collision) = count_meshes(&robot);
-    assert!(visual >= 6 && collision >= 6, "DAE visuals {visual}, STL collisions {collision}");
+    assert!(
+        visual >= 6 && collision >= 6,
+        "DAE visuals {visual}, STL collisions {collision}"
+    );
     // Reference: Pinocchio 3.x, example-robot-data UR5, frame tool0 at this q
     // (../shared/reference/SAFETY.md).
     let q = [0.1, -0.5, 0.8, -1.2, 0.3, 0.7];
     let state = robot.fk(Pose::IDENTITY, &q).expect("fk");
-    let tool0 = state.link_pose(robot.link_id("tool0").expect("tool0")).translation;
+    let tool0 = state
+        .link_pose(robot.link_id("tool0").expect("tool0"))
+        .translation;
     assert_relative_eq!(tool0.x, 0.814036, epsilon = 1e-6);
     assert_relative_eq!(tool0.y, 0.270393, epsilon = 1e-6);
     assert_relative_eq!(tool0.z, 0.137213, epsilon = 1e-6);
@@ -50,13 +74,18 @@ fn ur5_tool0_matches_pinocchio() {
 
 #[test]
 fn panda_loads_with_meshes_and_mimic_finger() {
-    let Some(robot) = load("robots/panda_description/urdf/panda.urdf") else { return };
+    let Some(robot) = load("robots/panda_description/urdf/panda.urdf") else {
+        return;
+    };
     // 7 arm joints + 1 finger; the second finger mimics the first.
     assert_eq!(robot.dof(), 8);
     let mimic = robot.joints().iter().filter(|j| j.mimic.is_some()).count();
     assert_eq!(mimic, 1);
     let (visual, collision) = count_meshes(&robot);
-    assert!(visual >= 8 && collision >= 8, "visual {visual}, collision {collision}");
+    assert!(
+        visual >= 8 && collision >= 8,
+        "visual {visual}, collision {collision}"
+    );
     // Every moving link with collision meshes gets a convex shape and a bounding capsule.
     for link in 0..robot.links().len() {
         if !robot.links()[link].collisions.is_empty() {

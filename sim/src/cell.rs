@@ -76,7 +76,7 @@ impl CellModel {
             RobotModel::load(&name, &PackageMap::from_env()).map_err(|source| SimError::Robot {
                 path: scenario_path.to_path_buf(),
                 key: key.to_string(),
-                source,
+                source: Box::new(source),
             })
         };
         let robot = load("robot.model", &scenario.robot.model)?;
@@ -87,10 +87,20 @@ impl CellModel {
             message,
         };
         if robot.dof() == 0 {
-            return Err(invalid("robot.model", format!("robot '{}' has no movable joint", robot.name())));
+            return Err(invalid(
+                "robot.model",
+                format!("robot '{}' has no movable joint", robot.name()),
+            ));
         }
         let tool_link = robot.link_id(&scenario.robot.tool_link).ok_or_else(|| {
-            invalid("robot.tool_link", format!("robot '{}' has no link '{}'", robot.name(), scenario.robot.tool_link))
+            invalid(
+                "robot.tool_link",
+                format!(
+                    "robot '{}' has no link '{}'",
+                    robot.name(),
+                    scenario.robot.tool_link
+                ),
+            )
         })?;
         let limits = robot.position_limits();
         let initial_q = if scenario.robot.initial_q.is_empty() {
@@ -101,19 +111,32 @@ impl CellModel {
         if initial_q.len() != robot.dof() {
             return Err(invalid(
                 "robot.initial_q",
-                format!("has {} values, robot '{}' has {} joints", initial_q.len(), robot.name(), robot.dof()),
+                format!(
+                    "has {} values, robot '{}' has {} joints",
+                    initial_q.len(),
+                    robot.name(),
+                    robot.dof()
+                ),
             ));
         }
         for (i, (q, [lo, hi])) in initial_q.iter().zip(&limits).enumerate() {
             if q < lo || q > hi {
-                return Err(invalid("robot.initial_q", format!("joint {i}: {q} is outside [{lo}, {hi}]")));
+                return Err(invalid(
+                    "robot.initial_q",
+                    format!("joint {i}: {q} is outside [{lo}, {hi}]"),
+                ));
             }
         }
         let X_WR = scenario.robot.base.to_pose();
         let X_WH = scenario.human.base.to_pose();
-        let robot_motion = plan_robot_motion(scenario, scenario_path, &robot, X_WR, tool_link, &initial_q)?;
-        let human_motion =
-            HumanMotion::generate(&scenario.human.motions, scenario.human.shuffle, &human.position_limits(), scenario.seed);
+        let robot_motion =
+            plan_robot_motion(scenario, scenario_path, &robot, X_WR, tool_link, &initial_q)?;
+        let human_motion = HumanMotion::generate(
+            &scenario.human.motions,
+            scenario.human.shuffle,
+            &human.position_limits(),
+            scenario.seed,
+        );
         let clutter = scenario.clutter.iter().flat_map(clutter_boxes).collect();
         Ok(Self {
             scenario: scenario.clone(),
@@ -162,16 +185,29 @@ fn plan_robot_motion(
             .iter()
             .map(|&j| {
                 let a = robot.joints()[j].limits.acceleration;
-                if a.is_finite() && a > 0.0 { a } else { fallback }
+                if a.is_finite() && a > 0.0 {
+                    a
+                } else {
+                    fallback
+                }
             })
             .collect()
     };
     let scaled = |scale: f64| -> Vec<f64> {
-        velocity.iter().map(|v| if *v > 0.0 { v * scale } else { scale }).collect()
+        velocity
+            .iter()
+            .map(|v| if *v > 0.0 { v * scale } else { scale })
+            .collect()
     };
     match &scenario.robot.motion {
         RobotMotionConfig::Hold => Ok(JointTrajectory::hold(initial_q)),
-        RobotMotionConfig::Random { speed_scale, acceleration_rad_s2, margin_rad, min_height_m, waypoints } => {
+        RobotMotionConfig::Random {
+            speed_scale,
+            acceleration_rad_s2,
+            margin_rad,
+            min_height_m,
+            waypoints,
+        } => {
             let mut rng = ChaCha8Rng::seed_from_u64(scenario.seed);
             let mut state = KinematicState::new(robot);
             state.X_WB = X_WR;
@@ -183,7 +219,9 @@ fn plan_robot_motion(
                     let s = f64::from(k) / 8.0;
                     let q: Vec<f64> = a.iter().zip(b).map(|(x, y)| x + (y - x) * s).collect();
                     robot.forward_kinematics(&q, &mut state).is_ok()
-                        && moving.iter().all(|&l| state.link_pose(l).translation.z >= *min_height_m)
+                        && moving
+                            .iter()
+                            .all(|&l| state.link_pose(l).translation.z >= *min_height_m)
                         && state.link_pose(tool_link).translation.z >= *min_height_m
                 })
             };
@@ -195,8 +233,15 @@ fn plan_robot_motion(
                         .iter()
                         .map(|[lo, hi]| {
                             // Continuous and +-2 pi joints: one turn either way is enough.
-                            let (lo, hi) = (lo.max(-std::f64::consts::PI) + margin_rad, hi.min(std::f64::consts::PI) - margin_rad);
-                            if lo < hi { rng.random_range(lo..hi) } else { 0.5 * (lo + hi) }
+                            let (lo, hi) = (
+                                lo.max(-std::f64::consts::PI) + margin_rad,
+                                hi.min(std::f64::consts::PI) - margin_rad,
+                            );
+                            if lo < hi {
+                                rng.random_range(lo..hi)
+                            } else {
+                                0.5 * (lo + hi)
+                            }
                         })
                         .collect();
                     (line_clear(&last, &q) && (!is_last || line_clear(&q, initial_q))).then_some(q)
@@ -214,23 +259,44 @@ fn plan_robot_motion(
                     }
                 }
             }
-            Ok(JointTrajectory::through(&points, &scaled(*speed_scale), &acceleration_of(*acceleration_rad_s2), 0.0))
+            Ok(JointTrajectory::through(
+                &points,
+                &scaled(*speed_scale),
+                &acceleration_of(*acceleration_rad_s2),
+                0.0,
+            ))
         }
-        RobotMotionConfig::PickAndPlace { waypoints, dwell_s, speed_scale, acceleration_rad_s2 } => {
+        RobotMotionConfig::PickAndPlace {
+            waypoints,
+            dwell_s,
+            speed_scale,
+            acceleration_rad_s2,
+        } => {
             let mut seed = initial_q.to_vec();
             let mut points = Vec::with_capacity(waypoints.len());
             let mut rng = ChaCha8Rng::seed_from_u64(scenario.seed);
             for (i, p) in waypoints.iter().enumerate() {
                 let target = tool_down(Vector::from_array(*p));
-                let mut best = solve_ik(robot, X_WR, tool_link, target, &seed, &IkOptions::default());
+                let mut best =
+                    solve_ik(robot, X_WR, tool_link, target, &seed, &IkOptions::default());
                 // Random restarts around the seed when the nearest solution is not found.
                 for _ in 0..20 {
                     if best.converged {
                         break;
                     }
-                    let restart: Vec<f64> =
-                        seed.iter().zip(&limits).map(|(q, [lo, hi])| (q + rng.random_range(-1.0..1.0)).clamp(*lo, *hi)).collect();
-                    let sol = solve_ik(robot, X_WR, tool_link, target, &restart, &IkOptions::default());
+                    let restart: Vec<f64> = seed
+                        .iter()
+                        .zip(&limits)
+                        .map(|(q, [lo, hi])| (q + rng.random_range(-1.0..1.0)).clamp(*lo, *hi))
+                        .collect();
+                    let sol = solve_ik(
+                        robot,
+                        X_WR,
+                        tool_link,
+                        target,
+                        &restart,
+                        &IkOptions::default(),
+                    );
                     if sol.error_m < best.error_m || sol.converged {
                         best = sol;
                     }
@@ -246,7 +312,12 @@ fn plan_robot_motion(
                 seed.clone_from(&best.q);
                 points.push(best.q);
             }
-            Ok(JointTrajectory::through(&points, &scaled(*speed_scale), &acceleration_of(*acceleration_rad_s2), *dwell_s))
+            Ok(JointTrajectory::through(
+                &points,
+                &scaled(*speed_scale),
+                &acceleration_of(*acceleration_rad_s2),
+                *dwell_s,
+            ))
         }
     }
 }
@@ -254,14 +325,21 @@ fn plan_robot_motion(
 /// Links whose origin moves with the configuration (those on the base or on the first
 /// joint's axis do not), judged by their Jacobian at `q` and at a perturbed `q`.
 fn moving_links(robot: &RobotModel, q: &[f64]) -> Vec<LinkId> {
-    let perturbed: Vec<f64> = q.iter().enumerate().map(|(i, v)| v + 0.1 + 0.05 * i as f64).collect();
+    let perturbed: Vec<f64> = q
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v + 0.1 + 0.05 * i as f64)
+        .collect();
     let mut jacobian = workcell_robots::Jacobian::zeros(robot.dof());
     (0..robot.links().len())
         .filter(|&l| {
             [q, &perturbed].iter().any(|q| {
                 robot.fk(Pose::IDENTITY, q).is_ok_and(|state| {
                     robot.point_jacobian(&state, l, state.link_pose(l).translation, &mut jacobian);
-                    jacobian.columns().iter().any(|c| c[0].abs() + c[1].abs() + c[2].abs() > 1e-9)
+                    jacobian
+                        .columns()
+                        .iter()
+                        .any(|c| c[0].abs() + c[1].abs() + c[2].abs() > 1e-9)
                 })
             })
         })
@@ -273,14 +351,20 @@ fn clutter_boxes(c: &crate::scenario::ClutterConfig) -> Vec<ClutterBox> {
     let X_WS = c.pose.to_pose();
     let [sx, sy, sz] = c.size_m;
     match c.kind {
-        ClutterKind::Box => vec![ClutterBox { X_WC: X_WS, half_extents_m: [sx / 2.0, sy / 2.0, sz / 2.0] }],
+        ClutterKind::Box => vec![ClutterBox {
+            X_WC: X_WS,
+            half_extents_m: [sx / 2.0, sy / 2.0, sz / 2.0],
+        }],
         ClutterKind::Shelf => {
             let post = 0.03_f64.min(sx / 4.0).min(sy / 4.0);
             let board = 0.02_f64.min(sz / (2.0 * c.boards as f64));
             let mut boxes = Vec::new();
             for (x, y) in [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)] {
                 let p = Vector::new(x * (sx - post) / 2.0, y * (sy - post) / 2.0, 0.0);
-                boxes.push(ClutterBox { X_WC: X_WS * Pose::from_translation(p), half_extents_m: [post / 2.0, post / 2.0, sz / 2.0] });
+                boxes.push(ClutterBox {
+                    X_WC: X_WS * Pose::from_translation(p),
+                    half_extents_m: [post / 2.0, post / 2.0, sz / 2.0],
+                });
             }
             for k in 0..c.boards {
                 let z = -sz / 2.0 + board / 2.0 + (sz - board) * k as f64 / (c.boards - 1) as f64;
@@ -356,7 +440,8 @@ impl CellState {
             world.insert_collider(ColliderBuilder::cuboid(hx, hy, hz).position(c.X_WC), None);
         }
 
-        let (robot_links, coordinates) = build_robot(&mut world, &model.robot, model.X_WR, &model.initial_q)?;
+        let (robot_links, coordinates) =
+            build_robot(&mut world, &model.robot, model.X_WR, &model.initial_q)?;
 
         // Human: one kinematic body per link with collision geometry.
         let human = &model.human;
@@ -367,7 +452,9 @@ impl CellState {
         model.human_motion.sample(0.0, &mut human_q, &mut human_qd);
         human
             .forward_kinematics(&human_q, &mut human_kinematics)
-            .map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
+            .map_err(|e| SimError::InvalidCommand {
+                message: e.to_string(),
+            })?;
         let mut human_bodies = Vec::with_capacity(human.links().len());
         for (l, link) in human.links().iter().enumerate() {
             let shapes: Vec<_> = link.collisions.iter().filter_map(geometry_shape).collect();
@@ -376,10 +463,15 @@ impl CellState {
                 continue;
             }
             let body = world.insert_body(
-                RigidBodyBuilder::kinematic_position_based().pose(*human_kinematics.link_pose(l)).can_sleep(false),
+                RigidBodyBuilder::kinematic_position_based()
+                    .pose(*human_kinematics.link_pose(l))
+                    .can_sleep(false),
             );
             for (X_LS, shape) in shapes {
-                world.insert_collider(ColliderBuilder::new(shape).position(X_LS).density(0.0), Some(body));
+                world.insert_collider(
+                    ColliderBuilder::new(shape).position(X_LS).density(0.0),
+                    Some(body),
+                );
             }
             human_bodies.push(Some(body));
         }
@@ -438,13 +530,18 @@ impl CellState {
     #[must_use]
     pub fn robot_link_pose(&self, link: LinkId) -> Pose {
         let lb = self.robot_links[link];
-        self.world.bodies.get(lb.body).map_or(Pose::IDENTITY, |b| *b.position() * lb.X_BL)
+        self.world
+            .bodies
+            .get(lb.body)
+            .map_or(Pose::IDENTITY, |b| *b.position() * lb.X_BL)
     }
 
     /// Ground truth: poses of all robot links, indexed by [`LinkId`].
     #[must_use]
     pub fn robot_link_poses(&self) -> Vec<Pose> {
-        (0..self.robot_links.len()).map(|l| self.robot_link_pose(l)).collect()
+        (0..self.robot_links.len())
+            .map(|l| self.robot_link_pose(l))
+            .collect()
     }
 
     /// Ground truth: poses of all human links, indexed by the human model's [`LinkId`].
@@ -481,7 +578,9 @@ fn build_robot(
 ) -> Result<(Vec<LinkBody>, Vec<CoordinateHandle>)> {
     let fk = robot
         .fk(X_WR, initial_q)
-        .map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
+        .map_err(|e| SimError::InvalidCommand {
+            message: e.to_string(),
+        })?;
     // Each link's body: itself if its parent joint moves (or it is the root), else its parent's.
     let mut body_link: Vec<LinkId> = (0..robot.links().len()).collect();
     for joint in robot.joints() {
@@ -495,7 +594,11 @@ fn build_robot(
         let b = body_link[l];
         let X_WBody = *fk.link_pose(b);
         if bodies[b].is_none() {
-            let builder = if b == robot.root() { RigidBodyBuilder::fixed() } else { RigidBodyBuilder::dynamic() };
+            let builder = if b == robot.root() {
+                RigidBodyBuilder::fixed()
+            } else {
+                RigidBodyBuilder::dynamic()
+            };
             // Mass of the body: the inertials of every link merged into it.
             let mut mass = MassProperties::default();
             for (m, link) in robot.links().iter().enumerate() {
@@ -504,23 +607,38 @@ fn build_robot(
                 }
                 if let Some(i) = link.inertial {
                     let [ixx, ixy, ixz, iyy, iyz, izz] = i.inertia_kgm2;
-                    let inertia = parry3d_f64::math::Matrix::from_cols_array(&[ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz]);
+                    let inertia = parry3d_f64::math::Matrix::from_cols_array(&[
+                        ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz,
+                    ]);
                     let X_BI = X_WBody.inverse() * *fk.link_pose(m) * i.X_LI;
-                    mass += MassProperties::with_inertia_matrix(Vector::ZERO, i.mass_kg, inertia).transform_by(&X_BI);
+                    mass += MassProperties::with_inertia_matrix(Vector::ZERO, i.mass_kg, inertia)
+                        .transform_by(&X_BI);
                 }
             }
             if mass.mass() <= 0.0 && b != robot.root() {
                 // A moving link without inertial: a small mass keeps the solver well posed.
                 mass = MassProperties::new(Vector::ZERO, 0.01, Vector::splat(1e-5));
             }
-            let handle = world.insert_body(builder.pose(X_WBody).additional_mass_properties(mass).can_sleep(false));
+            let handle = world.insert_body(
+                builder
+                    .pose(X_WBody)
+                    .additional_mass_properties(mass)
+                    .can_sleep(false),
+            );
             bodies[b] = Some(handle);
         }
-        let body = bodies[b].ok_or_else(|| SimError::InvalidCommand { message: "link without body".into() })?;
+        let body = bodies[b].ok_or_else(|| SimError::InvalidCommand {
+            message: "link without body".into(),
+        })?;
         let X_BL = X_WBody.inverse() * *fk.link_pose(l);
         for g in &robot.links()[l].collisions {
             if let Some((X_LS, shape)) = geometry_shape(g) {
-                world.insert_collider(ColliderBuilder::new(shape).position(X_BL * X_LS).density(0.0), Some(body));
+                world.insert_collider(
+                    ColliderBuilder::new(shape)
+                        .position(X_BL * X_LS)
+                        .density(0.0),
+                    Some(body),
+                );
             }
         }
         links.push(LinkBody { body, X_BL });
@@ -528,7 +646,9 @@ fn build_robot(
 
     // Joints, parents before children; each movable joint connects two bodies.
     let mut joint_handles = vec![None; robot.joints().len()];
-    let refused = |name: &str| SimError::InvalidCommand { message: format!("rapier refused joint '{name}'") };
+    let refused = |name: &str| SimError::InvalidCommand {
+        message: format!("rapier refused joint '{name}'"),
+    };
     for (j, joint) in robot.joints().iter().enumerate() {
         if joint.kind == JointKind::Fixed {
             continue;
@@ -553,19 +673,24 @@ fn build_robot(
         if l.effort > 0.0 && matches!(joint.coordinate, Coordinate::Own { .. }) {
             builder = builder.motor_max_force(axis, l.effort);
         }
-        let handle = world.insert_multibody_joint(parent.body, child.body, builder.build()).ok_or_else(|| refused(&joint.name))?;
+        let handle = world
+            .insert_multibody_joint(parent.body, child.body, builder.build())
+            .ok_or_else(|| refused(&joint.name))?;
         joint_handles[j] = Some((handle, axis, coord));
     }
 
     let mut coordinates = Vec::with_capacity(robot.dof());
     for &j in robot.actuated_joints() {
-        let (joint, axis, coord) = joint_handles[j].ok_or_else(|| refused(&robot.joints()[j].name))?;
+        let (joint, axis, coord) =
+            joint_handles[j].ok_or_else(|| refused(&robot.joints()[j].name))?;
         coordinates.push(CoordinateHandle { joint, axis, coord });
     }
 
     // Initial configuration, mimic couplings, no self-contacts.
     let Some(&(first, _, _)) = joint_handles.iter().flatten().next() else {
-        return Err(SimError::InvalidCommand { message: "robot has no movable joint".into() });
+        return Err(SimError::InvalidCommand {
+            message: "robot has no movable joint".into(),
+        });
     };
     let Some((multibody, _)) = world.multibody_joints.get_mut(first) else {
         return Err(refused("first joint"));
@@ -574,14 +699,34 @@ fn build_robot(
     let mut displacement = vec![0.0; multibody.ndofs()];
     let mut couplings = Vec::new();
     for (j, joint) in robot.joints().iter().enumerate() {
-        let Some((handle, _, coord)) = joint_handles[j] else { continue };
-        let link_id = world.multibody_joints.rigid_body_link(handle_body(handle)).map(|l| l.id).unwrap_or(0);
-        let Some((mb, _)) = world.multibody_joints.get(handle) else { continue };
-        let Some(link) = mb.link(link_id) else { continue };
+        let Some((handle, _, coord)) = joint_handles[j] else {
+            continue;
+        };
+        let link_id = world
+            .multibody_joints
+            .rigid_body_link(handle_body(handle))
+            .map(|l| l.id)
+            .unwrap_or(0);
+        let Some((mb, _)) = world.multibody_joints.get(handle) else {
+            continue;
+        };
+        let Some(link) = mb.link(link_id) else {
+            continue;
+        };
         displacement[link.assembly_id()] = joint.position(initial_q);
-        if let Coordinate::Mimic { index, multiplier, offset } = joint.coordinate {
-            let (src, _, src_coord) = joint_handles[robot.actuated_joints()[index]].ok_or_else(|| refused(&joint.name))?;
-            let src_link = world.multibody_joints.rigid_body_link(handle_body(src)).map(|l| l.id).unwrap_or(0);
+        if let Coordinate::Mimic {
+            index,
+            multiplier,
+            offset,
+        } = joint.coordinate
+        {
+            let (src, _, src_coord) = joint_handles[robot.actuated_joints()[index]]
+                .ok_or_else(|| refused(&joint.name))?;
+            let src_link = world
+                .multibody_joints
+                .rigid_body_link(handle_body(src))
+                .map(|l| l.id)
+                .unwrap_or(0);
             couplings.push(MultibodyDofCoupling {
                 link1: src_link,
                 dof1: 0,
@@ -594,7 +739,11 @@ fn build_robot(
             });
         }
     }
-    let PhysicsWorld { bodies, multibody_joints, .. } = world;
+    let PhysicsWorld {
+        bodies,
+        multibody_joints,
+        ..
+    } = world;
     if let Some((multibody, _)) = multibody_joints.get_mut(first) {
         for c in couplings {
             multibody.add_dof_coupling(c);
@@ -625,10 +774,14 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
     let (stiffness, damping) = (model.scenario.robot.stiffness, model.scenario.robot.damping);
     let check = |name: &str, v: &[f64]| -> Result<()> {
         if v.len() != dof {
-            return Err(SimError::InvalidCommand { message: format!("{name} has {} values, the robot {dof} joints", v.len()) });
+            return Err(SimError::InvalidCommand {
+                message: format!("{name} has {} values, the robot {dof} joints", v.len()),
+            });
         }
         if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-            return Err(SimError::InvalidCommand { message: format!("{name}[{i}] is {}", v[i]) });
+            return Err(SimError::InvalidCommand {
+                message: format!("{name}[{i}] is {}", v[i]),
+            });
         }
         Ok(())
     };
@@ -653,12 +806,22 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
     for (i, c) in state.coordinates.iter().enumerate() {
         let joint = &robot.joints()[robot.actuated_joints()[i]];
         let l = joint.limits;
-        let v_max = if l.velocity > 0.0 { l.velocity } else { f64::INFINITY };
-        let Some((mb, link)) = state.world.multibody_joints.get_mut(c.joint) else { continue };
-        let Some(link) = mb.link_mut(link) else { continue };
+        let v_max = if l.velocity > 0.0 {
+            l.velocity
+        } else {
+            f64::INFINITY
+        };
+        let Some((mb, link)) = state.world.multibody_joints.get_mut(c.joint) else {
+            continue;
+        };
+        let Some(link) = mb.link_mut(link) else {
+            continue;
+        };
         if mode_velocity {
             let q = state.q[i];
-            let v = targets.1[i].clamp(-v_max, v_max).clamp((l.lower - q) / dt, (l.upper - q) / dt);
+            let v = targets.1[i]
+                .clamp(-v_max, v_max)
+                .clamp((l.lower - q) / dt, (l.upper - q) / dt);
             link.joint.data.set_motor(c.axis, q, v, 0.0, damping);
         } else {
             // A PD servo solved implicitly by rapier; gravity leaves a steady error of about
@@ -672,11 +835,15 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
 
     // Human: kinematic bodies to their poses at the end of the step.
     let t_next = state.time_s + dt;
-    model.human_motion.sample(t_next, &mut state.human_q, &mut state.human_qd);
+    model
+        .human_motion
+        .sample(t_next, &mut state.human_q, &mut state.human_qd);
     model
         .human
         .forward_kinematics(&state.human_q, &mut state.human_kinematics)
-        .map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
+        .map_err(|e| SimError::InvalidCommand {
+            message: e.to_string(),
+        })?;
     for (l, body) in state.human_bodies.iter().enumerate() {
         if let Some(body) = body
             && let Some(rb) = state.world.bodies.get_mut(*body)
@@ -711,14 +878,25 @@ pub struct RapierCheck {
 /// # Errors
 /// [`SimError::InvalidCommand`] when `q` does not fit or rapier refuses the joint tree.
 pub fn check_in_rapier(robot: &RobotModel, q: &[f64]) -> Result<RapierCheck> {
-    robot.check_configuration(q).map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
+    robot
+        .check_configuration(q)
+        .map_err(|e| SimError::InvalidCommand {
+            message: e.to_string(),
+        })?;
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::new(0.0, 0.0, -9.81);
     world.integration_parameters.dt = 0.001;
     let (links, coordinates) = build_robot(&mut world, robot, Pose::IDENTITY, q)?;
-    let fk = robot.fk(Pose::IDENTITY, q).map_err(|e| SimError::InvalidCommand { message: e.to_string() })?;
+    let fk = robot
+        .fk(Pose::IDENTITY, q)
+        .map_err(|e| SimError::InvalidCommand {
+            message: e.to_string(),
+        })?;
     let pose_of = |world: &PhysicsWorld, l: usize| {
-        world.bodies.get(links[l].body).map_or(Pose::IDENTITY, |b| *b.position() * links[l].X_BL)
+        world
+            .bodies
+            .get(links[l].body)
+            .map_or(Pose::IDENTITY, |b| *b.position() * links[l].X_BL)
     };
     let fk_mismatch_m = (0..links.len())
         .map(|l| (pose_of(&world, l).translation - fk.link_pose(l).translation).length())
@@ -729,7 +907,9 @@ pub fn check_in_rapier(robot: &RobotModel, q: &[f64]) -> Result<RapierCheck> {
             if let Some((mb, link)) = world.multibody_joints.get_mut(c.joint)
                 && let Some(link) = mb.link_mut(link)
             {
-                link.joint.data.set_motor(c.axis, q[i], 0.0, defaults.stiffness, defaults.damping);
+                link.joint
+                    .data
+                    .set_motor(c.axis, q[i], 0.0, defaults.stiffness, defaults.damping);
             }
         }
         world.step();

@@ -31,10 +31,12 @@ pub enum SimError {
         path: PathBuf,
         key: String,
         #[source]
-        source: RobotError,
+        source: Box<RobotError>,
     },
     /// Inverse kinematics found no configuration for a task waypoint.
-    #[error("{path}: {key}: no joint configuration reaches {target:?} (residual {residual_m:.4} m)")]
+    #[error(
+        "{path}: {key}: no joint configuration reaches {target:?} (residual {residual_m:.4} m)"
+    )]
     Unreachable {
         path: PathBuf,
         key: String,

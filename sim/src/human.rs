@@ -37,12 +37,22 @@ impl HumanMotion {
     /// Generates the motion for an arm with position limits `limits` (at least 3 joints for
     /// the motion primitives; extra joints stay at 0), cycling through `kinds`.
     #[must_use]
-    pub fn generate(kinds: &[HumanMotionKind], shuffle: bool, limits: &[[f64; 2]], seed: u64) -> Self {
+    pub fn generate(
+        kinds: &[HumanMotionKind],
+        shuffle: bool,
+        limits: &[[f64; 2]],
+        seed: u64,
+    ) -> Self {
         let dof = limits.len();
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4855_4d41_4e00_0000); // "HUMAN"
         let clamp = |q: [f64; 3]| -> Vec<f64> {
             (0..dof)
-                .map(|j| q.get(j).copied().unwrap_or(0.0).clamp(limits[j][0], limits[j][1]))
+                .map(|j| {
+                    q.get(j)
+                        .copied()
+                        .unwrap_or(0.0)
+                        .clamp(limits[j][0], limits[j][1])
+                })
                 .collect()
         };
         let rest = clamp([0.08, 0.05, 0.15]);
@@ -59,13 +69,21 @@ impl HumanMotion {
         for kind in order {
             let (q_to, transition_s, hold_s, wave) = match kind {
                 HumanMotionKind::Rest => (
-                    clamp([rng.random_range(0.0..0.15), rng.random_range(-0.1..0.15), rng.random_range(0.05..0.35)]),
+                    clamp([
+                        rng.random_range(0.0..0.15),
+                        rng.random_range(-0.1..0.15),
+                        rng.random_range(0.05..0.35),
+                    ]),
                     rng.random_range(0.6..1.0),
                     rng.random_range(0.8..2.0),
                     None,
                 ),
                 HumanMotionKind::Reach => (
-                    clamp([rng.random_range(0.0..0.35), rng.random_range(1.0..1.6), rng.random_range(0.05..0.6)]),
+                    clamp([
+                        rng.random_range(0.0..0.35),
+                        rng.random_range(1.0..1.6),
+                        rng.random_range(0.05..0.6),
+                    ]),
                     rng.random_range(0.7..1.2),
                     rng.random_range(0.5..1.5),
                     None,
@@ -78,7 +96,15 @@ impl HumanMotion {
                     Some((rng.random_range(0.3..0.5), rng.random_range(1.2..2.0))),
                 ),
             };
-            phases.push(Phase { kind, t0_s: t, transition_s, hold_s, q_from: q.clone(), q_to: q_to.clone(), wave });
+            phases.push(Phase {
+                kind,
+                t0_s: t,
+                transition_s,
+                hold_s,
+                q_from: q.clone(),
+                q_to: q_to.clone(),
+                wave,
+            });
             t += transition_s + hold_s;
             q = q_to;
         }
@@ -93,7 +119,11 @@ impl HumanMotion {
             wave: None,
         });
         t += 1.0;
-        Self { phases, period_s: t, dof }
+        Self {
+            phases,
+            period_s: t,
+            dof,
+        }
     }
 
     /// Time after which the motion repeats, s.
@@ -110,7 +140,10 @@ impl HumanMotion {
 
     fn phase(&self, t_s: f64) -> &Phase {
         let t = t_s.rem_euclid(self.period_s);
-        let i = self.phases.partition_point(|p| p.t0_s <= t).saturating_sub(1);
+        let i = self
+            .phases
+            .partition_point(|p| p.t0_s <= t)
+            .saturating_sub(1);
         &self.phases[i]
     }
 
@@ -121,7 +154,11 @@ impl HumanMotion {
         let local = t - p.t0_s;
         let tau = (local / p.transition_s).clamp(0.0, 1.0);
         let (s, ds, _) = quintic(tau);
-        let ds = if local < p.transition_s { ds / p.transition_s } else { 0.0 };
+        let ds = if local < p.transition_s {
+            ds / p.transition_s
+        } else {
+            0.0
+        };
         for j in 0..self.dof {
             let d = p.q_to[j] - p.q_from[j];
             q[j] = p.q_from[j] + d * s;
@@ -135,10 +172,12 @@ impl HumanMotion {
             let h = local - p.transition_s;
             let w = 2.0 * std::f64::consts::PI * frequency_hz;
             let envelope = (std::f64::consts::PI * h / p.hold_s).sin();
-            let d_envelope = std::f64::consts::PI / p.hold_s * (std::f64::consts::PI * h / p.hold_s).cos();
+            let d_envelope =
+                std::f64::consts::PI / p.hold_s * (std::f64::consts::PI * h / p.hold_s).cos();
             let e2 = envelope * envelope;
             q[2] += amplitude * e2 * (w * h).sin();
-            qd[2] += amplitude * (2.0 * envelope * d_envelope * (w * h).sin() + e2 * w * (w * h).cos());
+            qd[2] +=
+                amplitude * (2.0 * envelope * d_envelope * (w * h).sin() + e2 * w * (w * h).cos());
         }
     }
 }
@@ -153,7 +192,11 @@ mod tests {
 
     #[test]
     fn same_seed_same_motion_other_seed_other_motion() {
-        let kinds = [HumanMotionKind::Reach, HumanMotionKind::Wave, HumanMotionKind::Withdraw];
+        let kinds = [
+            HumanMotionKind::Reach,
+            HumanMotionKind::Wave,
+            HumanMotionKind::Withdraw,
+        ];
         let a = HumanMotion::generate(&kinds, true, &limits(), 5);
         let b = HumanMotion::generate(&kinds, true, &limits(), 5);
         let c = HumanMotion::generate(&kinds, true, &limits(), 6);
@@ -163,7 +206,12 @@ mod tests {
 
     #[test]
     fn velocity_is_the_derivative_of_position_and_motion_is_continuous() {
-        let kinds = [HumanMotionKind::Rest, HumanMotionKind::Reach, HumanMotionKind::Wave, HumanMotionKind::Withdraw];
+        let kinds = [
+            HumanMotionKind::Rest,
+            HumanMotionKind::Reach,
+            HumanMotionKind::Wave,
+            HumanMotionKind::Withdraw,
+        ];
         let m = HumanMotion::generate(&kinds, false, &limits(), 1);
         let (mut q0, mut q1, mut qd, mut scratch) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
         let h = 1e-6;
@@ -176,7 +224,11 @@ mod tests {
             for j in 0..3 {
                 let numeric = (q1[j] - q0[j]) / (2.0 * h);
                 // Phase boundaries are C1 (rest to rest), so differences agree everywhere.
-                assert!((numeric - qd[j]).abs() < 1e-4, "t {t} joint {j}: {numeric} vs {}", qd[j]);
+                assert!(
+                    (numeric - qd[j]).abs() < 1e-4,
+                    "t {t} joint {j}: {numeric} vs {}",
+                    qd[j]
+                );
             }
         }
         // A reach brings the shoulder forward past 1 rad of flexion at some point.

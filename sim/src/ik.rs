@@ -22,7 +22,12 @@ pub struct IkOptions {
 
 impl Default for IkOptions {
     fn default() -> Self {
-        Self { max_iterations: 200, damping: 0.05, tolerance_m: 1e-4, tolerance_rad: 1e-3 }
+        Self {
+            max_iterations: 200,
+            damping: 0.05,
+            tolerance_m: 1e-4,
+            tolerance_rad: 1e-3,
+        }
     }
 }
 
@@ -49,11 +54,20 @@ pub fn solve_ik(
 ) -> IkSolution {
     let n = robot.dof();
     let limits = robot.position_limits();
-    let mut q: Vec<f64> = q_seed.iter().zip(&limits).map(|(v, [lo, hi])| v.clamp(*lo, *hi)).collect();
+    let mut q: Vec<f64> = q_seed
+        .iter()
+        .zip(&limits)
+        .map(|(v, [lo, hi])| v.clamp(*lo, *hi))
+        .collect();
     let mut state = KinematicState::new(robot);
     state.X_WB = X_WB;
     let mut jacobian = Jacobian::zeros(n);
-    let mut best = IkSolution { q: q.clone(), error_m: f64::INFINITY, error_rad: f64::INFINITY, converged: false };
+    let mut best = IkSolution {
+        q: q.clone(),
+        error_m: f64::INFINITY,
+        error_rad: f64::INFINITY,
+        converged: false,
+    };
     for _ in 0..options.max_iterations {
         if robot.forward_kinematics(&q, &mut state).is_err() {
             break;
@@ -68,7 +82,12 @@ pub fn solve_ik(
         let e_r = dr.to_scaled_axis();
         let (error_m, error_rad) = (e_p.length(), e_r.length());
         if error_m + 0.1 * error_rad < best.error_m + 0.1 * best.error_rad {
-            best = IkSolution { q: q.clone(), error_m, error_rad, converged: false };
+            best = IkSolution {
+                q: q.clone(),
+                error_m,
+                error_rad,
+                converged: false,
+            };
         }
         if error_m < options.tolerance_m && error_rad < options.tolerance_rad {
             best.converged = true;
@@ -124,7 +143,10 @@ fn solve_spd6(mut a: [[f64; 6]; 6], b: [f64; 6]) -> Option<[f64; 6]> {
 /// its x axis along world x.
 #[must_use]
 pub fn tool_down(p_W: Vector) -> Pose {
-    Pose::from_parts(p_W, workcell_robots::math::Rotation::from_rotation_x(std::f64::consts::PI))
+    Pose::from_parts(
+        p_W,
+        workcell_robots::math::Rotation::from_rotation_x(std::f64::consts::PI),
+    )
 }
 
 #[cfg(test)]
@@ -157,10 +179,23 @@ mod tests {
         let robot = RobotModel::from_catalogue("iiwa14_kinematics").expect("catalogue");
         let tool = robot.link_id("tool0").expect("tool0");
         let q_goal = [0.4, 0.6, -0.3, -1.2, 0.2, 0.9, 0.1];
-        let X_WT = *robot.fk(Pose::IDENTITY, &q_goal).expect("fk").link_pose(tool);
-        let sol = solve_ik(&robot, Pose::IDENTITY, tool, X_WT, &[0.0, 0.3, 0.0, -0.8, 0.0, 0.5, 0.0], &IkOptions::default());
+        let X_WT = *robot
+            .fk(Pose::IDENTITY, &q_goal)
+            .expect("fk")
+            .link_pose(tool);
+        let sol = solve_ik(
+            &robot,
+            Pose::IDENTITY,
+            tool,
+            X_WT,
+            &[0.0, 0.3, 0.0, -0.8, 0.0, 0.5, 0.0],
+            &IkOptions::default(),
+        );
         assert!(sol.converged, "{sol:?}");
-        let X = *robot.fk(Pose::IDENTITY, &sol.q).expect("fk").link_pose(tool);
+        let X = *robot
+            .fk(Pose::IDENTITY, &sol.q)
+            .expect("fk")
+            .link_pose(tool);
         assert!((X.translation - X_WT.translation).length() < 1e-4);
     }
 }

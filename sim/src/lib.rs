@@ -16,7 +16,6 @@
 //! assert!((state.time_s() - 0.1).abs() < 1e-12);
 //! # Ok::<(), workcell_sim::SimError>(())
 //! ```
-#![allow(non_snake_case)] // monogram frame notation: X_WB, p_WC
 
 mod cell;
 mod error;
@@ -25,6 +24,8 @@ pub mod ik;
 pub mod scenario;
 pub mod trajectory;
 
-pub use cell::{CellModel, CellState, ClutterBox, RapierCheck, RobotCommand, check_in_rapier, step};
+pub use cell::{
+    CellModel, CellState, ClutterBox, RapierCheck, RobotCommand, check_in_rapier, step,
+};
 pub use error::{Result, SimError};
 pub use scenario::Scenario;

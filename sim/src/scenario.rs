@@ -292,7 +292,12 @@ impl CameraConfig {
     #[must_use]
     pub fn intrinsics(&self) -> (f64, f64, f64, f64) {
         let fy = 0.5 * f64::from(self.height_px) / (0.5 * self.fov_y_deg.to_radians()).tan();
-        (fy, fy, 0.5 * f64::from(self.width_px), 0.5 * f64::from(self.height_px))
+        (
+            fy,
+            fy,
+            0.5 * f64::from(self.width_px),
+            0.5 * f64::from(self.height_px),
+        )
     }
 }
 
@@ -348,7 +353,10 @@ impl Scenario {
             }
         };
         if !(self.time_step_s > 0.0 && self.time_step_s <= 0.05) {
-            return Err(bad("time_step_s", format!("{} must be in (0, 0.05] s", self.time_step_s)));
+            return Err(bad(
+                "time_step_s",
+                format!("{} must be in (0, 0.05] s", self.time_step_s),
+            ));
         }
         finite("gravity_m_s2", &self.gravity_m_s2)?;
         finite("robot.base.xyz", &self.robot.base.xyz)?;
@@ -356,26 +364,43 @@ impl Scenario {
         finite("robot.initial_q", &self.robot.initial_q)?;
         finite("human.base.xyz", &self.human.base.xyz)?;
         finite("human.base.rpy", &self.human.base.rpy)?;
-        if !(self.robot.stiffness >= 0.0 && self.robot.damping >= 0.0)
-            || !self.robot.stiffness.is_finite()
-            || !self.robot.damping.is_finite()
-        {
-            return Err(bad("robot.stiffness", "stiffness and damping must be finite and >= 0".into()));
+        let gains = [self.robot.stiffness, self.robot.damping];
+        if !gains.iter().all(|g| g.is_finite() && *g >= 0.0) {
+            return Err(bad(
+                "robot.stiffness",
+                "stiffness and damping must be finite and >= 0".into(),
+            ));
         }
         match &self.robot.motion {
             RobotMotionConfig::Hold => {}
-            RobotMotionConfig::Random { speed_scale, acceleration_rad_s2, margin_rad, min_height_m, waypoints } => {
-                check_speed(*speed_scale, *acceleration_rad_s2).map_err(|m| bad("robot.motion", m))?;
+            RobotMotionConfig::Random {
+                speed_scale,
+                acceleration_rad_s2,
+                margin_rad,
+                min_height_m,
+                waypoints,
+            } => {
+                check_speed(*speed_scale, *acceleration_rad_s2)
+                    .map_err(|m| bad("robot.motion", m))?;
                 finite("robot.motion.min_height_m", &[*min_height_m])?;
                 if !(margin_rad.is_finite() && *margin_rad >= 0.0) {
-                    return Err(bad("robot.motion.margin_rad", format!("{margin_rad} must be >= 0")));
+                    return Err(bad(
+                        "robot.motion.margin_rad",
+                        format!("{margin_rad} must be >= 0"),
+                    ));
                 }
                 if *waypoints < 2 {
                     return Err(bad("robot.motion.waypoints", "at least 2 waypoints".into()));
                 }
             }
-            RobotMotionConfig::PickAndPlace { waypoints, dwell_s, speed_scale, acceleration_rad_s2 } => {
-                check_speed(*speed_scale, *acceleration_rad_s2).map_err(|m| bad("robot.motion", m))?;
+            RobotMotionConfig::PickAndPlace {
+                waypoints,
+                dwell_s,
+                speed_scale,
+                acceleration_rad_s2,
+            } => {
+                check_speed(*speed_scale, *acceleration_rad_s2)
+                    .map_err(|m| bad("robot.motion", m))?;
                 if waypoints.len() < 2 {
                     return Err(bad("robot.motion.waypoints", "at least 2 waypoints".into()));
                 }
@@ -383,7 +408,10 @@ impl Scenario {
                     finite("robot.motion.waypoints", w)?;
                 }
                 if !(dwell_s.is_finite() && *dwell_s >= 0.0) {
-                    return Err(bad("robot.motion.dwell_s", format!("{dwell_s} must be >= 0")));
+                    return Err(bad(
+                        "robot.motion.dwell_s",
+                        format!("{dwell_s} must be >= 0"),
+                    ));
                 }
             }
         }
@@ -395,10 +423,16 @@ impl Scenario {
             finite(&key, &c.pose.xyz)?;
             finite(&key, &c.pose.rpy)?;
             if !c.size_m.iter().all(|s| s.is_finite() && *s > 0.0) {
-                return Err(bad(&format!("{key}.size_m"), format!("{:?} must be > 0", c.size_m)));
+                return Err(bad(
+                    &format!("{key}.size_m"),
+                    format!("{:?} must be > 0", c.size_m),
+                ));
             }
             if c.kind == ClutterKind::Shelf && c.boards < 2 {
-                return Err(bad(&format!("{key}.boards"), "a shelf has at least 2 boards".into()));
+                return Err(bad(
+                    &format!("{key}.boards"),
+                    "a shelf has at least 2 boards".into(),
+                ));
             }
         }
         for (i, c) in self.cameras.iter().enumerate() {
@@ -410,7 +444,10 @@ impl Scenario {
                 return Err(bad(&key, "image size must be 1..=8192 pixels".into()));
             }
             if !(c.fov_y_deg > 1.0 && c.fov_y_deg < 179.0) {
-                return Err(bad(&format!("{key}.fov_y_deg"), format!("{} must be in (1, 179)", c.fov_y_deg)));
+                return Err(bad(
+                    &format!("{key}.fov_y_deg"),
+                    format!("{} must be in (1, 179)", c.fov_y_deg),
+                ));
             }
             if !(c.rate_hz > 0.0 && c.rate_hz.is_finite()) {
                 return Err(bad(&format!("{key}.rate_hz"), "must be > 0".into()));
@@ -433,10 +470,11 @@ impl Scenario {
     #[must_use]
     pub fn resolve_model_path(model: &str, scenario_path: &Path) -> String {
         let candidate = PathBuf::from(model);
-        if model.ends_with(".urdf") && candidate.is_relative() {
-            if let Some(dir) = scenario_path.parent() {
-                return dir.join(candidate).to_string_lossy().into_owned();
-            }
+        if model.ends_with(".urdf")
+            && candidate.is_relative()
+            && let Some(dir) = scenario_path.parent()
+        {
+            return dir.join(candidate).to_string_lossy().into_owned();
         }
         model.to_string()
     }

@@ -53,21 +53,40 @@ impl JointTrajectory {
         for (i, q0) in waypoints.iter().enumerate() {
             let q1 = &waypoints[(i + 1) % waypoints.len()];
             if dwell_s > 0.0 {
-                segments.push(Segment { t0_s: t, duration_s: dwell_s, q0: q0.clone(), q1: q0.clone() });
+                segments.push(Segment {
+                    t0_s: t,
+                    duration_s: dwell_s,
+                    q0: q0.clone(),
+                    q1: q0.clone(),
+                });
                 t += dwell_s;
             }
             let duration_s = segment_duration(q0, q1, velocity_limits, acceleration_limits);
             if q0 != q1 {
-                segments.push(Segment { t0_s: t, duration_s, q0: q0.clone(), q1: q1.clone() });
+                segments.push(Segment {
+                    t0_s: t,
+                    duration_s,
+                    q0: q0.clone(),
+                    q1: q1.clone(),
+                });
                 t += duration_s;
             }
         }
         if segments.is_empty() {
             let q = waypoints.first().cloned().unwrap_or_default();
-            segments.push(Segment { t0_s: 0.0, duration_s: 1.0, q0: q.clone(), q1: q });
+            segments.push(Segment {
+                t0_s: 0.0,
+                duration_s: 1.0,
+                q0: q.clone(),
+                q1: q,
+            });
             t = 1.0;
         }
-        Self { segments, period_s: t, dof }
+        Self {
+            segments,
+            period_s: t,
+            dof,
+        }
     }
 
     /// Time after which the trajectory repeats, s.
@@ -158,15 +177,31 @@ mod tests {
             let t = traj.period_s() * k as f64 / n as f64;
             traj.sample(t, &mut q, &mut qd, &mut qdd);
             for j in 0..2 {
-                assert!(qd[j].abs() <= vmax[j] * (1.0 + 1e-9), "v {} at t {t}", qd[j]);
-                assert!(qdd[j].abs() <= amax[j] * (1.0 + 1e-9), "a {} at t {t}", qdd[j]);
+                assert!(
+                    qd[j].abs() <= vmax[j] * (1.0 + 1e-9),
+                    "v {} at t {t}",
+                    qd[j]
+                );
+                assert!(
+                    qdd[j].abs() <= amax[j] * (1.0 + 1e-9),
+                    "a {} at t {t}",
+                    qdd[j]
+                );
             }
         }
         // Some joint reaches its limit on each move: the durations are the shortest allowed.
         let peak = (0..=n)
             .map(|k| {
-                traj.sample(traj.period_s() * k as f64 / n as f64, &mut q, &mut qd, &mut qdd);
-                (qd[0].abs() / vmax[0]).max(qd[1].abs() / vmax[1]).max(qdd[0].abs() / amax[0]).max(qdd[1].abs() / amax[1])
+                traj.sample(
+                    traj.period_s() * k as f64 / n as f64,
+                    &mut q,
+                    &mut qd,
+                    &mut qdd,
+                );
+                (qd[0].abs() / vmax[0])
+                    .max(qd[1].abs() / vmax[1])
+                    .max(qdd[0].abs() / amax[0])
+                    .max(qdd[1].abs() / amax[1])
             })
             .fold(0.0, f64::max);
         assert!(peak > 0.99, "peak utilisation {peak}");

@@ -33,12 +33,20 @@ fn rapier_links_match_forward_kinematics() {
     for (a, b) in state.q().iter().zip(&model.initial_q) {
         assert_relative_eq!(*a, *b, epsilon = 1e-9);
     }
-    assert!(fk_mismatch(&model, &state) < 1e-9, "at t=0: {}", fk_mismatch(&model, &state));
+    assert!(
+        fk_mismatch(&model, &state) < 1e-9,
+        "at t=0: {}",
+        fk_mismatch(&model, &state)
+    );
     for _ in 0..500 {
         step(&model, &mut state, &RobotCommand::Nominal).expect("step");
     }
     // Multibody coordinates and body poses agree while moving.
-    assert!(fk_mismatch(&model, &state) < 1e-6, "moving: {}", fk_mismatch(&model, &state));
+    assert!(
+        fk_mismatch(&model, &state) < 1e-6,
+        "moving: {}",
+        fk_mismatch(&model, &state)
+    );
 }
 
 #[test]
@@ -50,7 +58,15 @@ fn position_control_settles_on_the_target_under_gravity() {
     let target = [0.3, 0.8, -0.2, -1.2, 0.3, 0.6, 0.5];
     let zero = [0.0; 7];
     for _ in 0..2000 {
-        step(&model, &mut state, &RobotCommand::Position { q: &target, qd: &zero }).expect("step");
+        step(
+            &model,
+            &mut state,
+            &RobotCommand::Position {
+                q: &target,
+                qd: &zero,
+            },
+        )
+        .expect("step");
     }
     for (q, t) in state.q().iter().zip(&target) {
         assert!((q - t).abs() < 5e-3, "q {q} target {t}");
@@ -70,11 +86,17 @@ fn nominal_motion_is_tracked_and_stays_in_limits() {
     let mut worst = 0.0_f64;
     for _ in 0..3000 {
         step(&model, &mut state, &RobotCommand::Nominal).expect("step");
-        model.robot_motion.sample(state.time_s(), &mut q, &mut qd, &mut qdd);
+        model
+            .robot_motion
+            .sample(state.time_s(), &mut q, &mut qd, &mut qdd);
         for i in 0..7 {
             worst = worst.max((state.q()[i] - q[i]).abs());
             assert!(state.q()[i] >= limits[i][0] - 1e-3 && state.q()[i] <= limits[i][1] + 1e-3);
-            assert!(state.qd()[i].abs() <= velocity[i] * 1.05, "joint {i} at {} rad/s", state.qd()[i]);
+            assert!(
+                state.qd()[i].abs() <= velocity[i] * 1.05,
+                "joint {i} at {} rad/s",
+                state.qd()[i]
+            );
         }
     }
     assert!(worst < 0.02, "tracking error {worst} rad");
@@ -94,9 +116,20 @@ fn velocity_commands_stop_at_position_limits() {
         fastest = fastest.max(state.qd()[6].abs());
     }
     let upper = model.robot.position_limits()[6][1];
-    assert!(state.q()[6] <= upper + 1e-3, "{} beyond {upper}", state.q()[6]);
-    assert!(state.q()[6] > upper - 0.01, "did not reach the limit: {}", state.q()[6]);
-    assert!(fastest <= model.robot.velocity_limits()[6] * 1.05, "{fastest}");
+    assert!(
+        state.q()[6] <= upper + 1e-3,
+        "{} beyond {upper}",
+        state.q()[6]
+    );
+    assert!(
+        state.q()[6] > upper - 0.01,
+        "did not reach the limit: {}",
+        state.q()[6]
+    );
+    assert!(
+        fastest <= model.robot.velocity_limits()[6] * 1.05,
+        "{fastest}"
+    );
 }
 
 #[test]
@@ -133,7 +166,11 @@ fn trace(seed: u64, steps: usize) -> Vec<u64> {
     for _ in 0..steps {
         step(&model, &mut state, &RobotCommand::Nominal).expect("step");
     }
-    for p in state.robot_link_poses().iter().chain(state.human_link_poses()) {
+    for p in state
+        .robot_link_poses()
+        .iter()
+        .chain(state.human_link_poses())
+    {
         bits.extend(p.translation.to_array().map(f64::to_bits));
         bits.extend(p.rotation.to_array().map(f64::to_bits));
     }
@@ -155,13 +192,25 @@ fn bad_commands_are_errors() {
     let err = step(&model, &mut state, &RobotCommand::Velocity { qd: &short }).expect_err("short");
     assert!(matches!(err, SimError::InvalidCommand { .. }));
     let nan = [f64::NAN; 7];
-    assert!(step(&model, &mut state, &RobotCommand::Position { q: &nan, qd: &nan }).is_err());
+    assert!(
+        step(
+            &model,
+            &mut state,
+            &RobotCommand::Position { q: &nan, qd: &nan }
+        )
+        .is_err()
+    );
 }
 
 #[test]
 fn pick_and_place_visits_its_waypoints() {
     let mut scenario = Scenario::from_file(default_path()).expect("scenario");
-    let waypoints = vec![[0.5, -0.3, 1.0], [0.5, -0.3, 0.9], [0.4, 0.35, 1.0], [0.4, 0.35, 0.9]];
+    let waypoints = vec![
+        [0.5, -0.3, 1.0],
+        [0.5, -0.3, 0.9],
+        [0.4, 0.35, 1.0],
+        [0.4, 0.35, 0.9],
+    ];
     scenario.robot.motion = RobotMotionConfig::PickAndPlace {
         waypoints: waypoints.clone(),
         dwell_s: 0.2,
@@ -176,9 +225,23 @@ fn pick_and_place_visits_its_waypoints() {
     for k in 0..n {
         let t = model.robot_motion.period_s() * k as f64 / n as f64;
         model.robot_motion.sample(t, &mut q, &mut qd, &mut qdd);
-        let tool = model.robot.fk(model.X_WR, &q).expect("fk").link_pose(model.tool_link).translation;
+        let tool = model
+            .robot
+            .fk(model.X_WR, &q)
+            .expect("fk")
+            .link_pose(model.tool_link)
+            .translation;
         if qd.iter().all(|v| *v == 0.0) {
-            let near = waypoints.iter().any(|w| (tool.to_array().iter().zip(w).map(|(a, b)| (a - b).powi(2)).sum::<f64>()).sqrt() < 2e-4);
+            let near = waypoints.iter().any(|w| {
+                (tool
+                    .to_array()
+                    .iter()
+                    .zip(w)
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum::<f64>())
+                .sqrt()
+                    < 2e-4
+            });
             assert!(near, "resting at {tool:?}, not at a waypoint");
             visited += 1;
         }
@@ -200,25 +263,44 @@ fn pick_and_place_visits_its_waypoints() {
 #[test]
 fn scenario_errors_name_the_key() {
     let path = Path::new("bad.toml");
-    let unknown = Scenario::from_toml("seed = 1\n[robot]\nmodle = \"x\"\n", path).expect_err("unknown key");
+    let unknown =
+        Scenario::from_toml("seed = 1\n[robot]\nmodle = \"x\"\n", path).expect_err("unknown key");
     assert!(unknown.to_string().contains("modle"), "{unknown}");
     let dt = Scenario::from_toml("time_step_s = -1.0\n", path).expect_err("negative dt");
-    assert!(matches!(dt, SimError::Invalid { ref key, .. } if key == "time_step_s"), "{dt}");
-    let size = Scenario::from_toml("[[clutter]]\nkind = \"box\"\nsize_m = [1.0, -1.0, 1.0]\n", path).expect_err("size");
-    assert!(matches!(size, SimError::Invalid { ref key, .. } if key == "clutter[0].size_m"), "{size}");
+    assert!(
+        matches!(dt, SimError::Invalid { ref key, .. } if key == "time_step_s"),
+        "{dt}"
+    );
+    let size = Scenario::from_toml(
+        "[[clutter]]\nkind = \"box\"\nsize_m = [1.0, -1.0, 1.0]\n",
+        path,
+    )
+    .expect_err("size");
+    assert!(
+        matches!(size, SimError::Invalid { ref key, .. } if key == "clutter[0].size_m"),
+        "{size}"
+    );
     let kind = Scenario::from_toml("[human]\nmotions = [\"dance\"]\n", path).expect_err("kind");
     assert!(kind.to_string().contains("dance"), "{kind}");
     let q = Scenario::from_toml("[robot]\ninitial_q = [0.0, 1.0]\n", path).expect("parses");
     let err = CellModel::new(&q, path).expect_err("wrong length");
-    assert!(matches!(err, SimError::Invalid { ref key, .. } if key == "robot.initial_q"), "{err}");
-    let missing = Scenario::from_toml("[robot]\nmodel = \"nowhere/robot.urdf\"\n", path).expect("parses");
-    assert!(matches!(CellModel::new(&missing, path), Err(SimError::Robot { .. })));
+    assert!(
+        matches!(err, SimError::Invalid { ref key, .. } if key == "robot.initial_q"),
+        "{err}"
+    );
+    let missing =
+        Scenario::from_toml("[robot]\nmodel = \"nowhere/robot.urdf\"\n", path).expect("parses");
+    assert!(matches!(
+        CellModel::new(&missing, path),
+        Err(SimError::Robot { .. })
+    ));
 }
 
 #[test]
 fn defaults_round_trip_through_toml() {
     let scenario = Scenario::from_file(default_path()).expect("scenario");
-    let again = Scenario::from_toml(&scenario.to_toml(), Path::new("again.toml")).expect("round trip");
+    let again =
+        Scenario::from_toml(&scenario.to_toml(), Path::new("again.toml")).expect("round trip");
     assert_eq!(scenario, again);
     assert_eq!(Scenario::default().human.motions[1], HumanMotionKind::Reach);
 }

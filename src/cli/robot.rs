@@ -75,14 +75,21 @@ pub fn check(args: &CheckArgs) -> Result<ExitCode> {
     for (name, dir) in &args.packages {
         packages.insert(name.clone(), dir.clone());
     }
-    let robot = RobotModel::load(&args.robot, &packages).with_context(|| format!("loading '{}'", args.robot))?;
+    let robot = RobotModel::load(&args.robot, &packages)
+        .with_context(|| format!("loading '{}'", args.robot))?;
     let q_check = robot.neutral_configuration();
     let rapier = workcell::sim::check_in_rapier(&robot, &q_check).context("loading into rapier")?;
     let fk = match &args.fk {
         None => None,
         Some(q) => {
             if q.len() != robot.dof() {
-                bail!("--fk has {} values; '{}' has {} joints ({})", q.len(), robot.name(), robot.dof(), coordinate_names(&robot).join(", "));
+                bail!(
+                    "--fk has {} values; '{}' has {} joints ({})",
+                    q.len(),
+                    robot.name(),
+                    robot.dof(),
+                    coordinate_names(&robot).join(", ")
+                );
             }
             let state = robot.fk(Pose::IDENTITY, q)?;
             Some(
@@ -93,7 +100,12 @@ pub fn check(args: &CheckArgs) -> Result<ExitCode> {
                     .map(|(l, link)| {
                         let pose = state.link_pose(l);
                         let (xyz, rpy) = pose_to_xyz_rpy(pose);
-                        LinkPose { link: link.name.clone(), xyz, rpy, quaternion_xyzw: pose.rotation.to_array() }
+                        LinkPose {
+                            link: link.name.clone(),
+                            xyz,
+                            rpy,
+                            quaternion_xyzw: pose.rotation.to_array(),
+                        }
                     })
                     .collect(),
             )
@@ -120,7 +132,11 @@ pub fn check(args: &CheckArgs) -> Result<ExitCode> {
 }
 
 fn coordinate_names(robot: &RobotModel) -> Vec<String> {
-    robot.actuated_joints().iter().map(|&j| robot.joints()[j].name.clone()).collect()
+    robot
+        .actuated_joints()
+        .iter()
+        .map(|&j| robot.joints()[j].name.clone())
+        .collect()
 }
 
 fn joints(robot: &RobotModel) -> Vec<JointReport> {
@@ -136,13 +152,19 @@ fn joints(robot: &RobotModel) -> Vec<JointReport> {
             coordinate: match j.coordinate {
                 Coordinate::None => "-".into(),
                 Coordinate::Own { index } => format!("q{}", index + 1),
-                Coordinate::Mimic { index, multiplier, offset } => format!("{multiplier}*q{}{offset:+}", index + 1),
+                Coordinate::Mimic {
+                    index,
+                    multiplier,
+                    offset,
+                } => format!("{multiplier}*q{}{offset:+}", index + 1),
             },
             lower: j.limits.lower,
             upper: j.limits.upper,
             velocity: j.limits.velocity,
             effort: j.limits.effort,
-            soft_limits: j.safety_controller.map(|s| [s.soft_lower_limit, s.soft_upper_limit]),
+            soft_limits: j
+                .safety_controller
+                .map(|s| [s.soft_lower_limit, s.soft_upper_limit]),
         })
         .collect()
 }
@@ -155,7 +177,9 @@ fn meshes(robot: &RobotModel) -> BTreeMap<String, usize> {
                 let kind = match &g.shape {
                     Shape::Mesh { path, .. } => format!(
                         "{role} mesh .{}",
-                        path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default()
+                        path.extension()
+                            .map(|e| e.to_string_lossy().to_lowercase())
+                            .unwrap_or_default()
                     ),
                     Shape::Box { .. } => format!("{role} box"),
                     Shape::Cylinder { .. } => format!("{role} cylinder"),
@@ -177,34 +201,62 @@ fn problems(robot: &RobotModel, rapier: &workcell::sim::RapierCheck) -> Vec<Stri
             continue;
         }
         if j.limits.velocity <= 0.0 {
-            found.push(format!("joint '{}' has no velocity limit: trajectories and the safety filter need one", j.name));
+            found.push(format!(
+                "joint '{}' has no velocity limit: trajectories and the safety filter need one",
+                j.name
+            ));
         }
         if j.limits.effort <= 0.0 {
-            found.push(format!("joint '{}' has no effort limit: its motor is unbounded in simulation", j.name));
+            found.push(format!(
+                "joint '{}' has no effort limit: its motor is unbounded in simulation",
+                j.name
+            ));
         }
-        if j.kind == JointKind::Revolute && !(j.limits.lower.is_finite() && j.limits.upper.is_finite()) {
-            found.push(format!("revolute joint '{}' has no finite position limits", j.name));
+        if j.kind == JointKind::Revolute
+            && !(j.limits.lower.is_finite() && j.limits.upper.is_finite())
+        {
+            found.push(format!(
+                "revolute joint '{}' has no finite position limits",
+                j.name
+            ));
         }
     }
     for (l, link) in robot.links().iter().enumerate() {
-        let moves = link.parent_joint.is_some_and(|j| robot.joints()[j].kind.is_movable());
+        let moves = link
+            .parent_joint
+            .is_some_and(|j| robot.joints()[j].kind.is_movable());
         if moves && link.inertial.is_none() {
-            found.push(format!("moving link '{}' has no inertial: simulated with 0.01 kg", link.name));
+            found.push(format!(
+                "moving link '{}' has no inertial: simulated with 0.01 kg",
+                link.name
+            ));
         }
         if !link.collisions.is_empty() && link_collision_shape(robot, l).is_none() {
-            found.push(format!("link '{}': collision geometry is degenerate (no convex shape)", link.name));
+            found.push(format!(
+                "link '{}': collision geometry is degenerate (no convex shape)",
+                link.name
+            ));
         }
         if link.collisions.is_empty() && !link.visuals.is_empty() {
-            found.push(format!("link '{}' has visuals but no collision geometry: invisible to distance checks", link.name));
+            found.push(format!(
+                "link '{}' has visuals but no collision geometry: invisible to distance checks",
+                link.name
+            ));
         }
         if let Some(c) = link_bounding_capsule(robot, l)
             && c.radius_m > 0.25
         {
-            found.push(format!("link '{}': bounding capsule radius {:.3} m is coarse", link.name, c.radius_m));
+            found.push(format!(
+                "link '{}': bounding capsule radius {:.3} m is coarse",
+                link.name, c.radius_m
+            ));
         }
     }
     if rapier.fk_mismatch_m > 1e-6 {
-        found.push(format!("rapier and forward kinematics disagree by {:.2e} m", rapier.fk_mismatch_m));
+        found.push(format!(
+            "rapier and forward kinematics disagree by {:.2e} m",
+            rapier.fk_mismatch_m
+        ));
     }
     if rapier.hold_error > 0.05 {
         found.push(format!(
@@ -216,15 +268,24 @@ fn problems(robot: &RobotModel, rapier: &workcell::sim::RapierCheck) -> Vec<Stri
 }
 
 fn limit(v: f64) -> String {
-    if v.is_finite() { format!("{v:.4}") } else { "inf".into() }
+    if v.is_finite() {
+        format!("{v:.4}")
+    } else {
+        "inf".into()
+    }
 }
 
 fn print_report(r: &Report) {
     println!("robot    {}", r.name);
     println!("source   {}", r.source);
-    println!("dof      {}    links {}    mass {:.3} kg", r.dof, r.links, r.mass_kg);
+    println!(
+        "dof      {}    links {}    mass {:.3} kg",
+        r.dof, r.links, r.mass_kg
+    );
     println!();
-    println!("{:<24} {:<10} {:<7} {:>9} {:>9} {:>8} {:>8}  {}", "joint", "type", "coord", "lower", "upper", "vel", "effort", "parent -> child");
+    println!(
+        "joint                    type       coord       lower     upper      vel   effort  parent -> child"
+    );
     for j in &r.joints {
         println!(
             "{:<24} {:<10} {:<7} {:>9} {:>9} {:>8} {:>8}  {} -> {}",
@@ -247,7 +308,11 @@ fn print_report(r: &Report) {
     println!();
     println!(
         "rapier   {} bodies, {} colliders, {} multibody dofs; FK mismatch {:.1e} m; hold error after 1 s {:.1e}",
-        r.rapier.rigid_bodies, r.rapier.colliders, r.rapier.multibody_dofs, r.rapier.fk_mismatch_m, r.rapier.hold_error
+        r.rapier.rigid_bodies,
+        r.rapier.colliders,
+        r.rapier.multibody_dofs,
+        r.rapier.fk_mismatch_m,
+        r.rapier.hold_error
     );
     println!();
     if r.problems.is_empty() {
@@ -260,7 +325,9 @@ fn print_report(r: &Report) {
     }
     if let Some(fk) = &r.fk {
         println!();
-        println!("{:<24} {:>10} {:>10} {:>10} {:>9} {:>9} {:>9}", "link", "x [m]", "y [m]", "z [m]", "roll", "pitch", "yaw");
+        println!(
+            "link                          x [m]      y [m]      z [m]      roll     pitch       yaw"
+        );
         for p in fk {
             println!(
                 "{:<24} {:>10.6} {:>10.6} {:>10.6} {:>9.5} {:>9.5} {:>9.5}",

@@ -13,7 +13,12 @@ use workcell::plot::{Panel, svg_panels};
 use workcell::sim::{CellModel, CellState, RobotCommand, Scenario, step};
 
 /// Files `simulate` writes into `--out`.
-pub const OUTPUTS: [&str; 4] = ["robot_joints.csv", "human_poses.csv", "trajectories.svg", "summary.json"];
+pub const OUTPUTS: [&str; 4] = [
+    "robot_joints.csv",
+    "human_poses.csv",
+    "trajectories.svg",
+    "summary.json",
+];
 
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
@@ -87,9 +92,11 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
 
     let bar = ProgressBar::new(steps);
     bar.set_style(
-        ProgressStyle::with_template("{spinner} simulating [{bar:40}] {pos}/{len} steps ({per_sec}, eta {eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner} simulating [{bar:40}] {pos}/{len} steps ({per_sec}, eta {eta})",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
     let started = Instant::now();
     for k in 1..=steps {
@@ -118,15 +125,21 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
         outputs: outputs.clone(),
     };
     let summary_path = args.out.join("summary.json");
-    fs::write(&summary_path, serde_json::to_string_pretty(&summary)? + "\n")
-        .with_context(|| format!("writing {}", summary_path.display()))?;
+    fs::write(
+        &summary_path,
+        serde_json::to_string_pretty(&summary)? + "\n",
+    )
+    .with_context(|| format!("writing {}", summary_path.display()))?;
     println!(
         "simulated {:.2} s ({steps} steps of {} ms) in {wall_s:.2} s: {:.0} steps/s",
         state.time_s(),
         dt * 1e3,
         summary.steps_per_s
     );
-    for file in outputs.iter().chain(std::iter::once(&"summary.json".to_string())) {
+    for file in outputs
+        .iter()
+        .chain(std::iter::once(&"summary.json".to_string()))
+    {
         println!("  {}", args.out.join(file).display());
     }
     Ok(ExitCode::SUCCESS)
@@ -228,17 +241,28 @@ impl Log {
             Panel {
                 title: format!("robot '{}': joint positions", model.robot.name()),
                 y_label: "q [rad]".into(),
-                series: names.iter().map(|n| n.to_string()).zip(self.q.iter().cloned()).collect(),
+                series: names
+                    .iter()
+                    .map(|n| n.to_string())
+                    .zip(self.q.iter().cloned())
+                    .collect(),
             },
             Panel {
                 title: "robot: joint velocities".into(),
                 y_label: "qd [rad/s]".into(),
-                series: names.iter().map(|n| n.to_string()).zip(self.qd.iter().cloned()).collect(),
+                series: names
+                    .iter()
+                    .map(|n| n.to_string())
+                    .zip(self.qd.iter().cloned())
+                    .collect(),
             },
             Panel {
                 title: format!("human '{}': joint positions", model.human.name()),
                 y_label: "q [rad]".into(),
-                series: human_names.into_iter().zip(self.human_q.iter().cloned()).collect(),
+                series: human_names
+                    .into_iter()
+                    .zip(self.human_q.iter().cloned())
+                    .collect(),
             },
         ];
         Ok(vec![

@@ -1,0 +1,134 @@
+//! The `workcell` binary end to end, as a user runs it.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn workcell(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_workcell"))
+        .args(args)
+        .current_dir(Path::new(env!("CARGO_MANIFEST_DIR")))
+        .output()
+        .expect("run workcell")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn robot_check_reports_json_with_link_poses() {
+    let out = workcell(&[
+        "robot",
+        "check",
+        "iiwa14_kinematics",
+        "--fk",
+        "0,0,0,0,0,0,0",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(report["dof"], 7);
+    assert_eq!(report["problems"].as_array().map(Vec::len), Some(0));
+    let fk = report["fk"].as_array().expect("fk");
+    let tool0 = fk.iter().find(|p| p["link"] == "tool0").expect("tool0");
+    // Upright: 0.36 + 0.42 + 0.40 + 0.126 m above the base.
+    let z = tool0["xyz"][2].as_f64().expect("z");
+    assert!((z - 1.306).abs() < 1e-9, "{z}");
+    assert!(
+        report["rapier"]["fk_mismatch_m"]
+            .as_f64()
+            .expect("mismatch")
+            < 1e-9
+    );
+}
+
+#[test]
+fn bad_input_is_a_clear_error_not_a_panic() {
+    for args in [
+        vec![
+            "robot",
+            "check",
+            "robots/tests/fixtures/broken/missing_parent.urdf",
+        ],
+        vec!["robot", "check", "no_such_robot"],
+        vec!["robot", "check", "ur5e_kinematics", "--fk", "1,2"],
+        vec!["simulate", "configs/nonexistent.toml"],
+    ] {
+        let out = workcell(&args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.starts_with("error: "), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+    let out = workcell(&[
+        "robot",
+        "check",
+        "robots/tests/fixtures/broken/missing_parent.urdf",
+    ]);
+    assert!(text(&out.stderr).contains("joint 'j': parent link 'nowhere' does not exist"));
+}
+
+#[test]
+fn simulate_writes_csv_and_plot_and_replays_by_seed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let run = |name: &str, extra: &[&str]| {
+        let out_dir = dir.path().join(name);
+        let out_arg = out_dir.to_string_lossy().into_owned();
+        let mut args = vec![
+            "simulate",
+            "configs/default.toml",
+            "--seconds",
+            "0.2",
+            "--out",
+            &out_arg,
+        ];
+        args.extend_from_slice(extra);
+        let out = workcell(&args);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        out_dir
+    };
+    let a = run("a", &["--seed", "4"]);
+    let b = run("b", &["--seed", "4"]);
+    let c = run("c", &["--seed", "5"]);
+    let joints = std::fs::read_to_string(a.join("robot_joints.csv")).expect("csv");
+    let lines: Vec<&str> = joints.lines().collect();
+    // header + t = 0 + 20 samples at 100 Hz
+    assert_eq!(lines.len(), 22);
+    assert!(lines[0].starts_with("t_s,q_joint1,"));
+    assert_eq!(lines[0].split(',').count(), 1 + 2 * 7);
+    let human = std::fs::read_to_string(a.join("human_poses.csv")).expect("csv");
+    assert_eq!(
+        human.lines().count(),
+        1 + 21 * 5,
+        "5 human links per sample"
+    );
+    assert!(
+        std::fs::read_to_string(a.join("trajectories.svg"))
+            .expect("svg")
+            .contains("<polyline")
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(a.join("summary.json")).expect("json"))
+            .expect("json");
+    assert_eq!(summary["steps"], 200);
+    // Same seed, same file; another seed, another motion.
+    assert_eq!(
+        joints,
+        std::fs::read_to_string(b.join("robot_joints.csv")).expect("csv")
+    );
+    assert_ne!(
+        joints,
+        std::fs::read_to_string(c.join("robot_joints.csv")).expect("csv")
+    );
+    // Nothing is overwritten without --force.
+    let again = workcell(&[
+        "simulate",
+        "configs/default.toml",
+        "--seconds",
+        "0.1",
+        "--out",
+        &a.to_string_lossy(),
+    ]);
+    assert_eq!(again.status.code(), Some(1));
+    assert!(text(&again.stderr).contains("--force"));
+}
