@@ -304,3 +304,75 @@ fn defaults_round_trip_through_toml() {
     assert_eq!(scenario, again);
     assert_eq!(Scenario::default().human.motions[1], HumanMotionKind::Reach);
 }
+
+#[test]
+fn mimic_prismatic_and_continuous_joints_in_rapier() {
+    // The gripper fixture: a prismatic lift, a continuous wrist, and a finger that mimics
+    // another with multiplier -1. Rapier must move the mimic finger as forward kinematics says.
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../robots/tests/fixtures/pkg/my_robot/urdf/gripper.urdf");
+    let mut scenario = Scenario::default();
+    scenario.robot.model = fixture.to_string_lossy().into_owned();
+    scenario.robot.tool_link = "tip".into();
+    scenario.robot.initial_q = vec![0.1, 0.0, 0.0];
+    scenario.robot.motion = RobotMotionConfig::Hold;
+    let model = CellModel::new(&scenario, Path::new("inline.toml")).expect("model");
+    let mut state = CellState::new(&model).expect("state");
+    let target = [0.3, 1.0, 0.03];
+    for _ in 0..1500 {
+        step(
+            &model,
+            &mut state,
+            &RobotCommand::Position {
+                q: &target,
+                qd: &[0.0; 3],
+            },
+        )
+        .expect("step");
+    }
+    for (q, t) in state.q().iter().zip(&target) {
+        assert!((q - t).abs() < 2e-3, "q {q} target {t}");
+    }
+    assert!(
+        fk_mismatch(&model, &state) < 1e-4,
+        "mimic not honoured: {}",
+        fk_mismatch(&model, &state)
+    );
+    let report = workcell_sim::check_in_rapier(&model.robot, &[0.2, 0.5, 0.02]).expect("check");
+    assert_eq!(report.multibody_dofs, 4, "lift, wrist and both fingers");
+    assert!(report.fk_mismatch_m < 1e-9);
+}
+
+#[test]
+fn random_motion_stays_above_the_table_and_within_limits() {
+    let model = default_model();
+    let min_height = match model.scenario.robot.motion {
+        RobotMotionConfig::Random { min_height_m, .. } => min_height_m,
+        ref other => panic!("default motion is random, got {other:?}"),
+    };
+    let limits = model.robot.position_limits();
+    let velocity = model.robot.velocity_limits();
+    let (mut q, mut qd, mut qdd) = (vec![0.0; 7], vec![0.0; 7], vec![0.0; 7]);
+    let n = 20_000;
+    for k in 0..n {
+        let t = model.robot_motion.period_s() * k as f64 / n as f64;
+        model.robot_motion.sample(t, &mut q, &mut qd, &mut qdd);
+        for i in 0..7 {
+            assert!(q[i] >= limits[i][0] && q[i] <= limits[i][1]);
+            // speed_scale = 0.5 in the default cell
+            assert!(qd[i].abs() <= 0.5 * velocity[i] * (1.0 + 1e-9));
+            assert!(qdd[i].abs() <= 4.0 * (1.0 + 1e-9));
+        }
+        let fk = model.robot.fk(model.X_WR, &q).expect("fk");
+        let tool = fk.link_pose(model.tool_link).translation.z;
+        assert!(tool >= min_height - 1e-9, "tool at {tool} m at t {t}");
+        // Joints 2.. sit above the base: their origins move with q and must stay up too.
+        for &j in &model.robot.actuated_joints()[2..] {
+            let z = fk.link_pose(model.robot.joints()[j].child).translation.z;
+            assert!(
+                z >= min_height - 1e-9,
+                "link of joint {j} at {z} m at t {t}"
+            );
+        }
+    }
+}
