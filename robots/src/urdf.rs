@@ -37,6 +37,14 @@ impl RobotModel {
     /// # Errors
     /// [`RobotError`] naming `path` and the element that is wrong.
     pub fn from_urdf_str(text: &str, path: &Path, packages: &PackageMap) -> Result<Self> {
+        // urdf-rs reports an unknown joint type without saying which joint: find it first.
+        if let Some((joint, kind)) = unknown_joint_type(text) {
+            return Err(RobotError::invalid(
+                path,
+                format!("joint '{joint}'"),
+                format!("unknown joint type '{kind}' (revolute, continuous, prismatic, fixed)"),
+            ));
+        }
         let robot = urdf_rs::read_from_string(text).map_err(|e| RobotError::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),
@@ -49,6 +57,41 @@ impl RobotModel {
         }
         .build(&robot)
     }
+}
+
+/// The first `<joint name=".." type="..">` whose type URDF does not define, as
+/// `(name, type)`. A plain scan of the start tags: the XML parser reports the rest.
+fn unknown_joint_type(text: &str) -> Option<(String, String)> {
+    const KNOWN: [&str; 7] = [
+        "revolute",
+        "continuous",
+        "prismatic",
+        "fixed",
+        "floating",
+        "planar",
+        "spherical",
+    ];
+    let attribute = |tag: &str, name: &str| -> Option<String> {
+        let start = tag.find(&format!(" {name}="))? + name.len() + 2;
+        let quote = tag[start..].chars().next()?;
+        let rest = &tag[start + quote.len_utf8()..];
+        Some(rest[..rest.find(quote)?].to_string())
+    };
+    let mut rest = text;
+    while let Some(at) = rest.find("<joint") {
+        let tail = &rest[at + "<joint".len()..];
+        let end = tail.find('>').unwrap_or(tail.len());
+        let tag = &tail[..end];
+        // `<joint` followed by whitespace is a joint element (not `<joint_properties>`).
+        if tag.starts_with(char::is_whitespace)
+            && let Some(kind) = attribute(tag, "type")
+            && !KNOWN.contains(&kind.as_str())
+        {
+            return Some((attribute(tag, "name").unwrap_or_default(), kind));
+        }
+        rest = &tail[end..];
+    }
+    None
 }
 
 struct Builder<'a> {

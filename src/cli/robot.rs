@@ -75,8 +75,8 @@ pub fn check(args: &CheckArgs) -> Result<ExitCode> {
     for (name, dir) in &args.packages {
         packages.insert(name.clone(), dir.clone());
     }
-    let robot = RobotModel::load(&args.robot, &packages)
-        .with_context(|| format!("loading '{}'", args.robot))?;
+    // Load errors name the file and the element already.
+    let robot = RobotModel::load(&args.robot, &packages)?;
     let q_check = robot.neutral_configuration();
     let rapier = workcell::sim::check_in_rapier(&robot, &q_check).context("loading into rapier")?;
     let fk = match &args.fk {
