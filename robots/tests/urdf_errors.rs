@@ -100,7 +100,7 @@ fn nan_is_rejected() {
 
 #[test]
 fn unparsable_files_are_parse_errors() {
-    for name in ["not_xml.urdf"] {
+    for name in ["not_xml.urdf", "joint_without_child.urdf"] {
         assert!(matches!(load(name), RobotError::Parse { .. }), "{name}");
     }
 }
