@@ -149,3 +149,197 @@ mod tests {
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
     }
 }
+
+/// A polyline in the world frame, drawn in [`svg_cell_views`].
+#[derive(Debug, Clone)]
+pub struct WorldPath {
+    pub name: String,
+    pub color: &'static str,
+    pub width: f64,
+    /// `true`: separate segments `p0-p1, p2-p3, ...`; `false`: one connected line.
+    pub segments: bool,
+    pub points_W: Vec<[f64; 3]>,
+}
+
+/// Top view (x right, y up) and side view (x right, z up) of a cell, at one scale: solids
+/// (each given by its corner points; drawn as the convex hull of their projection) and paths.
+#[must_use]
+pub fn svg_cell_views(title: &str, solids: &[Vec<[f64; 3]>], paths: &[WorldPath]) -> String {
+    let all = || {
+        solids
+            .iter()
+            .flatten()
+            .chain(paths.iter().flat_map(|p| p.points_W.iter()))
+    };
+    let (x0, x1) = bounds(all().map(|p| p[0]));
+    let (y0, y1) = bounds(all().map(|p| p[1]));
+    let (z0, z1) = bounds(all().map(|p| p[2]));
+    let margin = 0.1;
+    let (view_w, pad, top) = (420.0, 40.0, 40.0);
+    let scale = view_w / ((x1 - x0) + 2.0 * margin);
+    let view_h = |lo: f64, hi: f64| (hi - lo + 2.0 * margin) * scale;
+    let height = top + view_h(y0, y1).max(view_h(z0, z1)) + 40.0 + 16.0 * paths.len() as f64;
+    let width = 2.0 * view_w + 3.0 * pad;
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
+    let _ = writeln!(
+        svg,
+        r#"<text x="{pad}" y="18" font-weight="bold">{}</text>"#,
+        escape(title)
+    );
+    // (axis of the vertical coordinate, its bounds, left edge, caption)
+    let views = [
+        (1, (y0, y1), pad, "top view: x right, y up"),
+        (2, (z0, z1), 2.0 * pad + view_w, "side view: x right, z up"),
+    ];
+    for (axis, (lo, hi), left, caption) in views {
+        let h = view_h(lo, hi);
+        let project = |p: &[f64; 3]| -> (f64, f64) {
+            (
+                left + (p[0] - x0 + margin) * scale,
+                top + h - (p[axis] - lo + margin) * scale,
+            )
+        };
+        let _ = writeln!(
+            svg,
+            r##"<rect x="{left}" y="{top}" width="{view_w}" height="{h:.1}" fill="none" stroke="#999"/>"##
+        );
+        let _ = writeln!(
+            svg,
+            r#"<text x="{left}" y="{}">{caption}</text>"#,
+            top - 6.0
+        );
+        for solid in solids {
+            let hull = convex_hull(solid.iter().map(project).collect());
+            let pts: Vec<String> = hull.iter().map(|(a, b)| format!("{a:.1},{b:.1}")).collect();
+            let _ = writeln!(
+                svg,
+                r##"<polygon points="{}" fill="#d9d9d9" fill-opacity="0.6" stroke="#888"/>"##,
+                pts.join(" ")
+            );
+        }
+        for path in paths {
+            let pts: Vec<(f64, f64)> = path.points_W.iter().map(project).collect();
+            if path.segments {
+                for pair in pts.chunks_exact(2) {
+                    let _ = writeln!(
+                        svg,
+                        r#"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{}" stroke-width="{}" stroke-linecap="round"/>"#,
+                        pair[0].0, pair[0].1, pair[1].0, pair[1].1, path.color, path.width
+                    );
+                }
+            } else {
+                let line: Vec<String> = pts.iter().map(|(a, b)| format!("{a:.1},{b:.1}")).collect();
+                let _ = writeln!(
+                    svg,
+                    r#"<polyline fill="none" stroke="{}" stroke-width="{}" points="{}"/>"#,
+                    path.color,
+                    path.width,
+                    line.join(" ")
+                );
+            }
+        }
+        let _ = writeln!(
+            svg,
+            r#"<text x="{left}" y="{:.1}">1 m = {scale:.0} px</text>"#,
+            top + h + 16.0
+        );
+    }
+    let legend_top = top + view_h(y0, y1).max(view_h(z0, z1)) + 36.0;
+    for (i, path) in paths.iter().enumerate() {
+        let y = legend_top + 16.0 * i as f64;
+        let _ = writeln!(
+            svg,
+            r#"<line x1="{pad}" y1="{}" x2="{}" y2="{}" stroke="{}" stroke-width="3"/>"#,
+            y - 4.0,
+            pad + 18.0,
+            y - 4.0,
+            path.color
+        );
+        let _ = writeln!(
+            svg,
+            r#"<text x="{}" y="{y}">{}</text>"#,
+            pad + 24.0,
+            escape(&path.name)
+        );
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
+/// Convex hull of 2-D points, counter-clockwise (Andrew's monotone chain).
+fn convex_hull(mut points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    points.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    points.dedup();
+    if points.len() < 3 {
+        return points;
+    }
+    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| {
+        (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0)
+    };
+    let mut hull: Vec<(f64, f64)> = Vec::with_capacity(2 * points.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &(f64, f64)>> = if pass == 0 {
+            Box::new(points.iter())
+        } else {
+            Box::new(points.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+#[cfg(test)]
+mod hull_tests {
+    use super::*;
+
+    #[test]
+    fn hull_of_a_square_with_inner_points_is_the_square() {
+        let pts = vec![
+            (0.0, 0.0),
+            (1.0, 0.0),
+            (1.0, 1.0),
+            (0.0, 1.0),
+            (0.5, 0.5),
+            (0.2, 0.7),
+        ];
+        let hull = convex_hull(pts);
+        assert_eq!(hull, vec![(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]);
+    }
+
+    #[test]
+    fn cell_views_draw_every_solid_twice() {
+        let cube: Vec<[f64; 3]> = (0..8)
+            .map(|i| {
+                [
+                    f64::from(i & 1),
+                    f64::from((i >> 1) & 1),
+                    f64::from((i >> 2) & 1),
+                ]
+            })
+            .collect();
+        let path = WorldPath {
+            name: "tool".into(),
+            color: "#d62728",
+            width: 1.0,
+            segments: false,
+            points_W: vec![[0.0, 0.0, 2.0], [1.0, 1.0, 2.0]],
+        };
+        let svg = svg_cell_views("cell", &[cube], &[path]);
+        assert_eq!(svg.matches("<polygon").count(), 2);
+        assert_eq!(svg.matches("<polyline").count(), 2);
+    }
+}

@@ -10,7 +10,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d_f64::prelude::*;
-use workcell_robots::collision::geometry_shape;
+use workcell_robots::collision::{geometry_shape, link_collision_shape};
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{Coordinate, JointKind, KinematicState, LinkId, PackageMap, RobotModel};
 
@@ -206,25 +206,20 @@ fn plan_robot_motion(
             acceleration_rad_s2,
             margin_rad,
             min_height_m,
+            clearance_m,
             waypoints,
         } => {
             let mut rng = ChaCha8Rng::seed_from_u64(scenario.seed);
-            let mut state = KinematicState::new(robot);
-            state.X_WB = X_WR;
+            let mut workspace = Workspace::new(
+                robot,
+                X_WR,
+                tool_link,
+                initial_q,
+                scenario,
+                *min_height_m,
+                *clearance_m,
+            );
             let mut points = vec![initial_q.to_vec()];
-            let moving = moving_links(robot, initial_q);
-            let mut line_clear = |a: &[f64], b: &[f64]| -> bool {
-                // The quintic path is the straight line in joint space: check points along it.
-                (0..=8).all(|k| {
-                    let s = f64::from(k) / 8.0;
-                    let q: Vec<f64> = a.iter().zip(b).map(|(x, y)| x + (y - x) * s).collect();
-                    robot.forward_kinematics(&q, &mut state).is_ok()
-                        && moving
-                            .iter()
-                            .all(|&l| state.link_pose(l).translation.z >= *min_height_m)
-                        && state.link_pose(tool_link).translation.z >= *min_height_m
-                })
-            };
             while points.len() < *waypoints {
                 let last = points.last().cloned().unwrap_or_default();
                 let is_last = points.len() + 1 == *waypoints;
@@ -244,16 +239,19 @@ fn plan_robot_motion(
                             }
                         })
                         .collect();
-                    (line_clear(&last, &q) && (!is_last || line_clear(&q, initial_q))).then_some(q)
+                    (workspace.line_clear(&last, &q)
+                        && (!is_last || workspace.line_clear(&q, initial_q)))
+                    .then_some(q)
                 });
                 match found {
                     Some(q) => points.push(q),
                     None => {
                         return Err(SimError::Invalid {
                             path: path.to_path_buf(),
-                            key: "robot.motion.min_height_m".into(),
+                            key: "robot.motion".into(),
                             message: format!(
-                                "no random waypoint keeps every link above {min_height_m} m after 1000 tries; lower it or move the robot"
+                                "no random waypoint keeps every link above {min_height_m} m and {clearance_m} m \
+                                 from the clutter after 1000 tries; lower them or move the robot"
                             ),
                         });
                     }
@@ -319,6 +317,98 @@ fn plan_robot_motion(
                 *dwell_s,
             ))
         }
+    }
+}
+
+/// Where random motion may go: every moving link and the tool above a height, every moving
+/// link's collision geometry clear of the clutter.
+struct Workspace<'a> {
+    robot: &'a RobotModel,
+    state: KinematicState,
+    tool_link: LinkId,
+    min_height_m: f64,
+    clearance_m: f64,
+    moving: Vec<LinkId>,
+    shapes: Vec<(LinkId, SharedShape)>,
+    obstacles: Vec<(Pose, SharedShape, parry3d_f64::bounding_volume::Aabb)>,
+}
+
+impl<'a> Workspace<'a> {
+    fn new(
+        robot: &'a RobotModel,
+        X_WR: Pose,
+        tool_link: LinkId,
+        q: &[f64],
+        scenario: &Scenario,
+        min_height_m: f64,
+        clearance_m: f64,
+    ) -> Self {
+        let mut state = KinematicState::new(robot);
+        state.X_WB = X_WR;
+        let moving = moving_links(robot, q);
+        let shapes = moving
+            .iter()
+            .filter_map(|&l| link_collision_shape(robot, l).map(|s| (l, s)))
+            .collect();
+        let obstacles = scenario
+            .clutter
+            .iter()
+            .flat_map(clutter_boxes)
+            .map(|c| {
+                let [hx, hy, hz] = c.half_extents_m;
+                let shape = SharedShape::cuboid(hx, hy, hz);
+                let aabb = shape.compute_aabb(&c.X_WC).loosened(clearance_m);
+                (c.X_WC, shape, aabb)
+            })
+            .collect();
+        Self {
+            robot,
+            state,
+            tool_link,
+            min_height_m,
+            clearance_m,
+            moving,
+            shapes,
+            obstacles,
+        }
+    }
+
+    /// Whether configuration `q` is in the workspace.
+    fn contains(&mut self, q: &[f64]) -> bool {
+        if self.robot.forward_kinematics(q, &mut self.state).is_err() {
+            return false;
+        }
+        let state = &self.state;
+        let high = |l: LinkId| state.link_pose(l).translation.z >= self.min_height_m;
+        self.moving.iter().all(|&l| high(l))
+            && high(self.tool_link)
+            && self.shapes.iter().all(|(l, shape)| {
+                let X_WL = state.link_pose(*l);
+                let aabb = shape.compute_aabb(X_WL);
+                self.obstacles.iter().all(|(X_WC, box_shape, box_aabb)| {
+                    !aabb.intersects(box_aabb)
+                        || parry3d_f64::query::distance(
+                            X_WL,
+                            shape.as_ref(),
+                            X_WC,
+                            box_shape.as_ref(),
+                        )
+                        .is_ok_and(|d| d.distance >= self.clearance_m)
+                })
+            })
+    }
+
+    /// Whether the straight joint-space line from `a` to `b` (the path of a rest-to-rest
+    /// quintic move) stays in the workspace, checked at nine points.
+    fn line_clear(&mut self, a: &[f64], b: &[f64]) -> bool {
+        let mut q = vec![0.0; a.len()];
+        (0..=8).all(|k| {
+            let s = f64::from(k) / 8.0;
+            for (qi, (x, y)) in q.iter_mut().zip(a.iter().zip(b)) {
+                *qi = x + (y - x) * s;
+            }
+            self.contains(&q)
+        })
     }
 }
 

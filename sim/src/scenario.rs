@@ -131,6 +131,10 @@ pub enum RobotMotionConfig {
         /// Every link origin stays above this height (world z) along the motion, m. Default 0.
         #[serde(default)]
         min_height_m: f64,
+        /// Every moving link's collision geometry keeps this distance from the clutter along
+        /// the motion, m. Default 0.03.
+        #[serde(default = "default_clearance")]
+        clearance_m: f64,
         /// Number of waypoints before the motion repeats. Default 32.
         #[serde(default = "default_waypoints")]
         waypoints: usize,
@@ -161,6 +165,9 @@ fn default_acceleration() -> f64 {
 fn default_margin() -> f64 {
     0.1
 }
+fn default_clearance() -> f64 {
+    0.03
+}
 fn default_waypoints() -> usize {
     32
 }
@@ -175,6 +182,7 @@ impl Default for RobotMotionConfig {
             acceleration_rad_s2: default_acceleration(),
             margin_rad: default_margin(),
             min_height_m: 0.0,
+            clearance_m: default_clearance(),
             waypoints: default_waypoints(),
         }
     }
@@ -378,11 +386,18 @@ impl Scenario {
                 acceleration_rad_s2,
                 margin_rad,
                 min_height_m,
+                clearance_m,
                 waypoints,
             } => {
                 check_speed(*speed_scale, *acceleration_rad_s2)
                     .map_err(|m| bad("robot.motion", m))?;
                 finite("robot.motion.min_height_m", &[*min_height_m])?;
+                if !(clearance_m.is_finite() && *clearance_m >= 0.0) {
+                    return Err(bad(
+                        "robot.motion.clearance_m",
+                        format!("{clearance_m} must be >= 0"),
+                    ));
+                }
                 if !(margin_rad.is_finite() && *margin_rad >= 0.0) {
                     return Err(bad(
                         "robot.motion.margin_rad",

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use approx::assert_relative_eq;
+use workcell_robots::collision::link_collision_shape;
 use workcell_sim::scenario::{HumanMotionKind, RobotMotionConfig};
 use workcell_sim::{CellModel, CellState, RobotCommand, Scenario, SimError, step};
 
@@ -364,6 +365,29 @@ fn random_motion_stays_above_the_table_and_within_limits() {
             assert!(qdd[i].abs() <= 4.0 * (1.0 + 1e-9));
         }
         let fk = model.robot.fk(model.X_WR, &q).expect("fk");
+        // No link touches the clutter (the planner keeps 3 cm at nine points per move; between
+        // them the gap may shrink a little, never to contact).
+        if k % 10 == 0 {
+            for l in 2..model.robot.links().len() {
+                let Some(shape) = link_collision_shape(&model.robot, l) else {
+                    continue;
+                };
+                for c in &model.clutter {
+                    let [hx, hy, hz] = c.half_extents_m;
+                    let cuboid =
+                        parry3d_f64::shape::Cuboid::new(parry3d_f64::math::Vector::new(hx, hy, hz));
+                    let d = parry3d_f64::query::distance(
+                        fk.link_pose(l),
+                        shape.as_ref(),
+                        &c.X_WC,
+                        &cuboid,
+                    )
+                    .expect("distance")
+                    .distance;
+                    assert!(d > 0.0, "link {l} touches clutter at t {t}");
+                }
+            }
+        }
         let tool = fk.link_pose(model.tool_link).translation.z;
         assert!(tool >= min_height - 1e-9, "tool at {tool} m at t {t}");
         // Joints 2.. sit above the base: their origins move with q and must stay up too.

@@ -9,7 +9,9 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
-use workcell::plot::{Panel, svg_panels};
+use workcell::plot::{Panel, WorldPath, svg_cell_views, svg_panels};
+use workcell::robots::RobotModel;
+use workcell::robots::math::Pose;
 use workcell::sim::{CellModel, CellState, RobotCommand, Scenario, step};
 
 /// Files `simulate` writes into `--out`.
@@ -87,7 +89,7 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
     let steps = (args.seconds / dt).round() as u64;
     let every = ((1.0 / args.rate_hz) / dt).round().max(1.0) as u64;
     let mut state = CellState::new(&model)?;
-    let mut log = Log::new(&model);
+    let mut log = Log::new(&model, path);
     log.record(&model, &state);
 
     let bar = ProgressBar::new(steps);
@@ -163,23 +165,55 @@ fn prepare_out(out: &Path, force: bool) -> Result<()> {
 
 /// Samples kept in memory, written at the end.
 struct Log {
+    /// The scenario file, for titles.
+    scenario: String,
     t: Vec<f64>,
     q: Vec<Vec<f64>>,
     qd: Vec<Vec<f64>>,
     human_q: Vec<Vec<f64>>,
     human_rows: String,
+    /// Tool and hand positions in the world at every sample.
+    tool_W: Vec<[f64; 3]>,
+    hand_W: Vec<[f64; 3]>,
+    /// Robot and human as line segments between joint origins, at the first sample.
+    robot_start: Vec<[f64; 3]>,
+    human_start: Vec<[f64; 3]>,
+}
+
+/// The robot as segments from each link's origin to its children's, for drawing.
+fn stick_figure(model: &RobotModel, X_WL: &[Pose]) -> Vec<[f64; 3]> {
+    model
+        .joints()
+        .iter()
+        .flat_map(|j| {
+            [
+                X_WL[j.parent].translation.to_array(),
+                X_WL[j.child].translation.to_array(),
+            ]
+        })
+        .collect()
+}
+
+/// The human link drawn as "the hand": the child of the last joint (a leaf).
+fn hand_link(model: &RobotModel) -> usize {
+    model.joints().last().map_or(model.root(), |j| j.child)
 }
 
 impl Log {
-    fn new(model: &CellModel) -> Self {
+    fn new(model: &CellModel, scenario: &Path) -> Self {
         let mut human_rows = String::from("t_s,part,x_m,y_m,z_m,qx,qy,qz,qw\n");
         human_rows.reserve(1 << 16);
         Self {
+            scenario: scenario.display().to_string(),
             t: Vec::new(),
             q: vec![Vec::new(); model.robot.dof()],
             qd: vec![Vec::new(); model.robot.dof()],
             human_q: vec![Vec::new(); model.human.dof()],
             human_rows,
+            tool_W: Vec::new(),
+            hand_W: Vec::new(),
+            robot_start: Vec::new(),
+            human_start: Vec::new(),
         }
     }
 
@@ -192,6 +226,19 @@ impl Log {
         }
         for (i, q) in state.human_q().iter().enumerate() {
             self.human_q[i].push(*q);
+        }
+        self.tool_W.push(
+            state
+                .robot_link_pose(model.tool_link)
+                .translation
+                .to_array(),
+        );
+        let human_poses = state.human_link_poses();
+        self.hand_W
+            .push(human_poses[hand_link(&model.human)].translation.to_array());
+        if self.robot_start.is_empty() {
+            self.robot_start = stick_figure(&model.robot, &state.robot_link_poses());
+            self.human_start = stick_figure(&model.human, human_poses);
         }
         for (link, pose) in model.human.links().iter().zip(state.human_link_poses()) {
             let p = pose.translation;
@@ -265,10 +312,49 @@ impl Log {
                     .collect(),
             },
         ];
+        let solids: Vec<Vec<[f64; 3]>> = model
+            .clutter
+            .iter()
+            .map(|c| {
+                let [hx, hy, hz] = c.half_extents_m;
+                (0..8)
+                    .map(|i| {
+                        let s = |bit: usize, h: f64| if i & bit == 0 { -h } else { h };
+                        let corner =
+                            workcell::robots::math::Vector::new(s(1, hx), s(2, hy), s(4, hz));
+                        c.X_WC.transform_point(corner).to_array()
+                    })
+                    .collect()
+            })
+            .collect();
+        let path = |name: &str, color, width, segments, points_W: &[[f64; 3]]| WorldPath {
+            name: name.to_string(),
+            color,
+            width,
+            segments,
+            points_W: points_W.to_vec(),
+        };
+        let views = svg_cell_views(
+            &format!(
+                "{}: {} and {} over {:.1} s",
+                self.scenario,
+                model.robot.name(),
+                model.human.name(),
+                self.t.last().copied().unwrap_or(0.0)
+            ),
+            &solids,
+            &[
+                path("robot at t = 0", "#333333", 4.0, true, &self.robot_start),
+                path("human at t = 0", "#a0522d", 4.0, true, &self.human_start),
+                path("tool path", "#1f77b4", 1.0, false, &self.tool_W),
+                path("hand path", "#d62728", 1.0, false, &self.hand_W),
+            ],
+        );
         Ok(vec![
             write("robot_joints.csv", &csv)?,
             write("human_poses.csv", &self.human_rows)?,
             write("trajectories.svg", &svg_panels(&self.t, "t [s]", &panels))?,
+            write("cell.svg", &views)?,
         ])
     }
 }
