@@ -43,6 +43,19 @@ fn robot_check_reports_json_with_link_poses() {
 }
 
 #[test]
+fn catalogue_models_check_clean() {
+    for name in ["ur5e_kinematics", "iiwa14_kinematics", "human_arm"] {
+        let out = workcell(&["robot", "check", name, "--json"]);
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+        assert_eq!(report["problems"], serde_json::json!([]), "{name}");
+        // Held off-neutral under gravity, the servos keep every joint within 10 mrad.
+        let hold = report["rapier"]["hold_error"].as_f64().expect("hold error");
+        assert!(hold < 0.01, "{name}: {hold}");
+    }
+}
+
+#[test]
 fn bad_input_is_a_clear_error_not_a_panic() {
     for args in [
         vec![

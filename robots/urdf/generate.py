@@ -196,13 +196,16 @@ def human_arm():
     out += '<robot name="human_arm">\n' + materials(colors)
 
     # Torso: the root; its frame is at the pelvis centre, z up, x forward, the right arm at -y.
-    torso_mass = 0.497 * body_mass
+    # The link between the two shoulder joints carries 20 g taken from the trunk, so that no
+    # moving link is massless (physics engines need mass on every moving body).
+    shoulder_mass = 0.02
+    torso_mass = 0.497 * body_mass - shoulder_mass
     out += '  <link name="torso">\n'
     out += inertial(torso_mass, (0, 0, 0.26), torso_mass * (0.5**2 + 0.22**2) / 12, torso_mass * (0.5**2 + 0.36**2) / 12, torso_mass * (0.36**2 + 0.22**2) / 12)
     out += geometry("visual", (0, 0, 0.26), (0, 0, 0), '<box size="0.22 0.36 0.52"/>', "torso")
     out += geometry("collision", (0, 0, 0.26), (0, 0, 0), '<box size="0.22 0.36 0.52"/>')
     out += "  </link>\n"
-    out += '  <link name="shoulder"/>\n'
+    out += '  <link name="shoulder">\n' + inertial(shoulder_mass, (0, 0, 0), 1e-5, 1e-5, 1e-5) + "  </link>\n"
 
     def limb(name, bones, envelope_radius, length, visuals_extra=""):
         mass, _, com_frac, gyr = parts[name]

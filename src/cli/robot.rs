@@ -77,7 +77,21 @@ pub fn check(args: &CheckArgs) -> Result<ExitCode> {
     }
     // Load errors name the file and the element already.
     let robot = RobotModel::load(&args.robot, &packages)?;
-    let q_check = robot.neutral_configuration();
+    // A configuration off the neutral one, so that gravity loads the joints while rapier
+    // holds it: half a radian (or a quarter of the range) from the middle of each range.
+    let q_check: Vec<f64> = robot
+        .neutral_configuration()
+        .iter()
+        .zip(robot.position_limits())
+        .map(|(mid, [_, hi])| {
+            let room = if hi.is_finite() {
+                0.25 * (hi - mid)
+            } else {
+                0.5
+            };
+            mid + room.min(0.5)
+        })
+        .collect();
     let rapier = workcell::sim::check_in_rapier(&robot, &q_check).context("loading into rapier")?;
     let fk = match &args.fk {
         None => None,
@@ -307,7 +321,7 @@ fn print_report(r: &Report) {
     }
     println!();
     println!(
-        "rapier   {} bodies, {} colliders, {} multibody dofs; FK mismatch {:.1e} m; hold error after 1 s {:.1e}",
+        "rapier   {} bodies, {} colliders, {} multibody dofs; FK mismatch {:.1e} m; error holding a pose for 1 s {:.1e}",
         r.rapier.rigid_bodies,
         r.rapier.colliders,
         r.rapier.multibody_dofs,
