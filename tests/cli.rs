@@ -120,6 +120,13 @@ fn simulate_writes_csv_and_plot_and_replays_by_seed() {
             .expect("svg")
             .contains("<polyline")
     );
+    // The cell picture draws every clutter box of the default cell in both views: the table,
+    // two boxes, and two shelves of four posts with five and four boards.
+    let cell = std::fs::read_to_string(a.join("cell.svg")).expect("svg");
+    assert_eq!(
+        cell.matches("<polygon").count(),
+        2 * (3 + (4 + 5) + (4 + 4))
+    );
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(a.join("summary.json")).expect("json"))
             .expect("json");

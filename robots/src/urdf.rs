@@ -226,6 +226,14 @@ impl Builder<'_> {
         }
         self.resolve_mimics(&mut joints)?;
 
+        tracing::debug!(
+            path = %self.path.display(),
+            links = links.len(),
+            joints = joints.len(),
+            dof = actuated.len(),
+            meshes = self.meshes.len(),
+            "URDF loaded"
+        );
         Ok(RobotModel {
             name: robot.name.clone(),
             source: self.path.to_path_buf(),

@@ -137,7 +137,15 @@ impl CellModel {
             &human.position_limits(),
             scenario.seed,
         );
-        let clutter = scenario.clutter.iter().flat_map(clutter_boxes).collect();
+        let clutter: Vec<ClutterBox> = scenario.clutter.iter().flat_map(clutter_boxes).collect();
+        tracing::info!(
+            robot = robot.name(),
+            human = human.name(),
+            robot_period_s = robot_motion.period_s(),
+            human_period_s = human_motion.period_s(),
+            clutter_boxes = clutter.len(),
+            "cell built"
+        );
         Ok(Self {
             scenario: scenario.clone(),
             robot,

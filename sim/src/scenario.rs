@@ -340,7 +340,7 @@ impl Scenario {
     /// The scenario as TOML text (every default written out).
     #[must_use]
     pub fn to_toml(&self) -> String {
-        toml::to_string_pretty(self).unwrap_or_default()
+        toml::to_string(self).unwrap_or_default()
     }
 
     /// Checks ranges that types cannot: positive time step, finite poses, sane sizes.
