@@ -525,7 +525,7 @@ impl CellState {
     /// The cell at t = 0: robot at its initial configuration, human at the start of its motion.
     ///
     /// # Errors
-    /// [`SimError::InvalidCommand`] if rapier refuses the robot's joint tree (a bug, reported
+    /// [`SimError::Physics`] if rapier refuses the robot's joint tree (a bug, reported
     /// rather than a panic).
     pub fn new(model: &CellModel) -> Result<Self> {
         let mut world = PhysicsWorld::new();
@@ -550,7 +550,7 @@ impl CellState {
         model.human_motion.sample(0.0, &mut human_q, &mut human_qd);
         human
             .forward_kinematics(&human_q, &mut human_kinematics)
-            .map_err(|e| SimError::InvalidCommand {
+            .map_err(|e| SimError::Physics {
                 message: e.to_string(),
             })?;
         let mut human_bodies = Vec::with_capacity(human.links().len());
@@ -674,11 +674,9 @@ fn build_robot(
     X_WR: Pose,
     initial_q: &[f64],
 ) -> Result<(Vec<LinkBody>, Vec<CoordinateHandle>)> {
-    let fk = robot
-        .fk(X_WR, initial_q)
-        .map_err(|e| SimError::InvalidCommand {
-            message: e.to_string(),
-        })?;
+    let fk = robot.fk(X_WR, initial_q).map_err(|e| SimError::Physics {
+        message: e.to_string(),
+    })?;
     // Each link's body: itself if its parent joint moves (or it is the root), else its parent's.
     let mut body_link: Vec<LinkId> = (0..robot.links().len()).collect();
     for joint in robot.joints() {
@@ -725,7 +723,7 @@ fn build_robot(
             );
             bodies[b] = Some(handle);
         }
-        let body = bodies[b].ok_or_else(|| SimError::InvalidCommand {
+        let body = bodies[b].ok_or_else(|| SimError::Physics {
             message: "link without body".into(),
         })?;
         let X_BL = X_WBody.inverse() * *fk.link_pose(l);
@@ -744,7 +742,7 @@ fn build_robot(
 
     // Joints, parents before children; each movable joint connects two bodies.
     let mut joint_handles = vec![None; robot.joints().len()];
-    let refused = |name: &str| SimError::InvalidCommand {
+    let refused = |name: &str| SimError::Physics {
         message: format!("rapier refused joint '{name}'"),
     };
     for (j, joint) in robot.joints().iter().enumerate() {
@@ -786,7 +784,7 @@ fn build_robot(
 
     // Initial configuration, mimic couplings, no self-contacts.
     let Some(&(first, _, _)) = joint_handles.iter().flatten().next() else {
-        return Err(SimError::InvalidCommand {
+        return Err(SimError::Physics {
             message: "robot has no movable joint".into(),
         });
     };
@@ -800,12 +798,7 @@ fn build_robot(
         let Some((handle, _, coord)) = joint_handles[j] else {
             continue;
         };
-        let link_id = world
-            .multibody_joints
-            .rigid_body_link(handle_body(handle))
-            .map(|l| l.id)
-            .unwrap_or(0);
-        let Some((mb, _)) = world.multibody_joints.get(handle) else {
+        let Some((mb, link_id)) = world.multibody_joints.get(handle) else {
             continue;
         };
         let Some(link) = mb.link(link_id) else {
@@ -820,11 +813,10 @@ fn build_robot(
         {
             let (src, _, src_coord) = joint_handles[robot.actuated_joints()[index]]
                 .ok_or_else(|| refused(&joint.name))?;
-            let src_link = world
+            let (_, src_link) = world
                 .multibody_joints
-                .rigid_body_link(handle_body(src))
-                .map(|l| l.id)
-                .unwrap_or(0);
+                .get(src)
+                .ok_or_else(|| refused(&joint.name))?;
             couplings.push(MultibodyDofCoupling {
                 link1: src_link,
                 dof1: 0,
@@ -851,11 +843,6 @@ fn build_robot(
         multibody.update_rigid_bodies(bodies, true);
     }
     Ok((links, coordinates))
-}
-
-/// The rigid body a multibody joint handle belongs to (rapier uses the child body's handle).
-fn handle_body(handle: MultibodyJointHandle) -> RigidBodyHandle {
-    RigidBodyHandle(handle.0)
 }
 
 /// Advances the cell by one time step under `command`.
@@ -939,7 +926,7 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
     model
         .human
         .forward_kinematics(&state.human_q, &mut state.human_kinematics)
-        .map_err(|e| SimError::InvalidCommand {
+        .map_err(|e| SimError::Physics {
             message: e.to_string(),
         })?;
     for (l, body) in state.human_bodies.iter().enumerate() {
@@ -974,7 +961,8 @@ pub struct RapierCheck {
 /// servos for one second.
 ///
 /// # Errors
-/// [`SimError::InvalidCommand`] when `q` does not fit or rapier refuses the joint tree.
+/// [`SimError::InvalidCommand`] when `q` does not fit, [`SimError::Physics`] when rapier
+/// refuses the joint tree.
 pub fn check_in_rapier(robot: &RobotModel, q: &[f64]) -> Result<RapierCheck> {
     robot
         .check_configuration(q)

@@ -46,6 +46,10 @@ pub enum SimError {
     /// A command given to `step` does not fit the robot.
     #[error("{message}")]
     InvalidCommand { message: String },
+    /// The physics world could not be built from a model that loaded (reported rather than
+    /// a panic; it points at a bug or at a robot rapier cannot represent).
+    #[error("physics: {message}")]
+    Physics { message: String },
 }
 
 /// Result alias of this crate.
