@@ -508,6 +508,10 @@ pub struct CellState {
     human_qd: Vec<f64>,
     // Scratch for the nominal command.
     nominal: [Vec<f64>; 3],
+    /// Position and velocity reference of each servo: they follow position commands within
+    /// the joint's velocity limit and the servo acceleration limit.
+    reference_q: Vec<f64>,
+    reference_qd: Vec<f64>,
 }
 
 impl std::fmt::Debug for CellState {
@@ -588,6 +592,8 @@ impl CellState {
             human_q,
             human_qd,
             nominal: [vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]],
+            reference_q: model.initial_q.clone(),
+            reference_qd: vec![0.0; dof],
         };
         state.read_robot();
         Ok(state)
@@ -904,16 +910,33 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
         };
         if mode_velocity {
             let q = state.q[i];
+            state.reference_q[i] = q;
+            state.reference_qd[i] = state.qd[i];
             let v = targets.1[i]
                 .clamp(-v_max, v_max)
                 .clamp((l.lower - q) / dt, (l.upper - q) / dt);
             link.joint.data.set_motor(c.axis, q, v, 0.0, damping);
         } else {
+            // The servo reference chases the command with bounded velocity and acceleration
+            // (braking in time: |v| <= sqrt(2 a |e|)), so a jump in the command cannot drive
+            // the joint beyond its limits; on a smooth command it rides the feed-forward.
+            let a_max = if l.acceleration.is_finite() && l.acceleration > 0.0 {
+                l.acceleration
+            } else {
+                model.scenario.robot.servo_acceleration_rad_s2
+            };
+            let goal = targets.0[i].clamp(l.lower, l.upper);
+            let (r, rd) = (&mut state.reference_q[i], &mut state.reference_qd[i]);
+            let e = goal - *r;
+            let approach = (2.0 * a_max * e.abs()).sqrt().min(e.abs() / dt);
+            let v_wanted = (targets.1[i] + e.signum() * approach).clamp(-v_max, v_max);
+            *rd += (v_wanted - *rd).clamp(-a_max * dt, a_max * dt);
+            *r += *rd * dt;
             // A PD servo solved implicitly by rapier; gravity leaves a steady error of about
             // (gravity acceleration of the joint) / stiffness, ~2 mrad at the default gains.
-            let q = targets.0[i].clamp(l.lower, l.upper);
-            let v = targets.1[i].clamp(-v_max, v_max);
-            link.joint.data.set_motor(c.axis, q, v, stiffness, damping);
+            link.joint
+                .data
+                .set_motor(c.axis, *r, *rd, stiffness, damping);
         }
     }
     state.nominal = nominal;

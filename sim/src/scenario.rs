@@ -92,6 +92,9 @@ pub struct RobotConfig {
     pub stiffness: f64,
     /// Damping of the joint servos, 1/s; also the gain of velocity control. Default 200.
     pub damping: f64,
+    /// Acceleration limit of the servo references where the URDF gives none, rad/s^2 (m/s^2
+    /// for prismatic joints). Default 10.
+    pub servo_acceleration_rad_s2: f64,
     /// What the robot does.
     pub motion: RobotMotionConfig,
 }
@@ -105,6 +108,7 @@ impl Default for RobotConfig {
             tool_link: "tool0".into(),
             stiffness: 20_000.0,
             damping: 200.0,
+            servo_acceleration_rad_s2: 10.0,
             motion: RobotMotionConfig::default(),
         }
     }
@@ -372,6 +376,13 @@ impl Scenario {
         finite("robot.initial_q", &self.robot.initial_q)?;
         finite("human.base.xyz", &self.human.base.xyz)?;
         finite("human.base.rpy", &self.human.base.rpy)?;
+        let a = self.robot.servo_acceleration_rad_s2;
+        if !(a > 0.0 && a.is_finite()) {
+            return Err(bad(
+                "robot.servo_acceleration_rad_s2",
+                format!("{a} must be > 0"),
+            ));
+        }
         let gains = [self.robot.stiffness, self.robot.damping];
         if !gains.iter().all(|g| g.is_finite() && *g >= 0.0) {
             return Err(bad(

@@ -56,18 +56,22 @@ fn position_control_settles_on_the_target_under_gravity() {
     scenario.robot.motion = RobotMotionConfig::Hold;
     let model = CellModel::new(&scenario, &default_path()).expect("model");
     let mut state = CellState::new(&model).expect("state");
-    let target = [0.3, 0.8, -0.2, -1.2, 0.3, 0.6, 0.5];
+    // A jump of up to 1.2 rad: the servo reference ramps at the velocity limit.
+    let target = [1.2, 0.8, -0.2, -1.2, 0.3, 0.6, 0.5];
     let zero = [0.0; 7];
+    let velocity = model.robot.velocity_limits();
     for _ in 0..2000 {
-        step(
-            &model,
-            &mut state,
-            &RobotCommand::Position {
-                q: &target,
-                qd: &zero,
-            },
-        )
-        .expect("step");
+        let command = RobotCommand::Position {
+            q: &target,
+            qd: &zero,
+        };
+        step(&model, &mut state, &command).expect("step");
+        for (qd, v) in state.qd().iter().zip(&velocity) {
+            assert!(
+                qd.abs() <= 1.05 * v,
+                "{qd} rad/s beyond the {v} rad/s limit"
+            );
+        }
     }
     for (q, t) in state.q().iter().zip(&target) {
         assert!((q - t).abs() < 5e-3, "q {q} target {t}");
