@@ -42,6 +42,17 @@ enum RobotCommand {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // Panics inside the mesh decoder are caught and reported as errors naming the file; keep
+    // the default panic message for everything else.
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let in_decoder = info
+            .location()
+            .is_some_and(|l| l.file().contains(workcell::robots::DECODER_CRATE));
+        if !in_decoder {
+            default_hook(info);
+        }
+    }));
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .or_else(|_| tracing_subscriber::EnvFilter::try_new(&args.log))
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));

@@ -64,6 +64,11 @@ fn bad_input_is_a_clear_error_not_a_panic() {
             "robots/tests/fixtures/broken/missing_parent.urdf",
         ],
         vec!["robot", "check", "no_such_robot"],
+        vec![
+            "robot",
+            "check",
+            "robots/tests/fixtures/broken/dangling_dae.urdf",
+        ],
         vec!["robot", "check", "ur5e_kinematics", "--fk", "1,2"],
         vec!["simulate", "configs/nonexistent.toml"],
     ] {

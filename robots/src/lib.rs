@@ -33,7 +33,7 @@ mod urdf;
 pub use catalogue::{CATALOGUE, CatalogueEntry};
 pub use error::{Result, RobotError};
 pub use kinematics::{Jacobian, KinematicState};
-pub use mesh::TriMesh;
+pub use mesh::{DECODER_CRATE, TriMesh};
 pub use model::{
     Coordinate, Geometry, Inertial, Joint, JointId, JointKind, JointLimits, Link, LinkId,
     RobotModel, SafetyController, Shape,

@@ -1,8 +1,15 @@
 //! Triangle meshes from STL (binary and ASCII), OBJ and COLLADA/DAE files.
+//!
+//! Decoding uses mesh-loader. Its panics on malformed input are caught and turned into
+//! errors; a program that wants them silent installs a panic hook that skips
+//! [`DECODER_CRATE`] (the `workcell` binary does).
 
 use std::path::Path;
 
 use crate::math::Vector;
+
+/// Name of the mesh decoding crate, as it appears in panic locations.
+pub const DECODER_CRATE: &str = "mesh-loader";
 
 /// An indexed triangle mesh in the mesh's own frame, in metres (scale applied).
 #[derive(Debug, Clone, PartialEq)]
@@ -32,10 +39,26 @@ impl TriMesh {
     pub fn from_bytes(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, String> {
         check_binary_stl_length(bytes, path)?;
         let loader = mesh_loader::Loader::default().merge_meshes(true);
-        // OBJ files may name material libraries; those are not needed for geometry.
-        let scene = loader
-            .load_from_slice_with_reader(bytes, path, |_| Ok(Vec::new()))
-            .map_err(|e| format!("cannot decode {}: {e}", path.display()))?;
+        // OBJ files may name material libraries; those are not needed for geometry. The
+        // decoder panics on some corrupted files (seen on COLLADA with dangling references):
+        // a broken file must be an error, so the panic is caught here.
+        let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            loader.load_from_slice_with_reader(bytes, path, |_| Ok(Vec::new()))
+        }));
+        let scene = match decoded {
+            Ok(result) => result.map_err(|e| format!("cannot decode {}: {e}", path.display()))?,
+            Err(panic) => {
+                let why = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| (*s).to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                return Err(format!(
+                    "cannot decode {}: the decoder failed ({why})",
+                    path.display()
+                ));
+            }
+        };
         let mut mesh = TriMesh {
             vertices: Vec::new(),
             triangles: Vec::new(),

@@ -99,3 +99,21 @@ fn package_uris_relative_paths_and_mimic_joints() {
     assert_relative_eq!(fl.translation.y, 0.05, epsilon = 1e-12);
     assert_relative_eq!(fr.translation.y, -0.05, epsilon = 1e-12);
 }
+
+#[test]
+fn truncated_and_corrupted_meshes_are_errors_not_panics() {
+    // Every prefix of each fixture, and each fixture with one byte flipped at a time, must
+    // give Ok or Err: a broken mesh in a vendor package must never crash a safety tool.
+    for file in ["cube_binary.stl", "cube_ascii.stl", "cube.obj", "cube.dae"] {
+        let path = fixtures().join("meshes").join(file);
+        let bytes = std::fs::read(&path).expect("fixture");
+        for len in 0..bytes.len() {
+            let _ = TriMesh::from_bytes(&bytes[..len], &path, [1.0; 3]);
+        }
+        for i in 0..bytes.len() {
+            let mut flipped = bytes.clone();
+            flipped[i] ^= 0x5a;
+            let _ = TriMesh::from_bytes(&flipped, &path, [1.0; 3]);
+        }
+    }
+}
