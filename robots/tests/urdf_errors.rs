@@ -154,3 +154,23 @@ fn unknown_catalogue_name_lists_the_catalogue() {
     let err = RobotModel::from_catalogue("ur5").expect_err("not in the catalogue");
     assert!(err.to_string().contains("ur5e_kinematics"), "{err}");
 }
+
+#[test]
+fn truncated_and_corrupted_urdfs_are_errors_not_panics() {
+    // Every prefix of a valid URDF with meshes, mimic and limits, and the file with each byte
+    // replaced in turn, loads or fails with an error.
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/pkg/my_robot/urdf/gripper.urdf");
+    let text = std::fs::read_to_string(&path).expect("fixture");
+    let packages = PackageMap::new();
+    for (len, _) in text.char_indices().step_by(3) {
+        let _ = RobotModel::from_urdf_str(&text[..len], &path, &packages);
+    }
+    for (i, c) in text.char_indices().step_by(2) {
+        for replacement in ["\"", "<", "-", "9"] {
+            let mut broken = text.clone();
+            broken.replace_range(i..i + c.len_utf8(), replacement);
+            let _ = RobotModel::from_urdf_str(&broken, &path, &packages);
+        }
+    }
+}

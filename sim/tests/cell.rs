@@ -404,3 +404,18 @@ fn random_motion_stays_above_the_table_and_within_limits() {
         }
     }
 }
+
+#[test]
+fn corrupted_scenarios_are_errors_not_panics() {
+    let text = std::fs::read_to_string(default_path()).expect("scenario");
+    for (i, c) in text.char_indices().step_by(3) {
+        for replacement in ["\"", "[", "-", "9", "x"] {
+            let mut broken = text.clone();
+            broken.replace_range(i..i + c.len_utf8(), replacement);
+            if let Ok(scenario) = Scenario::from_toml(&broken, Path::new("broken.toml")) {
+                // What parses and validates must also build (or fail with an error).
+                let _ = CellModel::new(&scenario, &default_path());
+            }
+        }
+    }
+}
