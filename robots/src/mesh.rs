@@ -38,6 +38,17 @@ impl TriMesh {
     /// A message saying what is wrong with the bytes.
     pub fn from_bytes(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, String> {
         check_binary_stl_length(bytes, path)?;
+        // A binary STL whose free-form header starts with "solid" is taken for ASCII by the
+        // decoder; when the size fits the binary layout exactly, blank the header first.
+        let patched;
+        let bytes = if is_binary_stl_starting_with_solid(bytes, path) {
+            let mut copy = bytes.to_vec();
+            copy[..5].copy_from_slice(b"     ");
+            patched = copy;
+            &patched[..]
+        } else {
+            bytes
+        };
         let loader = mesh_loader::Loader::default().merge_meshes(true);
         // OBJ files may name material libraries; those are not needed for geometry. The
         // decoder panics on some corrupted files (seen on COLLADA with dangling references):
@@ -130,4 +141,15 @@ fn check_binary_stl_length(bytes: &[u8], path: &Path) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+fn is_binary_stl_starting_with_solid(bytes: &[u8], path: &Path) -> bool {
+    let is_stl = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("stl"));
+    if !is_stl || bytes.len() < 84 || !bytes.starts_with(b"solid") {
+        return false;
+    }
+    let count = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
+    count > 0 && bytes.len() == 84 + 50 * count
 }

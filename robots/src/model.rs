@@ -25,6 +25,7 @@ pub struct RobotModel {
     /// Joint of each configuration coordinate, in coordinate order.
     pub(crate) actuated: Vec<JointId>,
     pub(crate) root: LinkId,
+    pub(crate) warnings: Vec<String>,
 }
 
 impl RobotModel {
@@ -37,6 +38,12 @@ impl RobotModel {
     #[must_use]
     pub fn source(&self) -> &std::path::Path {
         &self.source
+    }
+    /// What the loader tolerated and adjusted rather than refused (a mimic on a fixed joint,
+    /// an empty `<texture/>`, `package:///`), one sentence each, naming the element.
+    #[must_use]
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
     /// All links; `links()[root()]` has no parent joint.
     #[must_use]

@@ -65,6 +65,8 @@ impl PackageMap {
     /// A message saying why: unknown package, a path escaping its root, an unsupported scheme.
     pub fn resolve(&self, uri: &str, urdf_dir: &Path) -> Result<PathBuf, String> {
         if let Some(rest) = uri.strip_prefix("package://") {
+            // `package:///name/...` appears in exported files; the extra slash means nothing.
+            let rest = rest.trim_start_matches('/');
             let (package, relative) = rest
                 .split_once('/')
                 .ok_or_else(|| format!("'{uri}' has no path after the package name"))?;

@@ -45,7 +45,20 @@ impl RobotModel {
                 format!("unknown joint type '{kind}' (revolute, continuous, prismatic, fixed)"),
             ));
         }
-        let robot = urdf_rs::read_from_string(text).map_err(|e| RobotError::Parse {
+        let mut warnings = Vec::new();
+        // `<texture/>` without a filename is common in exported files and means nothing;
+        // urdf-rs refuses it.
+        let empty_textures =
+            text.matches("<texture />").count() + text.matches("<texture/>").count();
+        let text = if empty_textures > 0 {
+            warnings.push(format!(
+                "{empty_textures} empty <texture/> elements ignored"
+            ));
+            std::borrow::Cow::Owned(text.replace("<texture />", "").replace("<texture/>", ""))
+        } else {
+            std::borrow::Cow::Borrowed(text)
+        };
+        let robot = urdf_rs::read_from_string(&text).map_err(|e| RobotError::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
@@ -54,6 +67,7 @@ impl RobotModel {
             urdf_dir: path.parent().unwrap_or(Path::new(".")),
             packages,
             meshes: HashMap::new(),
+            warnings,
         }
         .build(&robot)
     }
@@ -94,11 +108,15 @@ fn unknown_joint_type(text: &str) -> Option<(String, String)> {
     None
 }
 
+/// Negative inertia moments smaller than this (kg m^2) are rounding noise, not errors.
+const INERTIA_NOISE_KGM2: f64 = 1e-12;
+
 struct Builder<'a> {
     path: &'a Path,
     urdf_dir: &'a Path,
     packages: &'a PackageMap,
     meshes: HashMap<(PathBuf, [u64; 3]), Arc<TriMesh>>,
+    warnings: Vec<String>,
 }
 
 impl Builder<'_> {
@@ -241,6 +259,7 @@ impl Builder<'_> {
             joints,
             actuated,
             root,
+            warnings: self.warnings,
         })
     }
 
@@ -290,7 +309,7 @@ impl Builder<'_> {
         Ok(())
     }
 
-    fn joint(&self, j: &urdf_rs::Joint, parent: usize, child: usize) -> Result<Joint> {
+    fn joint(&mut self, j: &urdf_rs::Joint, parent: usize, child: usize) -> Result<Joint> {
         let element = format!("joint '{}'", j.name);
         let kind = match j.joint_type {
             urdf_rs::JointType::Revolute => JointKind::Revolute,
@@ -371,10 +390,14 @@ impl Builder<'_> {
                         self.invalid(element, "mimic has a non-finite multiplier or offset")
                     );
                 }
-                if !kind.is_movable() {
-                    return Err(self.invalid(element, "a fixed joint cannot mimic"));
+                if kind.is_movable() {
+                    Some((m.joint.clone(), multiplier, offset))
+                } else {
+                    // A fixed joint does not move: its mimic means nothing (ROS ignores it).
+                    self.warnings
+                        .push(format!("{element}: <mimic> on a fixed joint ignored"));
+                    None
                 }
-                Some((m.joint.clone(), multiplier, offset))
             }
             None => None,
         };
@@ -431,11 +454,25 @@ impl Builder<'_> {
                 format!("inertial mass {} must be finite and >= 0", i.mass.value),
             ));
         }
-        if !all_finite(&tensor) || tensor[0] < 0.0 || tensor[3] < 0.0 || tensor[5] < 0.0 {
+        if !all_finite(&tensor)
+            || [tensor[0], tensor[3], tensor[5]]
+                .iter()
+                .any(|d| *d < -INERTIA_NOISE_KGM2)
+        {
             return Err(self.invalid(
                 element,
                 "inertia has a non-finite or negative diagonal value",
             ));
+        }
+        // Exporters write numerical noise such as -5e-20 for zero moments: clamp it to zero.
+        let mut tensor = tensor;
+        for k in [0, 3, 5] {
+            if tensor[k] < 0.0 {
+                tensor[k] = 0.0;
+                self.warnings.push(format!(
+                    "{element}: inertia diagonal {k} below zero by rounding, taken as 0"
+                ));
+            }
         }
         let inertial = (i.mass.value > 0.0).then(|| -> Result<Inertial> {
             Ok(Inertial {

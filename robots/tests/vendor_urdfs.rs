@@ -94,3 +94,47 @@ fn panda_loads_with_meshes_and_mimic_finger() {
         }
     }
 }
+
+#[test]
+fn the_whole_example_robot_data_corpus_loads_or_fails_for_a_real_reason() {
+    let Some(dir) = data_dir() else { return };
+    let mut files = Vec::new();
+    let mut stack = vec![dir.join("robots")];
+    while let Some(folder) = stack.pop() {
+        for entry in std::fs::read_dir(&folder).expect("read_dir").flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == "urdf") {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    assert_eq!(files.len(), 69, "example-robot-data 6.0.0 ships 69 URDFs");
+    let mut failures = Vec::new();
+    for path in &files {
+        if let Err(e) = RobotModel::from_urdf_file(path, &PackageMap::new()) {
+            let name = path
+                .strip_prefix(&dir)
+                .expect("inside")
+                .display()
+                .to_string();
+            failures.push((name, e.to_string()));
+        }
+    }
+    // The three files that are broken in the package itself, each refused with its reason.
+    let expected = [
+        (
+            "alex_psyonic_hands.urdf",
+            "mimics joint 'index_q1', which does not exist",
+        ),
+        ("romeo_laas_small.urdf", "cannot read /usr/Romeo"),
+        ("ur3.urdf", "has no link"),
+    ];
+    assert_eq!(failures.len(), expected.len(), "{failures:#?}");
+    for ((name, message), (file, reason)) in failures.iter().zip(expected) {
+        assert!(name.ends_with(file), "{name}");
+        assert!(message.contains(reason), "{name}: {message}");
+    }
+}

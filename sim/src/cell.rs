@@ -788,11 +788,10 @@ fn build_robot(
         coordinates.push(CoordinateHandle { joint, axis, coord });
     }
 
-    // Initial configuration, mimic couplings, no self-contacts.
+    // Initial configuration, mimic couplings, no self-contacts. A robot without movable
+    // joints is rigid bodies only (fixed root, fixed-jointed links merged into it).
     let Some(&(first, _, _)) = joint_handles.iter().flatten().next() else {
-        return Err(SimError::Physics {
-            message: "robot has no movable joint".into(),
-        });
+        return Ok((links, coordinates));
     };
     let Some((multibody, _)) = world.multibody_joints.get_mut(first) else {
         return Err(refused("first joint"));

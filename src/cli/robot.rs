@@ -209,7 +209,7 @@ fn meshes(robot: &RobotModel) -> BTreeMap<String, usize> {
 
 /// Things that load but deserve a look before the robot is trusted in a safety evaluation.
 fn problems(robot: &RobotModel, rapier: &workcell::sim::RapierCheck) -> Vec<String> {
-    let mut found = Vec::new();
+    let mut found: Vec<String> = robot.warnings().to_vec();
     for j in robot.joints() {
         if !j.kind.is_movable() || j.mimic.is_some() {
             continue;

@@ -1,0 +1,68 @@
+//! Vendor arms from example-robot-data 6.0.0 in rapier: the multibody built from our model
+//! puts every link where forward kinematics does, and the servos hold a pose under gravity.
+//! Needs `scripts/fetch-example-robot-data.sh` (CI runs it); without the data the test says
+//! so and passes, except on CI.
+
+use std::path::PathBuf;
+
+use workcell_robots::{PackageMap, RobotModel};
+
+fn data_dir() -> Option<PathBuf> {
+    let cached = std::env::var_os("HOME").map(|home| {
+        PathBuf::from(home)
+            .join(".cache/workcell/example-robot-data-6.0.0/cmeel.prefix/share/example-robot-data")
+    });
+    let dir = std::env::var_os("WORKCELL_EXAMPLE_ROBOT_DATA")
+        .map(PathBuf::from)
+        .or(cached);
+    match dir {
+        Some(dir) if dir.is_dir() => Some(dir),
+        _ if std::env::var_os("CI").is_some() => {
+            panic!("CI needs example-robot-data (see .ci/run)")
+        }
+        _ => {
+            eprintln!("example-robot-data not found: vendor rapier test not run");
+            None
+        }
+    }
+}
+
+#[test]
+fn vendor_arms_match_forward_kinematics_in_rapier() {
+    let Some(dir) = data_dir() else { return };
+    for relative in [
+        "robots/ur_description/urdf/ur5_robot.urdf",
+        "robots/panda_description/urdf/panda.urdf",
+        "robots/z1_description/urdf/z1.urdf",
+        "robots/kinova_description/robots/kinova.urdf",
+        "robots/xarm_description/urdf/xarm7.urdf",
+    ] {
+        let path = dir.join(relative);
+        if !path.is_file() {
+            panic!("{relative} is not in example-robot-data any more");
+        }
+        let robot = RobotModel::from_urdf_file(&path, &PackageMap::new()).expect("loads");
+        let q: Vec<f64> = robot
+            .position_limits()
+            .iter()
+            .map(|[lo, hi]| {
+                if lo.is_finite() && hi.is_finite() {
+                    lo + 0.4 * (hi - lo)
+                } else {
+                    0.3
+                }
+            })
+            .collect();
+        let report = workcell_sim::check_in_rapier(&robot, &q).expect("rapier");
+        assert!(
+            report.fk_mismatch_m < 1e-9,
+            "{relative}: {}",
+            report.fk_mismatch_m
+        );
+        assert!(
+            report.hold_error < 0.05,
+            "{relative}: hold error {}",
+            report.hold_error
+        );
+    }
+}
