@@ -542,8 +542,13 @@ impl CellState {
             world.insert_collider(ColliderBuilder::cuboid(hx, hy, hz).position(c.X_WC), None);
         }
 
-        let (robot_links, coordinates) =
-            build_robot(&mut world, &model.robot, model.X_WR, &model.initial_q)?;
+        let (robot_links, coordinates) = build_robot(
+            &mut world,
+            &model.robot,
+            model.X_WR,
+            &model.initial_q,
+            model.scenario.robot.gravity_compensation,
+        )?;
 
         // Human: one kinematic body per link with collision geometry.
         let human = &model.human;
@@ -679,6 +684,7 @@ fn build_robot(
     robot: &RobotModel,
     X_WR: Pose,
     initial_q: &[f64],
+    gravity_compensation: bool,
 ) -> Result<(Vec<LinkBody>, Vec<CoordinateHandle>)> {
     let fk = robot.fk(X_WR, initial_q).map_err(|e| SimError::Physics {
         message: e.to_string(),
@@ -696,8 +702,12 @@ fn build_robot(
         let b = body_link[l];
         let X_WBody = *fk.link_pose(b);
         if bodies[b].is_none() {
+            // Gravity compensation, as a robot controller does it: each link's weight is
+            // carried exactly, so the servos only see motion and contacts.
             let builder = if b == robot.root() {
                 RigidBodyBuilder::fixed()
+            } else if gravity_compensation {
+                RigidBodyBuilder::dynamic().gravity_scale(0.0)
             } else {
                 RigidBodyBuilder::dynamic()
             };
@@ -931,8 +941,9 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
             let v_wanted = (targets.1[i] + e.signum() * approach).clamp(-v_max, v_max);
             *rd += (v_wanted - *rd).clamp(-a_max * dt, a_max * dt);
             *r += *rd * dt;
-            // A PD servo solved implicitly by rapier; gravity leaves a steady error of about
-            // (gravity acceleration of the joint) / stiffness, ~2 mrad at the default gains.
+            // A PD servo solved implicitly by rapier. Without gravity compensation, gravity
+            // leaves a steady error of (gravity acceleration of the joint) / stiffness, ~2 mrad
+            // at the default gains.
             link.joint
                 .data
                 .set_motor(c.axis, *r, *rd, stiffness, damping);
@@ -994,7 +1005,9 @@ pub fn check_in_rapier(robot: &RobotModel, q: &[f64]) -> Result<RapierCheck> {
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::new(0.0, 0.0, -9.81);
     world.integration_parameters.dt = 0.001;
-    let (links, coordinates) = build_robot(&mut world, robot, Pose::IDENTITY, q)?;
+    // Without gravity compensation: the hold error then shows how well the servos and effort
+    // limits carry the robot's own weight.
+    let (links, coordinates) = build_robot(&mut world, robot, Pose::IDENTITY, q, false)?;
     let fk = robot
         .fk(Pose::IDENTITY, q)
         .map_err(|e| SimError::InvalidCommand {

@@ -95,6 +95,9 @@ pub struct RobotConfig {
     /// Acceleration limit of the servo references where the URDF gives none, rad/s^2 (m/s^2
     /// for prismatic joints). Default 10.
     pub servo_acceleration_rad_s2: f64,
+    /// Compensate the robot's weight in its controller (as cobot controllers do), so that the
+    /// servos hold poses without the sag gravity leaves. Default true.
+    pub gravity_compensation: bool,
     /// What the robot does.
     pub motion: RobotMotionConfig,
 }
@@ -109,6 +112,7 @@ impl Default for RobotConfig {
             stiffness: 20_000.0,
             damping: 200.0,
             servo_acceleration_rad_s2: 10.0,
+            gravity_compensation: true,
             motion: RobotMotionConfig::default(),
         }
     }
