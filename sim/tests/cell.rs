@@ -122,7 +122,8 @@ fn nominal_motion_is_tracked_and_stays_in_limits() {
             );
         }
     }
-    assert!(worst < 0.02, "tracking error {worst} rad");
+    // Measured 2.8 mrad at half the speed limits (rapier 0.36, default gains).
+    assert!(worst < 5e-3, "tracking error {worst} rad");
 }
 
 #[test]
