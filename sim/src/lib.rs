@@ -18,14 +18,17 @@
 //! ```
 
 mod cell;
+mod clutter;
 mod error;
 pub mod human;
 pub mod ik;
+mod multibody;
+mod planning;
 pub mod scenario;
 pub mod trajectory;
 
-pub use cell::{
-    CellModel, CellState, ClutterBox, RapierCheck, RobotCommand, check_in_rapier, step,
-};
+pub use cell::{CellModel, CellState, RobotCommand, step};
+pub use clutter::ClutterBox;
 pub use error::{Result, SimError};
+pub use multibody::{RapierCheck, check_in_rapier};
 pub use scenario::Scenario;
