@@ -3,35 +3,13 @@
 //! into `~/.cache/workcell`, where these tests find it (or set `WORKCELL_EXAMPLE_ROBOT_DATA`).
 //! Without the data they say so and pass, except on CI (`CI` set), where they fail.
 
-use std::path::PathBuf;
-
 use approx::assert_relative_eq;
 use workcell_robots::math::Pose;
 use workcell_robots::{PackageMap, RobotModel, Shape};
 
-fn data_dir() -> Option<PathBuf> {
-    let cached = std::env::var_os("HOME").map(|home| {
-        PathBuf::from(home)
-            .join(".cache/workcell/example-robot-data-6.0.0/cmeel.prefix/share/example-robot-data")
-    });
-    let dir = std::env::var_os("WORKCELL_EXAMPLE_ROBOT_DATA")
-        .map(PathBuf::from)
-        .or(cached);
-    match dir {
-        Some(dir) if dir.is_dir() => Some(dir),
-        _ if std::env::var_os("CI").is_some() => {
-            panic!(
-                "CI needs example-robot-data: run scripts/fetch-example-robot-data.sh (see .ci/run)"
-            )
-        }
-        _ => {
-            eprintln!(
-                "example-robot-data not found: vendor URDF tests not run (scripts/fetch-example-robot-data.sh)"
-            );
-            None
-        }
-    }
-}
+#[path = "support/example_robot_data.rs"]
+mod example_robot_data;
+use example_robot_data::data_dir;
 
 fn load(relative: &str) -> Option<RobotModel> {
     let path = data_dir()?.join(relative);

@@ -3,29 +3,11 @@
 //! Needs `scripts/fetch-example-robot-data.sh` (CI runs it); without the data the test says
 //! so and passes, except on CI.
 
-use std::path::PathBuf;
-
 use workcell_robots::{PackageMap, RobotModel};
 
-fn data_dir() -> Option<PathBuf> {
-    let cached = std::env::var_os("HOME").map(|home| {
-        PathBuf::from(home)
-            .join(".cache/workcell/example-robot-data-6.0.0/cmeel.prefix/share/example-robot-data")
-    });
-    let dir = std::env::var_os("WORKCELL_EXAMPLE_ROBOT_DATA")
-        .map(PathBuf::from)
-        .or(cached);
-    match dir {
-        Some(dir) if dir.is_dir() => Some(dir),
-        _ if std::env::var_os("CI").is_some() => {
-            panic!("CI needs example-robot-data (see .ci/run)")
-        }
-        _ => {
-            eprintln!("example-robot-data not found: vendor rapier test not run");
-            None
-        }
-    }
-}
+#[path = "../../robots/tests/support/example_robot_data.rs"]
+mod example_robot_data;
+use example_robot_data::data_dir;
 
 #[test]
 fn vendor_arms_match_forward_kinematics_in_rapier() {
