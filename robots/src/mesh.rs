@@ -122,16 +122,25 @@ impl TriMesh {
     }
 }
 
-/// A binary STL states its triangle count in its header: a file shorter than that is
-/// truncated (decoders tend to read what is there and say nothing).
-fn check_binary_stl_length(bytes: &[u8], path: &Path) -> Result<(), String> {
+/// The triangle count in the header of a binary STL, `None` when the file is not an STL
+/// long enough to have that header.
+fn binary_stl_count(bytes: &[u8], path: &Path) -> Option<usize> {
     let is_stl = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("stl"));
-    if !is_stl || bytes.len() < 84 || bytes.starts_with(b"solid") && bytes.is_ascii() {
+    (is_stl && bytes.len() >= 84)
+        .then(|| u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize)
+}
+
+/// A binary STL states its triangle count in its header: a file shorter than that is
+/// truncated (decoders tend to read what is there and say nothing).
+fn check_binary_stl_length(bytes: &[u8], path: &Path) -> Result<(), String> {
+    let Some(count) = binary_stl_count(bytes, path) else {
+        return Ok(());
+    };
+    if bytes.starts_with(b"solid") && bytes.is_ascii() {
         return Ok(());
     }
-    let count = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
     let expected = 84 + 50 * count;
     if bytes.len() < expected {
         return Err(format!(
@@ -143,13 +152,8 @@ fn check_binary_stl_length(bytes: &[u8], path: &Path) -> Result<(), String> {
     Ok(())
 }
 
+/// A binary STL whose header starts with "solid": the size fits the binary layout exactly.
 fn is_binary_stl_starting_with_solid(bytes: &[u8], path: &Path) -> bool {
-    let is_stl = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("stl"));
-    if !is_stl || bytes.len() < 84 || !bytes.starts_with(b"solid") {
-        return false;
-    }
-    let count = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
-    count > 0 && bytes.len() == 84 + 50 * count
+    bytes.starts_with(b"solid")
+        && binary_stl_count(bytes, path).is_some_and(|n| n > 0 && bytes.len() == 84 + 50 * n)
 }

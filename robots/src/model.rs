@@ -106,14 +106,6 @@ impl RobotModel {
             .map(|&j| self.joints[j].limits.velocity)
             .collect()
     }
-    /// The links whose poses depend on no joint but fixed ones from the root, i.e. the links
-    /// that do not move. Leaf links (without children) of each chain, e.g. the tool flange.
-    #[must_use]
-    pub fn leaf_links(&self) -> Vec<LinkId> {
-        (0..self.links.len())
-            .filter(|&l| !self.joints.iter().any(|j| j.parent == l))
-            .collect()
-    }
     /// The configuration halfway between the position limits (0 for unlimited joints).
     #[must_use]
     pub fn neutral_configuration(&self) -> Vec<f64> {

@@ -120,15 +120,22 @@ impl CellModel {
         }
         let X_WR = scenario.robot.base.to_pose();
         let X_WH = scenario.human.base.to_pose();
-        let robot_motion =
-            plan_robot_motion(scenario, scenario_path, &robot, X_WR, tool_link, &initial_q)?;
+        let clutter: Vec<ClutterBox> = scenario.clutter.iter().flat_map(clutter_boxes).collect();
+        let robot_motion = plan_robot_motion(
+            scenario,
+            scenario_path,
+            &robot,
+            X_WR,
+            tool_link,
+            &initial_q,
+            &clutter,
+        )?;
         let human_motion = HumanMotion::generate(
             &scenario.human.motions,
             scenario.human.shuffle,
             &human.position_limits(),
             scenario.seed,
         );
-        let clutter: Vec<ClutterBox> = scenario.clutter.iter().flat_map(clutter_boxes).collect();
         tracing::info!(
             robot = robot.name(),
             human = human.name(),

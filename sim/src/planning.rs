@@ -11,7 +11,7 @@ use workcell_robots::collision::link_collision_shape;
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{KinematicState, LinkId, RobotModel};
 
-use crate::clutter::clutter_boxes;
+use crate::clutter::ClutterBox;
 use crate::error::{Result, SimError};
 use crate::ik::{IkOptions, solve_ik, tool_down};
 use crate::scenario::{RobotMotionConfig, Scenario};
@@ -25,6 +25,7 @@ pub(crate) fn plan_robot_motion(
     X_WR: Pose,
     tool_link: LinkId,
     initial_q: &[f64],
+    clutter: &[ClutterBox],
 ) -> Result<JointTrajectory> {
     let limits = robot.position_limits();
     let velocity = robot.velocity_limits();
@@ -64,7 +65,7 @@ pub(crate) fn plan_robot_motion(
                 X_WR,
                 tool_link,
                 initial_q,
-                scenario,
+                clutter,
                 *min_height_m,
                 *clearance_m,
             );
@@ -188,7 +189,7 @@ impl<'a> Workspace<'a> {
         X_WR: Pose,
         tool_link: LinkId,
         q: &[f64],
-        scenario: &Scenario,
+        clutter: &[ClutterBox],
         min_height_m: f64,
         clearance_m: f64,
     ) -> Self {
@@ -199,10 +200,8 @@ impl<'a> Workspace<'a> {
             .iter()
             .filter_map(|&l| link_collision_shape(robot, l).map(|s| (l, s)))
             .collect();
-        let obstacles = scenario
-            .clutter
+        let obstacles = clutter
             .iter()
-            .flat_map(clutter_boxes)
             .map(|c| {
                 let [hx, hy, hz] = c.half_extents_m;
                 let shape = SharedShape::cuboid(hx, hy, hz);
