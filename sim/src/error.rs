@@ -50,6 +50,15 @@ pub enum SimError {
     /// a panic; it points at a bug or at a robot rapier cannot represent).
     #[error("physics: {message}")]
     Physics { message: String },
+    /// A camera, pose or image size given to the renderer is not usable.
+    #[error("render: {message}")]
+    InvalidRender { message: String },
+    /// The GPU backend failed (no adapter, device lost, a wgpu validation error).
+    #[error("gpu: {message}")]
+    Gpu { message: String },
+    /// A dataset file is missing, malformed or inconsistent with its manifest.
+    #[error("{path}: {message}")]
+    Dataset { path: PathBuf, message: String },
 }
 
 /// Result alias of this crate.

@@ -22,8 +22,10 @@ mod clutter;
 mod error;
 pub mod human;
 pub mod ik;
+pub mod image;
 mod multibody;
 mod planning;
+pub mod render;
 pub mod scenario;
 pub mod trajectory;
 

@@ -1,0 +1,146 @@
+//! PNG files: encoding, decoding, and atomic writes (a killed run leaves no half-written file
+//! under the final name).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Result, SimError};
+
+/// Pixel layouts this crate writes and reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PixelKind {
+    /// 8-bit grey (class indices, masks).
+    Gray,
+    /// 8-bit sRGB.
+    Rgb,
+}
+
+impl PixelKind {
+    fn channels(self) -> usize {
+        match self {
+            PixelKind::Gray => 1,
+            PixelKind::Rgb => 3,
+        }
+    }
+}
+
+fn dataset_error(path: &Path, message: impl std::fmt::Display) -> SimError {
+    SimError::Dataset {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
+}
+
+/// Encodes an 8-bit image as PNG (fast compression: encoding is on the dataset's hot path).
+///
+/// # Errors
+/// [`SimError::InvalidRender`] when `data` does not have `width * height` pixels.
+pub fn encode_png(width: u32, height: u32, kind: PixelKind, data: &[u8]) -> Result<Vec<u8>> {
+    if data.len() != width as usize * height as usize * kind.channels() || width == 0 || height == 0
+    {
+        return Err(SimError::InvalidRender {
+            message: format!(
+                "{} bytes do not make a {width}x{height} image of {} channel(s)",
+                data.len(),
+                kind.channels()
+            ),
+        });
+    }
+    let mut out = Vec::with_capacity(data.len() / 2 + 64);
+    {
+        let mut encoder = png::Encoder::new(&mut out, width, height);
+        encoder.set_color(match kind {
+            PixelKind::Gray => png::ColorType::Grayscale,
+            PixelKind::Rgb => png::ColorType::Rgb,
+        });
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_compression(png::Compression::Fast);
+        let mut writer = encoder
+            .write_header()
+            .map_err(|e| SimError::InvalidRender {
+                message: e.to_string(),
+            })?;
+        writer
+            .write_image_data(data)
+            .map_err(|e| SimError::InvalidRender {
+                message: e.to_string(),
+            })?;
+    }
+    Ok(out)
+}
+
+/// Decodes an 8-bit grey or RGB PNG into `(width, height, kind, pixels)`.
+///
+/// # Errors
+/// [`SimError::Dataset`] naming `path` for a file that is not such a PNG.
+pub fn decode_png(bytes: &[u8], path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = decoder
+        .read_info()
+        .map_err(|e| dataset_error(path, format!("not a PNG: {e}")))?;
+    let info = reader.info();
+    let kind = match (info.color_type, info.bit_depth) {
+        (png::ColorType::Grayscale, png::BitDepth::Eight) => PixelKind::Gray,
+        (png::ColorType::Rgb, png::BitDepth::Eight) => PixelKind::Rgb,
+        (c, d) => {
+            return Err(dataset_error(
+                path,
+                format!("PNG of {c:?} at {d:?}; expected 8-bit grey or RGB"),
+            ));
+        }
+    };
+    let size = reader
+        .output_buffer_size()
+        .ok_or_else(|| dataset_error(path, "PNG too large"))?;
+    let mut data = vec![0; size];
+    let frame = reader
+        .next_frame(&mut data)
+        .map_err(|e| dataset_error(path, format!("corrupt PNG: {e}")))?;
+    data.truncate(frame.buffer_size());
+    Ok((frame.width, frame.height, kind, data))
+}
+
+/// Reads a PNG file.
+///
+/// # Errors
+/// [`SimError::Io`] or [`SimError::Dataset`] naming the file.
+pub fn read_png(path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
+    let bytes = std::fs::read(path).map_err(|source| SimError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    decode_png(&bytes, path)
+}
+
+/// Writes `bytes` to `path` atomically: into a temporary file beside it, synced, then renamed.
+///
+/// # Errors
+/// [`SimError::Io`] naming the file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let io = |source| SimError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let tmp = temporary_name(path);
+    let mut file = std::fs::File::create(&tmp).map_err(io)?;
+    file.write_all(bytes).map_err(io)?;
+    file.sync_data().map_err(io)?;
+    drop(file);
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+/// `dir/.name.tmp` for `dir/name`.
+pub(crate) fn temporary_name(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map_or_else(|| "file".into(), |n| n.to_string_lossy().into_owned());
+    path.with_file_name(format!(".{name}.tmp"))
+}
+
+/// Encodes and writes a PNG atomically.
+///
+/// # Errors
+/// As [`encode_png`] and [`write_atomic`].
+pub fn write_png(path: &Path, width: u32, height: u32, kind: PixelKind, data: &[u8]) -> Result<()> {
+    write_atomic(path, &encode_png(width, height, kind, data)?)
+}

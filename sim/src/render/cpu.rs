@@ -1,0 +1,449 @@
+//! The software rasterizer.
+
+use rayon::prelude::*;
+use workcell_robots::math::Pose;
+
+use crate::error::{Result, SimError};
+use crate::render::{
+    Camera, Frame, MaskBatch, NEAR_M, RenderMesh, Renderer, SUBPIXEL_BITS, Scene, pose_is_finite,
+};
+
+const SUB: i64 = 1 << SUBPIXEL_BITS;
+/// Triangles are clipped to this many pixels beyond the image, so that fixed-point edge
+/// functions stay far from overflow; a GPU's guard band plays the same role.
+const GUARD_PX: f32 = 8192.0;
+
+/// The software rasterizer: single-threaded per image, masks of a batch in parallel (rayon).
+/// It keeps its buffers between calls.
+#[derive(Debug, Clone, Default)]
+pub struct CpuRenderer {
+    vertices: Vec<[f32; 3]>,
+    inv_z: Vec<f32>,
+    color: Vec<[f32; 3]>,
+}
+
+impl CpuRenderer {
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
+/// A pose as a 3x4 matrix in f32, rows of `[R | t]`.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Affine(pub(crate) [[f32; 4]; 3]);
+
+impl Affine {
+    pub(crate) fn from_pose(X: &Pose) -> Self {
+        let m = parry3d_f64::glamx::DMat3::from_quat(X.rotation);
+        let t = X.translation;
+        let row = |r: usize| {
+            let v = m.row(r);
+            [v.x as f32, v.y as f32, v.z as f32, t[r] as f32]
+        };
+        Self([row(0), row(1), row(2)])
+    }
+
+    #[inline]
+    pub(crate) fn apply(&self, p: [f32; 3]) -> [f32; 3] {
+        let m = &self.0;
+        [0, 1, 2].map(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3])
+    }
+
+    #[inline]
+    pub(crate) fn rotate(&self, p: [f32; 3]) -> [f32; 3] {
+        let m = &self.0;
+        [0, 1, 2].map(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2])
+    }
+}
+
+#[inline]
+pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+#[inline]
+pub(crate) fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+#[inline]
+pub(crate) fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// Pinhole intrinsics in f32 and the clip planes of the image.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Projection {
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
+    width: u32,
+    height: u32,
+    /// Planes `n . p + d >= 0` (camera frame) a visible point satisfies: near, then the
+    /// guard band's left, right, top, bottom.
+    planes: [([f32; 3], f32); 5],
+}
+
+impl Projection {
+    pub(crate) fn new(c: &Camera) -> Self {
+        let (fx, fy, cx, cy) = (c.fx as f32, c.fy as f32, c.cx as f32, c.cy as f32);
+        let (w, h) = (c.width as f32, c.height as f32);
+        // u >= -G  <=>  fx x + (cx + G) z >= 0;  u <= w + G  <=>  -fx x + (w + G - cx) z >= 0.
+        let planes = [
+            ([0.0, 0.0, 1.0], -(NEAR_M as f32)),
+            ([fx, 0.0, cx + GUARD_PX], 0.0),
+            ([-fx, 0.0, w + GUARD_PX - cx], 0.0),
+            ([0.0, fy, cy + GUARD_PX], 0.0),
+            ([0.0, -fy, h + GUARD_PX - cy], 0.0),
+        ];
+        Self {
+            fx,
+            fy,
+            cx,
+            cy,
+            width: c.width,
+            height: c.height,
+            planes,
+        }
+    }
+
+    /// Clips triangle `(a, b, c)` (camera frame) to the view and rasterizes the pieces,
+    /// calling `pixel(index, 1/z)` for every covered pixel centre. With `cull`, triangles
+    /// not facing the camera (counter-clockwise seen from outside) are dropped.
+    #[inline]
+    pub(crate) fn triangle(
+        &self,
+        t: [[f32; 3]; 3],
+        cull: bool,
+        pixel: &mut impl FnMut(usize, f32),
+    ) {
+        if cull {
+            let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+            if dot(n, t[0]) >= 0.0 {
+                return;
+            }
+        }
+        let inside = |p: [f32; 3], (n, d): ([f32; 3], f32)| dot(n, p) + d >= 0.0;
+        if self
+            .planes
+            .iter()
+            .all(|&pl| t.iter().all(|&p| inside(p, pl)))
+        {
+            self.raster(t, pixel);
+            return;
+        }
+        // Sutherland-Hodgman against each plane; a triangle gains at most one vertex per plane.
+        let mut poly = [[0.0f32; 3]; 8];
+        let mut next = [[0.0f32; 3]; 8];
+        poly[..3].copy_from_slice(&t);
+        let mut n = 3;
+        for &(normal, d) in &self.planes {
+            let mut m = 0;
+            for i in 0..n {
+                let (p, q) = (poly[i], poly[(i + 1) % n]);
+                let (dp, dq) = (dot(normal, p) + d, dot(normal, q) + d);
+                if dp >= 0.0 {
+                    next[m] = p;
+                    m += 1;
+                }
+                if (dp >= 0.0) != (dq >= 0.0) {
+                    let s = dp / (dp - dq);
+                    next[m] = [0, 1, 2].map(|k| p[k] + s * (q[k] - p[k]));
+                    m += 1;
+                }
+            }
+            std::mem::swap(&mut poly, &mut next);
+            n = m;
+            if n < 3 {
+                return;
+            }
+        }
+        for i in 1..n - 1 {
+            self.raster([poly[0], poly[i], poly[i + 1]], pixel);
+        }
+    }
+
+    /// Rasterizes a triangle in front of the near plane: vertices snapped to 1/256 px,
+    /// integer edge functions, top-left rule for pixel centres on an edge.
+    #[inline]
+    fn raster(&self, t: [[f32; 3]; 3], pixel: &mut impl FnMut(usize, f32)) {
+        let mut x = [0i64; 3];
+        let mut y = [0i64; 3];
+        let mut iz = [0f32; 3];
+        for k in 0..3 {
+            let [px, py, pz] = t[k];
+            iz[k] = 1.0 / pz;
+            x[k] = ((self.fx * px * iz[k] + self.cx) * SUB as f32).round() as i64;
+            y[k] = ((self.fy * py * iz[k] + self.cy) * SUB as f32).round() as i64;
+        }
+        let mut area = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]);
+        if area == 0 {
+            return;
+        }
+        if area < 0 {
+            x.swap(1, 2);
+            y.swap(1, 2);
+            iz.swap(1, 2);
+            area = -area;
+        }
+        let (w, h) = (i64::from(self.width), i64::from(self.height));
+        // Pixel i's centre is at i * SUB + SUB / 2.
+        let first = |lo: i64| (lo - SUB / 2 + SUB - 1).div_euclid(SUB).max(0);
+        let last = |hi: i64, n: i64| (hi - SUB / 2).div_euclid(SUB).min(n - 1);
+        let (i0, i1) = (
+            first(*x.iter().min().unwrap_or(&0)),
+            last(*x.iter().max().unwrap_or(&0), w),
+        );
+        let (j0, j1) = (
+            first(*y.iter().min().unwrap_or(&0)),
+            last(*y.iter().max().unwrap_or(&0), h),
+        );
+        if i0 > i1 || j0 > j1 {
+            return;
+        }
+        // Edge k runs from vertex k to k+1; E_k(p) = dx (p.y - a.y) - dy (p.x - a.x) >= 0
+        // inside. Its weight goes to the vertex opposite.
+        let mut step_x = [0i64; 3];
+        let mut step_y = [0i64; 3];
+        let mut row = [0i64; 3];
+        let (px0, py0) = (i0 * SUB + SUB / 2, j0 * SUB + SUB / 2);
+        for k in 0..3 {
+            let (a, b) = (k, (k + 1) % 3);
+            let (dx, dy) = (x[b] - x[a], y[b] - y[a]);
+            let top_left = dy < 0 || (dy == 0 && dx > 0);
+            row[k] = dx * (py0 - y[a]) - dy * (px0 - x[a]) - i64::from(!top_left);
+            step_x[k] = -dy * SUB;
+            step_y[k] = dx * SUB;
+        }
+        let inv_area = 1.0 / area as f32;
+        // Weights: E_1 (edge b-c) for vertex a, E_2 for b, E_0 for c.
+        let (wa, wb, wc) = (iz[0] * inv_area, iz[1] * inv_area, iz[2] * inv_area);
+        let stride = self.width as usize;
+        for j in j0..=j1 {
+            let mut e = row;
+            let base = j as usize * stride;
+            for i in i0..=i1 {
+                if (e[0] | e[1] | e[2]) >= 0 {
+                    let z = e[1] as f32 * wa + e[2] as f32 * wb + e[0] as f32 * wc;
+                    pixel(base + i as usize, z);
+                }
+                e[0] += step_x[0];
+                e[1] += step_x[1];
+                e[2] += step_x[2];
+            }
+            row[0] += step_y[0];
+            row[1] += step_y[1];
+            row[2] += step_y[2];
+        }
+    }
+}
+
+/// A hash of an integer lattice point to [0, 1), the texture's value noise.
+#[inline]
+pub(crate) fn lattice_noise(x: i32, y: i32, z: i32) -> f32 {
+    let mut h = (x as u32).wrapping_mul(0x8da6_b343)
+        ^ (y as u32).wrapping_mul(0xd816_3841)
+        ^ (z as u32).wrapping_mul(0xcb1a_b31f);
+    h ^= h >> 13;
+    h = h.wrapping_mul(0x5bd1_e995);
+    h ^= h >> 15;
+    (h & 0xffff) as f32 / 65536.0
+}
+
+/// Texture factor at world point `p`: two octaves of value noise (3 cm and 15 cm cells).
+#[inline]
+pub(crate) fn texture_factor(p: [f32; 3], amplitude: f32) -> f32 {
+    let cell = |s: f32| {
+        let q = p.map(|v| (v / s).floor() as i32);
+        lattice_noise(q[0], q[1], q[2])
+    };
+    let n = 0.6 * cell(0.03) + 0.4 * cell(0.15);
+    1.0 + amplitude * (n - 0.5) * 2.0
+}
+
+/// Flat shading of a face with camera-frame normal `n` (any length) and first vertex `a`:
+/// ambient, the directional light and a headlight, on both sides of the face.
+#[inline]
+pub(crate) fn shade(n: [f32; 3], a: [f32; 3], light_C: [f32; 3]) -> f32 {
+    let len = dot(n, n).sqrt();
+    if len <= 0.0 {
+        return 0.25;
+    }
+    let mut nn = n.map(|v| v / len);
+    if dot(nn, a) > 0.0 {
+        nn = nn.map(|v| -v);
+    }
+    let view = dot(a, a).sqrt().max(1e-12);
+    let head = (-dot(nn, a) / view).max(0.0);
+    0.25 + 0.55 * dot(nn, light_C).max(0.0) + 0.25 * head
+}
+
+/// Linear [0, 1] to sRGB bytes.
+fn srgb_table() -> &'static [u8; 4096] {
+    static TABLE: std::sync::OnceLock<[u8; 4096]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|i| {
+            let l = i as f64 / 4095.0;
+            let s = if l <= 0.003_130_8 {
+                12.92 * l
+            } else {
+                1.055 * l.powf(1.0 / 2.4) - 0.055
+            };
+            (s * 255.0).round() as u8
+        })
+    })
+}
+
+#[inline]
+pub(crate) fn to_srgb(table: &[u8; 4096], l: f32) -> u8 {
+    table[((l.clamp(0.0, 1.0) * 4095.0) as usize).min(4095)]
+}
+
+/// Checks the poses of a scene's objects.
+pub(crate) fn check_scene(scene: &Scene) -> Result<()> {
+    if scene.objects.len() >= usize::from(u16::MAX) {
+        return Err(SimError::InvalidRender {
+            message: format!(
+                "{} objects; at most {} can be indexed",
+                scene.objects.len(),
+                u16::MAX - 1
+            ),
+        });
+    }
+    match scene.objects.iter().find(|o| !pose_is_finite(&o.X_WO)) {
+        Some(o) => Err(SimError::InvalidRender {
+            message: format!("object {} has a pose that is not finite", o.name),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Checks the poses of a mask batch.
+pub(crate) fn check_poses(X_CO: &[Pose]) -> Result<()> {
+    match X_CO.iter().position(|X| !pose_is_finite(X)) {
+        Some(k) => Err(SimError::InvalidRender {
+            message: format!("mask pose {k} is not finite"),
+        }),
+        None => Ok(()),
+    }
+}
+
+impl Renderer for CpuRenderer {
+    fn name(&self) -> String {
+        "cpu".into()
+    }
+
+    fn render(&mut self, scene: &Scene, camera: &Camera, frame: &mut Frame) -> Result<()> {
+        camera.validate()?;
+        check_scene(scene)?;
+        let proj = Projection::new(camera);
+        let n = camera.width as usize * camera.height as usize;
+        frame.resize(camera.width, camera.height);
+        frame.object.fill(0);
+        self.inv_z.clear();
+        self.inv_z.resize(n, 0.0);
+        self.color.resize(n, [0.0; 3]);
+        let X_CW = camera.X_WC.inverse();
+        let light_C = Affine::from_pose(&X_CW).rotate(scene.light_W);
+        let Self {
+            vertices,
+            inv_z,
+            color,
+        } = self;
+        for (k, object) in scene.objects.iter().enumerate() {
+            let X_CO = Affine::from_pose(&(X_CW * object.X_WO));
+            let mesh = &*object.mesh;
+            vertices.clear();
+            vertices.extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
+            let id = (k + 1) as u16;
+            for (tri, albedo) in mesh.triangles.iter().zip(&mesh.colors) {
+                let t = tri.map(|i| vertices.get(i as usize).copied().unwrap_or([f32::NAN; 3]));
+                if !t.iter().flatten().all(|v| v.is_finite()) {
+                    continue;
+                }
+                let s = shade(cross(sub(t[1], t[0]), sub(t[2], t[0])), t[0], light_C);
+                let c = albedo.map(|a| a * s);
+                proj.triangle(t, mesh.closed, &mut |p, z| {
+                    if z > inv_z[p] {
+                        inv_z[p] = z;
+                        frame.object[p] = id;
+                        color[p] = c;
+                    }
+                });
+            }
+        }
+        // Resolve: texture, sRGB, depth.
+        let table = srgb_table();
+        let X_WC = Affine::from_pose(&camera.X_WC);
+        let texture: Vec<f32> = scene.objects.iter().map(|o| o.texture).collect();
+        let (fx, fy, cx, cy) = (proj.fx, proj.fy, proj.cx, proj.cy);
+        let w = camera.width as usize;
+        for p in 0..n {
+            let id = frame.object[p];
+            let (c, depth) = if id == 0 {
+                (scene.sky, 0.0)
+            } else {
+                let z = 1.0 / inv_z[p];
+                let amplitude = texture[usize::from(id) - 1];
+                let mut c = color[p];
+                if amplitude > 0.0 {
+                    let (i, j) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
+                    let p_W = X_WC.apply([(i - cx) / fx * z, (j - cy) / fy * z, z]);
+                    let f = texture_factor(p_W, amplitude);
+                    c = c.map(|v| v * f);
+                }
+                (c, z)
+            };
+            frame.depth_m[p] = depth;
+            for k in 0..3 {
+                frame.rgb[3 * p + k] = to_srgb(table, c[k]);
+            }
+        }
+        Ok(())
+    }
+
+    fn render_masks(
+        &mut self,
+        mesh: &RenderMesh,
+        camera: &Camera,
+        X_CO: &[Pose],
+        masks: &mut MaskBatch,
+    ) -> Result<()> {
+        camera.validate()?;
+        check_poses(X_CO)?;
+        let proj = Projection::new(camera);
+        masks.resize(camera.width, camera.height, X_CO.len());
+        let n = camera.width as usize * camera.height as usize;
+        masks
+            .data
+            .par_chunks_mut(n.max(1))
+            .zip(X_CO.par_iter())
+            .for_each_init(Vec::new, |vertices, (mask, X)| {
+                mask.fill(0);
+                draw_mask(&proj, mesh, &Affine::from_pose(X), vertices, mask);
+            });
+        Ok(())
+    }
+}
+
+/// Covers the pixels of `mesh` at `X_CO` in `mask`.
+pub(crate) fn draw_mask(
+    proj: &Projection,
+    mesh: &RenderMesh,
+    X_CO: &Affine,
+    vertices: &mut Vec<[f32; 3]>,
+    mask: &mut [u8],
+) {
+    vertices.clear();
+    vertices.extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
+    for tri in &mesh.triangles {
+        let t = tri.map(|i| vertices.get(i as usize).copied().unwrap_or([f32::NAN; 3]));
+        if t.iter().flatten().all(|v| v.is_finite()) {
+            proj.triangle(t, mesh.closed, &mut |p, _| mask[p] = 1);
+        }
+    }
+}

@@ -1,0 +1,151 @@
+//! Camera frames of the cell: a pinhole [`Camera`], a [`Scene`] of posed triangle meshes, and
+//! one [`Renderer`] interface with two backends that give the same pixels:
+//!
+//! - [`CpuRenderer`] (default): a software rasterizer written for this project. Vertices are
+//!   snapped to 1/256 pixel and covered by exact integer edge functions with a top-left rule,
+//!   triangles crossing the near plane are clipped, back faces of closed meshes culled, and a
+//!   z-buffer on 1/z keeps the nearest surface.
+//! - `GpuRenderer` (feature `gpu`): wgpu, headless, with the same vertex preparation, so the
+//!   two differ only where a GPU's rasterizer rounds differently.
+//!
+//! Each frame has RGB (flat Lambert shading, per-triangle albedo, value-noise texture on
+//! textured objects), linear depth along the optical axis, and the index of the object seen
+//! at every pixel; [`Scene::class_of`] maps object indices to [`Class`]es. For
+//! render-and-compare, [`Renderer::render_masks`] draws one mesh at N poses into N binary
+//! masks in one call.
+//!
+//! Camera frame C: x right, y down, z forward (the optical axis); pixel (i, j) covers
+//! `[i, i+1) x [j, j+1)` and is sampled at its centre.
+
+mod camera;
+mod cpu;
+#[cfg(feature = "gpu")]
+mod gpu;
+mod mesh;
+mod scene;
+
+pub use camera::Camera;
+pub use cpu::CpuRenderer;
+#[cfg(feature = "gpu")]
+pub use gpu::GpuRenderer;
+pub use mesh::RenderMesh;
+pub use scene::{CellScene, Class, Scene, SceneObject};
+
+use workcell_robots::math::Pose;
+
+use crate::error::Result;
+
+/// Sub-pixel precision of vertex positions: 8 bits, as GPUs commonly snap.
+pub const SUBPIXEL_BITS: u32 = 8;
+
+/// The nearest depth drawn, m; closer geometry is clipped.
+pub const NEAR_M: f64 = 0.02;
+
+/// One rendered image: RGB, depth and object index, row-major from the top-left pixel.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    /// sRGB, 3 bytes per pixel.
+    pub rgb: Vec<u8>,
+    /// Depth along the optical axis, m; 0 where no surface is seen.
+    pub depth_m: Vec<f32>,
+    /// Object index per pixel: 0 for nothing, `k + 1` for `scene.objects[k]`.
+    pub object: Vec<u16>,
+}
+
+impl Frame {
+    /// An empty frame; renderers size it.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Resizes the buffers for `width x height` (keeps their allocation when it fits).
+    pub fn resize(&mut self, width: u32, height: u32) {
+        let n = width as usize * height as usize;
+        self.width = width;
+        self.height = height;
+        self.rgb.resize(3 * n, 0);
+        self.depth_m.resize(n, 0.0);
+        self.object.resize(n, 0);
+    }
+
+    /// The class of every pixel.
+    #[must_use]
+    pub fn classes(&self, scene: &Scene) -> Vec<u8> {
+        self.object
+            .iter()
+            .map(|&o| scene.class_of(o) as u8)
+            .collect()
+    }
+
+    /// Number of pixels showing object index `id`.
+    #[must_use]
+    pub fn count(&self, id: u16) -> usize {
+        self.object.iter().filter(|&&o| o == id).count()
+    }
+}
+
+/// N binary masks of one size, stored one after another (1 = covered).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MaskBatch {
+    pub width: u32,
+    pub height: u32,
+    pub len: usize,
+    pub data: Vec<u8>,
+}
+
+impl MaskBatch {
+    /// An empty batch; renderers size it.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Sizes the batch for `len` masks of `width x height`; reuses the allocation.
+    pub fn resize(&mut self, width: u32, height: u32, len: usize) {
+        self.width = width;
+        self.height = height;
+        self.len = len;
+        self.data.resize(len * width as usize * height as usize, 0);
+    }
+
+    /// Mask `k`, row-major.
+    #[must_use]
+    pub fn mask(&self, k: usize) -> &[u8] {
+        let n = self.width as usize * self.height as usize;
+        &self.data[k * n..(k + 1) * n]
+    }
+}
+
+/// A renderer backend.
+pub trait Renderer {
+    /// A short name for reports ("cpu", "wgpu").
+    fn name(&self) -> String;
+
+    /// Renders `scene` seen by `camera` into `frame` (resized to the camera's image).
+    ///
+    /// # Errors
+    /// [`crate::SimError::InvalidRender`] for a camera or object pose that is not finite;
+    /// [`crate::SimError::Gpu`] when the GPU fails.
+    fn render(&mut self, scene: &Scene, camera: &Camera, frame: &mut Frame) -> Result<()>;
+
+    /// Renders `mesh` alone at each pose `X_CO[k]` (object in the camera frame; the camera's
+    /// own pose is not used) into mask `k` of `masks`.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`].
+    fn render_masks(
+        &mut self,
+        mesh: &RenderMesh,
+        camera: &Camera,
+        X_CO: &[Pose],
+        masks: &mut MaskBatch,
+    ) -> Result<()>;
+}
+
+/// Whether every number of a pose is finite.
+pub(crate) fn pose_is_finite(X: &Pose) -> bool {
+    X.translation.is_finite() && X.rotation.is_finite()
+}

@@ -1,0 +1,314 @@
+//! What a camera sees: posed meshes with classes, and the scene of a cell.
+
+use std::sync::Arc;
+
+use workcell_robots::math::{Pose, Vector};
+use workcell_robots::{LinkId, RobotModel};
+
+use crate::cell::{CellModel, CellState};
+use crate::render::RenderMesh;
+
+/// The segmentation classes (the class-index PNGs store these numbers).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[repr(u8)]
+pub enum Class {
+    Background = 0,
+    Robot = 1,
+    Torso = 2,
+    UpperArm = 3,
+    Forearm = 4,
+    Hand = 5,
+}
+
+impl Class {
+    pub const ALL: [Class; 6] = [
+        Class::Background,
+        Class::Robot,
+        Class::Torso,
+        Class::UpperArm,
+        Class::Forearm,
+        Class::Hand,
+    ];
+
+    /// Lower-case name (`upper_arm`).
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Class::Background => "background",
+            Class::Robot => "robot",
+            Class::Torso => "torso",
+            Class::UpperArm => "upper_arm",
+            Class::Forearm => "forearm",
+            Class::Hand => "hand",
+        }
+    }
+
+    /// The class with number `k`.
+    #[must_use]
+    pub fn from_u8(k: u8) -> Option<Class> {
+        Class::ALL.get(usize::from(k)).copied()
+    }
+
+    /// A colour to draw the class with (sRGB).
+    #[must_use]
+    pub fn color(self) -> [u8; 3] {
+        match self {
+            Class::Background => [0, 0, 0],
+            Class::Robot => [255, 140, 0],
+            Class::Torso => [70, 130, 230],
+            Class::UpperArm => [60, 200, 90],
+            Class::Forearm => [230, 40, 60],
+            Class::Hand => [240, 220, 40],
+        }
+    }
+}
+
+/// One posed mesh.
+#[derive(Debug, Clone)]
+pub struct SceneObject {
+    pub name: String,
+    pub class: Class,
+    pub mesh: Arc<RenderMesh>,
+    /// Amplitude of the value-noise texture, 0 for a plain surface.
+    pub texture: f32,
+    /// Pose of the mesh frame O in the world.
+    pub X_WO: Pose,
+}
+
+/// Posed meshes and the light.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub objects: Vec<SceneObject>,
+    /// Unit direction towards the (directional) light, world frame.
+    pub light_W: [f32; 3],
+    /// Linear RGB where nothing is seen.
+    pub sky: [f32; 3],
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        let l = Vector::new(0.35, -0.5, 1.0).normalize();
+        Self {
+            objects: Vec::new(),
+            light_W: [l.x as f32, l.y as f32, l.z as f32],
+            sky: [0.55, 0.6, 0.68],
+        }
+    }
+}
+
+impl Scene {
+    /// The class of object index `id` (0 and unknown indices are background).
+    #[must_use]
+    pub fn class_of(&self, id: u16) -> Class {
+        usize::from(id)
+            .checked_sub(1)
+            .and_then(|k| self.objects.get(k))
+            .map_or(Class::Background, |o| o.class)
+    }
+
+    /// Adds an object; returns its index in `objects` (its pixels show `index + 1`).
+    pub fn push(&mut self, object: SceneObject) -> usize {
+        self.objects.push(object);
+        self.objects.len() - 1
+    }
+
+    /// Number of triangles.
+    #[must_use]
+    pub fn triangle_count(&self) -> usize {
+        self.objects.iter().map(|o| o.mesh.len()).sum()
+    }
+}
+
+/// Texture amplitude of floor, walls, shelves and boxes.
+const TEXTURE: f32 = 0.35;
+
+/// The scene of a cell: a room (floor, two walls), the clutter, the robot's and the human's
+/// links. [`CellScene::update`] poses the links from a [`CellState`].
+#[derive(Debug, Clone)]
+pub struct CellScene {
+    pub scene: Scene,
+    /// Object index of each robot link (links without visuals have none).
+    pub robot_objects: Vec<Option<usize>>,
+    /// Object index of each human link.
+    pub human_objects: Vec<Option<usize>>,
+    /// The human link whose class is [`Class::Forearm`], if any.
+    pub forearm_link: Option<LinkId>,
+}
+
+impl CellScene {
+    /// Builds the scene of `model`, with links at the model's initial configuration.
+    #[must_use]
+    pub fn new(model: &CellModel) -> Self {
+        let mut scene = Scene::default();
+        let mut environment = |name: &str, mesh: RenderMesh, X_WO: Pose| {
+            scene.push(SceneObject {
+                name: name.into(),
+                class: Class::Background,
+                mesh: Arc::new(mesh),
+                texture: TEXTURE,
+                X_WO,
+            });
+        };
+        // The room: a concrete floor and two walls behind the cell (towards -x and +y of
+        // the clutter's extent), so that far cameras on the open sides see a background.
+        let (lo, hi) = clutter_extent(model);
+        let centre = 0.5 * (lo + hi);
+        environment(
+            "floor",
+            RenderMesh::cuboid([20.0, 20.0, 0.01], [0.42, 0.42, 0.40]),
+            Pose::from_translation(Vector::new(centre.x, centre.y, -0.01)),
+        );
+        let wall_h = 3.0;
+        environment(
+            "wall_x",
+            RenderMesh::cuboid([0.05, 8.0, wall_h / 2.0], [0.75, 0.73, 0.68]),
+            Pose::from_translation(Vector::new(lo.x - 0.3, centre.y, wall_h / 2.0)),
+        );
+        environment(
+            "wall_y",
+            RenderMesh::cuboid([8.0, 0.05, wall_h / 2.0], [0.70, 0.72, 0.74]),
+            Pose::from_translation(Vector::new(centre.x, hi.y + 0.3, wall_h / 2.0)),
+        );
+        const PALETTE: [[f32; 3]; 4] = [
+            [0.55, 0.38, 0.22], // wood
+            [0.15, 0.30, 0.60], // shelf blue
+            [0.60, 0.45, 0.28], // cardboard
+            [0.50, 0.50, 0.52], // steel
+        ];
+        for (k, c) in model.clutter.iter().enumerate() {
+            environment(
+                &format!("clutter_{k}"),
+                RenderMesh::cuboid(c.half_extents_m, PALETTE[k % PALETTE.len()]),
+                c.X_WC,
+            );
+        }
+
+        let robot_objects = link_objects(
+            &mut scene,
+            &model.robot,
+            "robot",
+            |_| Class::Robot,
+            [0.93, 0.45, 0.08],
+        );
+        let classes = human_classes(&model.human);
+        let human_objects = link_objects(
+            &mut scene,
+            &model.human,
+            "human",
+            |l| classes[l],
+            [0.85, 0.72, 0.62],
+        );
+        let forearm_link = classes.iter().position(|&c| c == Class::Forearm);
+        let mut out = Self {
+            scene,
+            robot_objects,
+            human_objects,
+            forearm_link,
+        };
+        let robot = model
+            .robot
+            .fk(model.X_WR, &model.initial_q)
+            .map(|k| k.link_poses().to_vec())
+            .unwrap_or_default();
+        let mut q = vec![0.0; model.human.dof()];
+        let mut qd = q.clone();
+        model.human_motion.sample(0.0, &mut q, &mut qd);
+        let human = model
+            .human
+            .fk(model.X_WH, &q)
+            .map(|k| k.link_poses().to_vec())
+            .unwrap_or_default();
+        out.set_link_poses(&robot, &human);
+        out
+    }
+
+    /// Poses the links as in `state`.
+    pub fn update(&mut self, state: &CellState) {
+        let robot = state.robot_link_poses();
+        self.set_link_poses(&robot, state.human_link_poses());
+    }
+
+    /// Poses the links from their world poses (indexed by link id; missing ones are left).
+    pub fn set_link_poses(&mut self, robot: &[Pose], human: &[Pose]) {
+        for (objects, poses) in [(&self.robot_objects, robot), (&self.human_objects, human)] {
+            for (object, X_WL) in objects.iter().zip(poses) {
+                if let Some(k) = object {
+                    self.scene.objects[*k].X_WO = *X_WL;
+                }
+            }
+        }
+    }
+
+    /// The forearm's object index in `scene.objects`.
+    #[must_use]
+    pub fn forearm_object(&self) -> Option<usize> {
+        self.forearm_link
+            .and_then(|l| self.human_objects.get(l).copied().flatten())
+    }
+}
+
+/// The classes of a human model's links: by link name (`torso`, `shoulder` and `upper_arm`,
+/// `forearm`, `hand`), other links inheriting their parent's class; the root defaults to torso.
+fn human_classes(human: &RobotModel) -> Vec<Class> {
+    let mut classes = vec![Class::Torso; human.links().len()];
+    // Links are stored parents first.
+    for (l, link) in human.links().iter().enumerate() {
+        let inherited = link
+            .parent_joint
+            .map_or(Class::Torso, |j| classes[human.joints()[j].parent]);
+        classes[l] = match link.name.as_str() {
+            "torso" => Class::Torso,
+            "shoulder" | "upper_arm" => Class::UpperArm,
+            "forearm" => Class::Forearm,
+            "hand" => Class::Hand,
+            _ => inherited,
+        };
+    }
+    classes
+}
+
+/// One object per link with visuals, its meshes merged in the link frame.
+fn link_objects(
+    scene: &mut Scene,
+    model: &RobotModel,
+    prefix: &str,
+    class: impl Fn(LinkId) -> Class,
+    default_color: [f32; 3],
+) -> Vec<Option<usize>> {
+    model
+        .links()
+        .iter()
+        .enumerate()
+        .map(|(l, link)| {
+            let mut mesh = RenderMesh::default();
+            for g in &link.visuals {
+                mesh.append(
+                    &RenderMesh::from_geometry(g, default_color),
+                    &Pose::IDENTITY,
+                );
+            }
+            (!mesh.is_empty()).then(|| {
+                scene.push(SceneObject {
+                    name: format!("{prefix}/{}", link.name),
+                    class: class(l),
+                    mesh: Arc::new(mesh),
+                    texture: 0.0,
+                    X_WO: Pose::IDENTITY,
+                })
+            })
+        })
+        .collect()
+}
+
+/// The axis-aligned bounds of the clutter (the origin's neighbourhood if there is none).
+fn clutter_extent(model: &CellModel) -> (Vector, Vector) {
+    let (mut lo, mut hi) = (Vector::splat(-0.5), Vector::splat(0.5));
+    for c in &model.clutter {
+        let h = Vector::from_array(c.half_extents_m);
+        let R = parry3d_f64::glamx::DMat3::from_quat(c.X_WC.rotation);
+        let extent = R.abs() * h;
+        lo = lo.min(c.X_WC.translation - extent);
+        hi = hi.max(c.X_WC.translation + extent);
+    }
+    (lo, hi)
+}
