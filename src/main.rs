@@ -30,6 +30,19 @@ enum Command {
     },
     /// Run a scenario and write joint trajectories and human part poses (CSV) and a plot.
     Simulate(cli::simulate::SimulateArgs),
+    /// Camera datasets for ProcNet: generate them, look at them.
+    Dataset {
+        #[command(subcommand)]
+        command: DatasetCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum DatasetCommand {
+    /// Render seeded episodes of a cell into occluded frame sequences with ground truth.
+    Generate(cli::dataset::GenerateArgs),
+    /// Write a contact sheet PNG of a dataset (frames, masks, occlusion) and summarise it.
+    Show(cli::dataset::ShowArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -68,6 +81,12 @@ fn main() -> ExitCode {
             command: RobotCommand::List,
         } => cli::robot::list(),
         Command::Simulate(a) => cli::simulate::run(&a),
+        Command::Dataset {
+            command: DatasetCommand::Generate(a),
+        } => cli::dataset::generate(&a),
+        Command::Dataset {
+            command: DatasetCommand::Show(a),
+        } => cli::dataset::show(&a),
     };
     match result {
         Ok(code) => code,

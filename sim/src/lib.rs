@@ -19,11 +19,13 @@
 
 mod cell;
 mod clutter;
+pub mod dataset;
 mod error;
 pub mod human;
 pub mod ik;
 pub mod image;
 mod multibody;
+pub mod occlusion;
 mod planning;
 pub mod render;
 pub mod scenario;

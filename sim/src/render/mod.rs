@@ -18,7 +18,7 @@
 //! `[i, i+1) x [j, j+1)` and is sampled at its centre.
 
 mod camera;
-mod cpu;
+pub(crate) mod cpu;
 #[cfg(feature = "gpu")]
 mod gpu;
 mod mesh;

@@ -1,0 +1,151 @@
+//! What a dataset stores besides images: per-frame labels and the manifest.
+
+use serde::{Deserialize, Serialize};
+use workcell_robots::math::{Pose, pose_to_xyz_rpy};
+
+use crate::occlusion::Occluder;
+
+/// The layout version written into manifests.
+pub const FORMAT: &str = "workcell-dataset/1";
+
+/// A pose as stored: position, roll-pitch-yaw (URDF convention) and the quaternion.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseLabel {
+    pub xyz_m: [f64; 3],
+    pub rpy_rad: [f64; 3],
+    /// `[x, y, z, w]`.
+    pub quaternion_xyzw: [f64; 4],
+}
+
+impl From<&Pose> for PoseLabel {
+    fn from(X: &Pose) -> Self {
+        let (xyz_m, rpy_rad) = pose_to_xyz_rpy(X);
+        Self {
+            xyz_m,
+            rpy_rad,
+            quaternion_xyzw: X.rotation.to_array(),
+        }
+    }
+}
+
+/// The camera of a sequence.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CameraLabel {
+    pub width_px: u32,
+    pub height_px: u32,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// Camera frame (x right, y down, z forward) in the world.
+    pub X_WC: PoseLabel,
+}
+
+/// One segmented part (a class) in one frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PartLabel {
+    /// The class name (`forearm`).
+    pub class: String,
+    /// The link whose frame `X_CP` is (the human's link of that name; for `robot`, the base).
+    pub link: String,
+    /// Pose of the part's link frame in the camera frame.
+    pub X_CP: PoseLabel,
+    /// Pixels of the part rendered alone.
+    pub pixels_amodal: u32,
+    /// Pixels where the scene shows it (occluded only by other objects).
+    pub pixels_unoccluded: u32,
+    /// Pixels visible through the artificial occluder as well.
+    pub pixels_visible: u32,
+    /// Hidden over all pixels (robot and occluder); `null` when the part is out of view.
+    pub occlusion: Option<f64>,
+    /// Hidden by other objects only.
+    pub natural_occlusion: Option<f64>,
+}
+
+/// The labels of one frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameLabels {
+    pub sequence: usize,
+    pub frame: usize,
+    /// Simulated time of the frame, s.
+    pub time_s: f64,
+    pub distance_class: String,
+    /// Lens to cell centre, m.
+    pub distance_m: f64,
+    pub occlusion_level: String,
+    /// The forearm occlusion the occluder was sized for.
+    pub target_occlusion: f64,
+    pub occluder: Occluder,
+    pub camera: CameraLabel,
+    pub parts: Vec<PartLabel>,
+    /// Robot joint positions, rad.
+    pub robot_q: Vec<f64>,
+    /// Human joint positions, rad.
+    pub human_q: Vec<f64>,
+}
+
+impl FrameLabels {
+    /// The label of class `name`.
+    #[must_use]
+    pub fn part(&self, name: &str) -> Option<&PartLabel> {
+        self.parts.iter().find(|p| p.class == name)
+    }
+}
+
+/// Train, validation or test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Split {
+    Train,
+    Validation,
+    Test,
+}
+
+impl Split {
+    pub const ALL: [Split; 3] = [Split::Train, Split::Validation, Split::Test];
+
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Validation => "validation",
+            Split::Test => "test",
+        }
+    }
+}
+
+/// One sequence as the manifest lists it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SequenceEntry {
+    pub index: usize,
+    /// Folder relative to the dataset root.
+    pub dir: String,
+    /// The scenario seed of its episode.
+    pub seed: u64,
+    /// Draws before its camera and start time kept the forearm in view (1 = first draw).
+    pub attempts: usize,
+    pub distance_class: String,
+    pub occlusion_level: String,
+    pub split: Split,
+    pub frames: usize,
+    /// Mean forearm occlusion over the frames that show it.
+    pub mean_forearm_occlusion: Option<f64>,
+    /// Frames where the forearm is out of view.
+    pub frames_without_forearm: usize,
+}
+
+/// The manifest: everything needed to regenerate the dataset bit for bit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format: String,
+    pub generator: String,
+    /// The dataset configuration, as TOML.
+    pub config: String,
+    /// The cell's scenario, as TOML (its seed is replaced per sequence).
+    pub scenario: String,
+    /// Class number to name, as the class PNGs store them.
+    pub classes: Vec<String>,
+    pub width_px: u32,
+    pub height_px: u32,
+    pub sequences: Vec<SequenceEntry>,
+}

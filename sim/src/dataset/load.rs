@@ -1,0 +1,197 @@
+//! Reading a dataset back as float arrays.
+
+use std::path::{Path, PathBuf};
+
+use crate::dataset::generate::frame_files;
+use crate::dataset::labels::{FORMAT, FrameLabels, Manifest, SequenceEntry, Split};
+use crate::error::{Result, SimError};
+use crate::image::{PixelKind, read_png};
+use crate::render::Class;
+
+/// An opened dataset: its manifest and root folder.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    pub root: PathBuf,
+    pub manifest: Manifest,
+}
+
+/// One sequence, loaded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sequence {
+    pub entry: SequenceEntry,
+    pub width: u32,
+    pub height: u32,
+    /// The network input, `[frames, 3, height, width]`, in [0, 1].
+    pub rgb: Vec<f32>,
+    /// Class per pixel without the occluder, `[frames, height, width]`.
+    pub classes: Vec<u8>,
+    /// Class per pixel seen through the occluder, `[frames, height, width]`.
+    pub visible: Vec<u8>,
+    /// 1 under the occluder, `[frames, height, width]`.
+    pub occluder: Vec<u8>,
+    /// 1 where the forearm rendered alone covers, `[frames, height, width]`.
+    pub amodal_forearm: Vec<u8>,
+    pub labels: Vec<FrameLabels>,
+}
+
+impl Sequence {
+    /// Number of frames.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.labels.len()
+    }
+
+    /// Whether the sequence has no frame.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.labels.is_empty()
+    }
+
+    /// Pixels per frame.
+    #[must_use]
+    pub fn pixels(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// The input of frame `t`, `[3, height, width]`.
+    #[must_use]
+    pub fn rgb_frame(&self, t: usize) -> &[f32] {
+        let n = 3 * self.pixels();
+        &self.rgb[t * n..(t + 1) * n]
+    }
+
+    /// The classes of frame `t`, `[height, width]`.
+    #[must_use]
+    pub fn class_frame(&self, t: usize) -> &[u8] {
+        let n = self.pixels();
+        &self.classes[t * n..(t + 1) * n]
+    }
+}
+
+fn invalid(path: &Path, message: impl std::fmt::Display) -> SimError {
+    SimError::Dataset {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
+}
+
+impl Dataset {
+    /// Opens the dataset in `root`.
+    ///
+    /// # Errors
+    /// [`SimError::Dataset`] when there is no manifest (the generation did not finish: run
+    /// it again to complete it) or it is not a manifest of this format.
+    pub fn open(root: impl AsRef<Path>) -> Result<Self> {
+        let root = root.as_ref().to_path_buf();
+        let path = root.join("manifest.json");
+        let bytes = std::fs::read(&path).map_err(|e| {
+            invalid(
+                &path,
+                format!(
+                    "{e}: not a finished dataset (rerun `workcell dataset generate` to complete it)"
+                ),
+            )
+        })?;
+        let manifest: Manifest = serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))?;
+        if manifest.format != FORMAT {
+            return Err(invalid(
+                &path,
+                format!(
+                    "format {:?}; this version reads {FORMAT:?}",
+                    manifest.format
+                ),
+            ));
+        }
+        if manifest.width_px == 0 || manifest.height_px == 0 {
+            return Err(invalid(&path, "zero image size"));
+        }
+        Ok(Self { root, manifest })
+    }
+
+    /// The sequences of `split` (all with `None`), in manifest order.
+    pub fn entries(&self, split: Option<Split>) -> impl Iterator<Item = &SequenceEntry> {
+        self.manifest
+            .sequences
+            .iter()
+            .filter(move |e| split.is_none_or(|s| e.split == s))
+    }
+
+    /// Loads the sequences of `split` one after another.
+    pub fn sequences(&self, split: Option<Split>) -> impl Iterator<Item = Result<Sequence>> + '_ {
+        self.entries(split).map(|e| self.load(e))
+    }
+
+    /// Loads one sequence and checks it against the manifest.
+    ///
+    /// # Errors
+    /// [`SimError::Io`] or [`SimError::Dataset`] naming the file that is missing, corrupt or
+    /// of the wrong size.
+    pub fn load(&self, entry: &SequenceEntry) -> Result<Sequence> {
+        if entry.dir.contains("..") || Path::new(&entry.dir).is_absolute() {
+            return Err(invalid(
+                &self.root.join("manifest.json"),
+                format!("bad folder {:?}", entry.dir),
+            ));
+        }
+        let dir = self.root.join(&entry.dir);
+        let (w, h) = (self.manifest.width_px, self.manifest.height_px);
+        let n = w as usize * h as usize;
+        let mut s = Sequence {
+            entry: entry.clone(),
+            width: w,
+            height: h,
+            rgb: Vec::with_capacity(entry.frames * 3 * n),
+            classes: Vec::with_capacity(entry.frames * n),
+            visible: Vec::with_capacity(entry.frames * n),
+            occluder: Vec::with_capacity(entry.frames * n),
+            amodal_forearm: Vec::with_capacity(entry.frames * n),
+            labels: Vec::with_capacity(entry.frames),
+        };
+        let classes = Class::ALL.len() as u8;
+        for f in 0..entry.frames {
+            let names = frame_files(f);
+            let image = |name: &str, kind: PixelKind| -> Result<Vec<u8>> {
+                let path = dir.join(name);
+                let (iw, ih, k, data) = read_png(&path)?;
+                if (iw, ih, k) != (w, h, kind) {
+                    return Err(invalid(
+                        &path,
+                        format!("{iw}x{ih} {k:?}; the manifest says {w}x{h} {kind:?}"),
+                    ));
+                }
+                Ok(data)
+            };
+            let rgb = image(&names[0], PixelKind::Rgb)?;
+            for c in 0..3 {
+                s.rgb
+                    .extend(rgb.iter().skip(c).step_by(3).map(|&v| f32::from(v) / 255.0));
+            }
+            for (k, out) in [(1, &mut s.classes), (2, &mut s.visible)] {
+                let data = image(&names[k], PixelKind::Gray)?;
+                if let Some(bad) = data.iter().find(|&&v| v >= classes) {
+                    return Err(invalid(
+                        &dir.join(&names[k]),
+                        format!("class {bad} is not one of 0..{classes}"),
+                    ));
+                }
+                out.extend_from_slice(&data);
+            }
+            for (k, out) in [(3, &mut s.occluder), (4, &mut s.amodal_forearm)] {
+                out.extend(
+                    image(&names[k], PixelKind::Gray)?
+                        .iter()
+                        .map(|&v| u8::from(v >= 128)),
+                );
+            }
+            let path = dir.join(&names[5]);
+            let bytes = std::fs::read(&path).map_err(|source| SimError::Io {
+                path: path.clone(),
+                source,
+            })?;
+            let labels: FrameLabels =
+                serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))?;
+            s.labels.push(labels);
+        }
+        Ok(s)
+    }
+}

@@ -1,0 +1,130 @@
+//! `workcell dataset`: generate the ProcNet dataset, look at it.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use workcell::sim::dataset::{Dataset, DatasetConfig, Generator, Split, contact_sheet};
+use workcell::sim::image::{PixelKind, write_png};
+
+#[derive(Debug, clap::Args)]
+pub struct GenerateArgs {
+    /// Dataset configuration (TOML), e.g. configs/dataset.toml.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Output folder. A run into a folder of the same configuration completes it (finished
+    /// sequences are kept); a folder of another configuration is refused.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print the configuration with every default filled in, then exit.
+    #[arg(long)]
+    pub print_defaults: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ShowArgs {
+    /// A dataset folder.
+    pub dir: PathBuf,
+    /// The contact sheet to write (default: DIR/contact_sheet.png).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Frames per sequence on the sheet.
+    #[arg(long, default_value_t = 6)]
+    pub columns: usize,
+}
+
+pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
+    if args.print_defaults {
+        print!("{}", DatasetConfig::default().to_toml());
+        return Ok(ExitCode::SUCCESS);
+    }
+    let path = args
+        .config
+        .clone()
+        .context("--config FILE is required (see configs/dataset.toml)")?;
+    let generator = Generator::from_file(&path)?;
+    let n = generator.config.sequence_count();
+    let bar = ProgressBar::new(n as u64).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let start = Instant::now();
+    let report = generator.generate(&args.out, &|done| bar.set_position(done as u64))?;
+    bar.finish_and_clear();
+    let wall = start.elapsed().as_secs_f64();
+    let m = &report.manifest;
+    let frames: usize = m.sequences.iter().map(|s| s.frames).sum();
+    println!(
+        "{} sequences ({} new), {frames} frames of {}x{} px in {wall:.1} s -> {}",
+        m.sequences.len(),
+        report.generated,
+        m.width_px,
+        m.height_px,
+        args.out.display()
+    );
+    for split in Split::ALL {
+        let k = m.sequences.iter().filter(|s| s.split == split).count();
+        println!("  {:<10} {k} sequences", split.name());
+    }
+    let t = report.timing;
+    let total = t.total().as_secs_f64().max(1e-9);
+    if report.generated > 0 {
+        println!(
+            "  time (all threads): simulate {:.0}%, render {:.0}%, occlusion and labels {:.0}%, PNG+JSON encoding {:.0}%, writing {:.0}%",
+            100.0 * t.simulate.as_secs_f64() / total,
+            100.0 * t.render.as_secs_f64() / total,
+            100.0 * t.occlusion.as_secs_f64() / total,
+            100.0 * t.encode.as_secs_f64() / total,
+            100.0 * t.write.as_secs_f64() / total,
+        );
+    }
+    let missing: usize = m.sequences.iter().map(|s| s.frames_without_forearm).sum();
+    if missing > 0 {
+        println!("  {missing} frames show no forearm (out of view after every camera draw)");
+    }
+    println!("look at it: workcell dataset show {}", args.out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn show(args: &ShowArgs) -> Result<ExitCode> {
+    let dataset = Dataset::open(&args.dir)?;
+    let (w, h, rgb) = contact_sheet(&dataset, args.columns)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| args.dir.join("contact_sheet.png"));
+    write_png(&out, w, h, PixelKind::Rgb, &rgb)?;
+    let m = &dataset.manifest;
+    println!(
+        "{}: {} sequences of {}x{} px",
+        args.dir.display(),
+        m.sequences.len(),
+        m.width_px,
+        m.height_px
+    );
+    let mut pairs: Vec<(String, String, usize, f64)> = Vec::new();
+    for s in &m.sequences {
+        let o = s.mean_forearm_occlusion.unwrap_or(f64::NAN);
+        match pairs
+            .iter_mut()
+            .find(|p| p.0 == s.distance_class && p.1 == s.occlusion_level)
+        {
+            Some(p) => {
+                p.2 += 1;
+                p.3 += o;
+            }
+            None => pairs.push((s.distance_class.clone(), s.occlusion_level.clone(), 1, o)),
+        }
+    }
+    println!(
+        "  {:<8} {:<8} {:>9} {:>22}",
+        "distance", "level", "sequences", "mean forearm occlusion"
+    );
+    for (d, l, k, o) in pairs {
+        println!("  {d:<8} {l:<8} {k:>9} {:>21.0}%", 100.0 * o / k as f64);
+    }
+    println!("contact sheet: {}", out.display());
+    Ok(ExitCode::SUCCESS)
+}
