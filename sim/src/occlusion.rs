@@ -112,7 +112,7 @@ impl PartPixels {
 }
 
 /// Scales `occluder` so that the part's occlusion comes as close to `target` as the
-/// shape allows, by bisection on the scale in `[0, max_scale]` (occlusion grows with the
+/// shape allows (to within one pixel's step), by bisection on the scale in `[0, max_scale]` (occlusion grows with the
 /// scale because the shapes are nested). `amodal` and `shown` are the part's pixel flags in a
 /// `width`-wide image. Returns the scaled occluder and the occlusion it gives.
 #[must_use]
@@ -155,8 +155,15 @@ pub fn fit_occluder(
             hi = mid;
         }
     }
-    let o = occluder.scaled(hi);
-    (o, Some(occlusion(&o)))
+    // The occlusion moves in steps of whole pixels: take the side of the step nearer the
+    // target.
+    let (below, above) = (occluder.scaled(lo), occluder.scaled(hi));
+    let (ob, oa) = (occlusion(&below), occlusion(&above));
+    if target - ob < oa - target {
+        (below, Some(ob))
+    } else {
+        (above, Some(oa))
+    }
 }
 
 #[cfg(test)]

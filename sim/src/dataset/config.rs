@@ -87,7 +87,7 @@ impl Default for DatasetConfig {
             height_px: 128,
             rate_hz: 30.0,
             start_s: [0.5, 6.0],
-            azimuth_deg: [-100.0, -10.0],
+            azimuth_deg: [10.0, 100.0],
             elevation_deg: [10.0, 40.0],
             // The paper's classes, lens to cell centre: short 0-3 m, medium 3-6 m, large 6-10 m.
             distances: vec![

@@ -343,8 +343,25 @@ impl Generator {
                 },
                 angle_rad: angle + spin * f as f64,
             };
-            let (occluder, _) =
-                fit_occluder(&base, target, 2.0 * f64::from(w + h), w, &amodal, &shown);
+            // A shape lying along the thin forearm can jump past the level in one step of
+            // its size; turn it until the fitted occlusion lands in the level.
+            let max_scale = 2.0 * f64::from(w + h);
+            let mut fitted = fit_occluder(&base, target, max_scale, w, &amodal, &shown);
+            for k in 1..8 {
+                if fitted.1.is_none_or(|o| o >= range[0] && o <= range[1]) {
+                    break;
+                }
+                let turned = Occluder {
+                    angle_rad: base.angle_rad + f64::from(k) * std::f64::consts::PI / 8.0,
+                    ..base
+                };
+                let candidate = fit_occluder(&turned, target, max_scale, w, &amodal, &shown);
+                let miss = |o: Option<f64>| o.map_or(f64::MAX, |o| (o - target).abs());
+                if miss(candidate.1) < miss(fitted.1) {
+                    fitted = candidate;
+                }
+            }
+            let occluder = fitted.0;
             let occluder_mask = occluder.mask(w, h);
             let classes = frame.classes(&cell.scene);
             let mut rgb = frame.rgb.clone();

@@ -447,3 +447,51 @@ pub(crate) fn draw_mask(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// A jittered grid of triangles over the whole image (and beyond) covers every pixel
+    /// centre exactly once: the top-left rule leaves no gap and no double cover on shared
+    /// edges, whatever the vertex positions.
+    #[test]
+    fn shared_edges_cover_each_pixel_once() {
+        let camera =
+            Camera::look_at([0.0; 3], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0], 48, 40, 60.0).unwrap();
+        let proj = Projection::new(&camera);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let n = 9;
+        let mut grid = vec![[0.0f32; 3]; (n + 1) * (n + 1)];
+        for j in 0..=n {
+            for i in 0..=n {
+                let interior = i > 0 && i < n && j > 0 && j < n;
+                let jitter = |rng: &mut rand_chacha::ChaCha8Rng| {
+                    if interior {
+                        rng.random_range(-0.04..0.04)
+                    } else {
+                        0.0
+                    }
+                };
+                let x = -1.0 + 2.0 * i as f32 / n as f32 + jitter(&mut rng);
+                let y = -1.0 + 2.0 * j as f32 / n as f32 + jitter(&mut rng);
+                // Some depth variation; all in front of the camera.
+                grid[j * (n + 1) + i] = [x, y, 1.0 + 0.2 * rng.random::<f32>()];
+            }
+        }
+        let mut hits = vec![0u32; 48 * 40];
+        for j in 0..n {
+            for i in 0..n {
+                let v = |a: usize, b: usize| grid[b * (n + 1) + a];
+                for t in [
+                    [v(i, j), v(i + 1, j), v(i + 1, j + 1)],
+                    [v(i, j), v(i + 1, j + 1), v(i, j + 1)],
+                ] {
+                    proj.triangle(t, false, &mut |p, _| hits[p] += 1);
+                }
+            }
+        }
+        assert!(hits.iter().all(|&h| h == 1), "{hits:?}");
+    }
+}

@@ -149,8 +149,8 @@ impl CellScene {
                 X_WO,
             });
         };
-        // The room: a concrete floor and two walls behind the cell (towards -x and +y of
-        // the clutter's extent), so that far cameras on the open sides see a background.
+        // The room: a concrete floor and two walls behind the cell (beyond the clutter's
+        // extent towards -x and -y), so that far cameras on the open sides see a background.
         let (lo, hi) = clutter_extent(model);
         let centre = 0.5 * (lo + hi);
         environment(
@@ -167,7 +167,7 @@ impl CellScene {
         environment(
             "wall_y",
             RenderMesh::cuboid([8.0, 0.05, wall_h / 2.0], [0.70, 0.72, 0.74]),
-            Pose::from_translation(Vector::new(centre.x, hi.y + 0.3, wall_h / 2.0)),
+            Pose::from_translation(Vector::new(centre.x, lo.y - 0.3, wall_h / 2.0)),
         );
         const PALETTE: [[f32; 3]; 4] = [
             [0.55, 0.38, 0.22], // wood

@@ -1,0 +1,349 @@
+//! The renderer against closed-form answers: silhouettes of boxes facing the camera, depth,
+//! the horizon of a floor that reaches behind the camera (near clipping), visibility order,
+//! masks against index renders, and bad input.
+
+use std::sync::Arc;
+
+use approx::assert_relative_eq;
+use workcell_robots::math::{Pose, Rotation, Vector};
+use workcell_sim::SimError;
+use workcell_sim::render::{
+    Camera, Class, CpuRenderer, Frame, MaskBatch, RenderMesh, Renderer, Scene, SceneObject,
+};
+
+/// A camera at the origin looking along world +x (image x = world -y, image y = world -z).
+fn camera(width: u32, height: u32, fov_y_deg: f64) -> Camera {
+    Camera::look_at(
+        [0.0; 3],
+        [1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0],
+        width,
+        height,
+        fov_y_deg,
+    )
+    .expect("valid camera")
+}
+
+fn object(name: &str, class: Class, mesh: RenderMesh, X_WO: Pose) -> SceneObject {
+    SceneObject {
+        name: name.into(),
+        class,
+        mesh: Arc::new(mesh),
+        texture: 0.0,
+        X_WO,
+    }
+}
+
+/// Pixel centres `i + 0.5` strictly inside `(lo, hi)`.
+fn centres_inside(lo: f64, hi: f64) -> usize {
+    (0..10_000)
+        .filter(|&i| f64::from(i) + 0.5 > lo && f64::from(i) + 0.5 < hi)
+        .count()
+}
+
+#[test]
+fn a_box_facing_the_camera_covers_the_pixels_of_its_projected_face() {
+    let cam = camera(128, 96, 50.0);
+    // Box centred 3 m ahead, half extents 0.2 (depth) x 0.43 x 0.31; its front face is at
+    // x = 2.8 and projects to a rectangle around the principal point.
+    let (d, hy, hz) = (2.8, 0.43, 0.31);
+    let mut scene = Scene::default();
+    scene.push(object(
+        "box",
+        Class::Robot,
+        RenderMesh::cuboid([0.2, hy, hz], [0.5; 3]),
+        Pose::from_translation(Vector::new(3.0, 0.0, 0.0)),
+    ));
+    let mut frame = Frame::new();
+    CpuRenderer::new().render(&scene, &cam, &mut frame).unwrap();
+    let (u0, u1) = (cam.cx - cam.fx * hy / d, cam.cx + cam.fx * hy / d);
+    let (v0, v1) = (cam.cy - cam.fy * hz / d, cam.cy + cam.fy * hz / d);
+    let expected = centres_inside(u0, u1) * centres_inside(v0, v1);
+    assert_eq!(frame.count(1), expected);
+    assert_eq!(frame.count(0), 128 * 96 - expected);
+    // Depth along the optical axis is the face's distance everywhere on it.
+    for (p, &o) in frame.object.iter().enumerate() {
+        if o == 1 {
+            assert_relative_eq!(f64::from(frame.depth_m[p]), d, max_relative = 1e-5);
+        } else {
+            assert_eq!(frame.depth_m[p], 0.0);
+        }
+    }
+    assert_eq!(
+        frame
+            .classes(&scene)
+            .iter()
+            .filter(|&&c| c == Class::Robot as u8)
+            .count(),
+        expected
+    );
+}
+
+#[test]
+fn the_nearer_object_wins_whatever_the_drawing_order() {
+    let cam = camera(64, 64, 60.0);
+    for order in [[0, 1], [1, 0]] {
+        let boxes = [
+            object(
+                "near",
+                Class::Forearm,
+                RenderMesh::cuboid([0.1, 0.2, 0.2], [1.0; 3]),
+                Pose::from_translation(Vector::new(2.0, 0.0, 0.0)),
+            ),
+            object(
+                "far",
+                Class::Robot,
+                RenderMesh::cuboid([0.1, 1.0, 1.0], [1.0; 3]),
+                Pose::from_translation(Vector::new(4.0, 0.0, 0.0)),
+            ),
+        ];
+        let mut scene = Scene::default();
+        for k in order {
+            scene.push(boxes[k].clone());
+        }
+        let mut frame = Frame::new();
+        CpuRenderer::new().render(&scene, &cam, &mut frame).unwrap();
+        let centre = 32 * 64 + 32;
+        assert_eq!(scene.class_of(frame.object[centre]), Class::Forearm);
+        assert_relative_eq!(frame.depth_m[centre], 1.9, max_relative = 1e-5);
+        // Far box visible beside the near one: its face spans |u - 32| < fx 1.0 / 3.9 = 14.2
+        // px, the near one's |u - 32| < fx 0.2 / 1.9 = 5.8 px.
+        let corner = 32 * 64 + 22;
+        assert_eq!(scene.class_of(frame.object[corner]), Class::Robot);
+    }
+}
+
+#[test]
+fn a_floor_through_the_camera_is_clipped_at_the_near_plane_and_ends_at_the_horizon() {
+    // Camera 1.2 m above a floor that extends 50 m around it, looking horizontally: every
+    // pixel centre below the principal point sees the floor, every one above sees the sky.
+    let cam = Camera::look_at(
+        [0.0, 0.0, 1.2],
+        [1.0, 0.0, 1.2],
+        [0.0, 0.0, 1.0],
+        80,
+        60,
+        70.0,
+    )
+    .unwrap();
+    let mut scene = Scene::default();
+    scene.push(object(
+        "floor",
+        Class::Background,
+        RenderMesh::cuboid([50.0, 50.0, 0.01], [0.5; 3]),
+        Pose::from_translation(Vector::new(0.0, 0.0, -0.01)),
+    ));
+    let mut frame = Frame::new();
+    CpuRenderer::new().render(&scene, &cam, &mut frame).unwrap();
+    for j in 0..60u32 {
+        let v = f64::from(j) + 0.5;
+        for i in 0..80u32 {
+            let p = (j * 80 + i) as usize;
+            // Rows far enough below the horizon for the floor's 50 m edge not to matter.
+            if v > cam.cy + cam.fy * 1.2 / 40.0 {
+                assert_eq!(frame.object[p], 1, "pixel ({i}, {j})");
+                // Ray depth: the floor point at height -1.2 in the camera: z = fy 1.2 / (v - cy).
+                let z = cam.fy * 1.2 / (v - cam.cy);
+                assert_relative_eq!(f64::from(frame.depth_m[p]), z, max_relative = 1e-3);
+            } else if v < cam.cy {
+                assert_eq!(frame.object[p], 0, "pixel ({i}, {j})");
+            }
+        }
+    }
+    assert!(frame.depth_m.iter().all(|d| d.is_finite()));
+}
+
+#[test]
+fn masks_match_the_index_render_of_the_object_alone() {
+    let cam = camera(96, 80, 45.0);
+    let mesh = RenderMesh::capsule(0.05, 0.3, [0.8, 0.6, 0.5]);
+    let poses: Vec<Pose> = (0..12)
+        .map(|k| {
+            let a = f64::from(k) * 0.5;
+            // Object poses in the camera frame (z forward).
+            Pose::from_parts(
+                Vector::new(0.1 * a.sin(), -0.05 * a.cos(), 1.0 + 0.1 * f64::from(k)),
+                Rotation::from_scaled_axis(Vector::new(a, 0.3 * a, 1.0 - a)),
+            )
+        })
+        .collect();
+    let mut renderer = CpuRenderer::new();
+    let mut masks = MaskBatch::new();
+    renderer
+        .render_masks(&mesh, &cam, &poses, &mut masks)
+        .unwrap();
+    assert_eq!(masks.len, poses.len());
+    let mut frame = Frame::new();
+    for (k, X_CO) in poses.iter().enumerate() {
+        let mut scene = Scene::default();
+        scene.push(object(
+            "capsule",
+            Class::Forearm,
+            mesh.clone(),
+            cam.X_WC * *X_CO,
+        ));
+        renderer.render(&scene, &cam, &mut frame).unwrap();
+        let index: Vec<u8> = frame.object.iter().map(|&o| u8::from(o == 1)).collect();
+        assert_eq!(masks.mask(k), index.as_slice(), "mask {k}");
+        assert!(index.iter().any(|&v| v == 1), "pose {k} in view");
+    }
+}
+
+#[test]
+fn a_tessellated_sphere_covers_about_the_disc_it_projects_to() {
+    // Sphere of radius r at distance d: its silhouette is a circle of angular radius
+    // asin(r / d); the 16-segment tessellation is inscribed, so it covers a bit less.
+    let cam = camera(200, 200, 40.0);
+    let (r, d) = (0.4, 3.0);
+    let mut scene = Scene::default();
+    scene.push(object(
+        "ball",
+        Class::Hand,
+        RenderMesh::capsule(r, 0.0, [1.0; 3]),
+        Pose::from_translation(Vector::new(d, 0.0, 0.0)),
+    ));
+    let mut frame = Frame::new();
+    CpuRenderer::new().render(&scene, &cam, &mut frame).unwrap();
+    let radius_px = cam.fx * (r / d).asin().tan();
+    let disc = std::f64::consts::PI * radius_px * radius_px;
+    let covered = frame.count(1) as f64;
+    // A regular 16-gon inscribed in the circle has 97.4 % of its area.
+    let polygon = 16.0 / (2.0 * std::f64::consts::PI) * (2.0 * std::f64::consts::PI / 16.0).sin();
+    assert!(
+        covered < disc * 1.01 && covered > disc * polygon * 0.97,
+        "{covered} vs disc {disc}"
+    );
+}
+
+#[test]
+fn a_camera_inside_a_closed_box_sees_through_its_back_faces() {
+    let cam = camera(32, 32, 60.0);
+    let mut scene = Scene::default();
+    scene.push(object(
+        "room",
+        Class::Background,
+        RenderMesh::cuboid([1.0; 3], [0.5; 3]),
+        Pose::IDENTITY,
+    ));
+    scene.push(object(
+        "target",
+        Class::Robot,
+        RenderMesh::cuboid([0.1, 3.0, 3.0], [0.5; 3]),
+        Pose::from_translation(Vector::new(5.0, 0.0, 0.0)),
+    ));
+    let mut frame = Frame::new();
+    CpuRenderer::new().render(&scene, &cam, &mut frame).unwrap();
+    // The closed box around the camera is culled; the far box fills the view.
+    assert_eq!(frame.count(2), 32 * 32);
+}
+
+#[test]
+fn degenerate_and_non_finite_geometry_renders_without_nan() {
+    let cam = camera(64, 64, 60.0);
+    let mesh = RenderMesh {
+        positions: vec![
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.1, 0.0],
+            [f32::NAN, 0.0, 0.0],
+            [0.0, 0.0, 0.1],
+        ],
+        // A zero-area triangle, one with a NaN vertex, one with an index out of range, one good.
+        triangles: vec![[0, 1, 2], [0, 3, 2], [0, 9, 2], [0, 2, 4]],
+        colors: vec![[1.0; 3]; 4],
+        closed: false,
+    };
+    let mut scene = Scene::default();
+    scene.push(object(
+        "junk",
+        Class::Robot,
+        mesh.clone(),
+        Pose::from_translation(Vector::new(1.0, 0.0, 0.0)),
+    ));
+    let mut frame = Frame::new();
+    CpuRenderer::new().render(&scene, &cam, &mut frame).unwrap();
+    assert!(frame.depth_m.iter().all(|d| d.is_finite()));
+    assert!(frame.count(1) > 0, "the good triangle is drawn");
+    let mut masks = MaskBatch::new();
+    CpuRenderer::new()
+        .render_masks(
+            &mesh,
+            &cam,
+            &[cam.X_WC.inverse() * Pose::from_translation(Vector::new(1.0, 0.0, 0.0))],
+            &mut masks,
+        )
+        .unwrap();
+    assert!(masks.mask(0).iter().any(|&v| v == 1));
+}
+
+#[test]
+fn bad_cameras_and_poses_are_errors() {
+    let bad = [
+        Camera::look_at([0.0; 3], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0, 64, 60.0),
+        Camera::look_at([0.0; 3], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], 64, 5000, 60.0),
+        Camera::look_at([0.0; 3], [0.0; 3], [0.0, 0.0, 1.0], 64, 64, 60.0),
+        Camera::look_at([0.0; 3], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], 64, 64, 60.0),
+        Camera::look_at(
+            [f64::NAN, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            64,
+            64,
+            60.0,
+        ),
+        Camera::look_at([0.0; 3], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], 64, 64, 180.0),
+    ];
+    for (k, c) in bad.iter().enumerate() {
+        assert!(
+            matches!(c, Err(SimError::InvalidRender { .. })),
+            "case {k}: {c:?}"
+        );
+    }
+    let cam = camera(16, 16, 60.0);
+    let mut scene = Scene::default();
+    let nan = Pose::from_translation(Vector::new(f64::NAN, 0.0, 0.0));
+    scene.push(object(
+        "lost",
+        Class::Hand,
+        RenderMesh::cuboid([0.1; 3], [1.0; 3]),
+        nan,
+    ));
+    let err = CpuRenderer::new()
+        .render(&scene, &cam, &mut Frame::new())
+        .unwrap_err();
+    assert!(err.to_string().contains("lost"), "{err}");
+    let err = CpuRenderer::new()
+        .render_masks(
+            &RenderMesh::cuboid([0.1; 3], [1.0; 3]),
+            &cam,
+            &[Pose::IDENTITY, nan],
+            &mut MaskBatch::new(),
+        )
+        .unwrap_err();
+    assert!(err.to_string().contains("mask pose 1"), "{err}");
+}
+
+#[test]
+fn the_default_cell_renders_every_class_it_shows_at_any_supported_size() {
+    let model = workcell_sim::CellModel::from_file(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/default.toml"
+    ))
+    .unwrap();
+    let cell = workcell_sim::render::CellScene::new(&model);
+    let base = Camera::from_config(&model.scenario.cameras[0]).unwrap();
+    let mut frame = Frame::new();
+    for (w, h) in [(64, 64), (128, 128), (320, 240), (640, 480)] {
+        let cam = base.resized(w, h).unwrap();
+        CpuRenderer::new()
+            .render(&cell.scene, &cam, &mut frame)
+            .unwrap();
+        let classes = frame.classes(&cell.scene);
+        for class in [Class::Background, Class::Robot, Class::Torso] {
+            assert!(classes.contains(&(class as u8)), "{class:?} at {w}x{h}");
+        }
+        assert!(frame.depth_m.iter().all(|d| d.is_finite() && *d >= 0.0));
+        // The sky is never black: only the occluder is.
+        assert!(frame.rgb.chunks(3).all(|c| c != [0, 0, 0]));
+    }
+}
