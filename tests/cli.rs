@@ -157,3 +157,56 @@ fn simulate_writes_csv_and_plot_and_replays_by_seed() {
     assert_eq!(again.status.code(), Some(1));
     assert!(text(&again.stderr).contains("--force"));
 }
+
+#[test]
+fn dataset_generate_then_show_writes_a_contact_sheet() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let config = tmp.path().join("small.toml");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/default.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "scenario = {:?}\nsequences_per_pair = 1\nframes = 2\nwidth_px = 64\nheight_px = 64\nstart_s = [0.5, 1.0]\n",
+            scenario.display().to_string()
+        ),
+    )
+    .expect("config");
+    let out = tmp.path().join("data");
+    let (config, out) = (
+        config.to_str().expect("utf-8"),
+        out.to_str().expect("utf-8"),
+    );
+    let run = workcell(&["dataset", "generate", "--config", config, "--out", out]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(
+        text(&run.stdout).contains("9 sequences (9 new), 18 frames"),
+        "{}",
+        text(&run.stdout)
+    );
+    let show = workcell(&["dataset", "show", out]);
+    assert!(show.status.success(), "{}", text(&show.stderr));
+    let sheet = Path::new(out).join("contact_sheet.png");
+    let bytes = std::fs::read(&sheet).expect("contact sheet");
+    assert!(bytes.starts_with(b"\x89PNG"));
+    // Not a dataset: a clear error, not a panic.
+    let bad = workcell(&["dataset", "show", tmp.path().to_str().expect("utf-8")]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("not a finished dataset"),
+        "{}",
+        text(&bad.stderr)
+    );
+    let bad = workcell(&[
+        "dataset",
+        "generate",
+        "--config",
+        "nowhere.toml",
+        "--out",
+        out,
+    ]);
+    assert!(
+        text(&bad.stderr).contains("nowhere.toml"),
+        "{}",
+        text(&bad.stderr)
+    );
+}

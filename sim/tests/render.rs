@@ -185,7 +185,7 @@ fn masks_match_the_index_render_of_the_object_alone() {
         renderer.render(&scene, &cam, &mut frame).unwrap();
         let index: Vec<u8> = frame.object.iter().map(|&o| u8::from(o == 1)).collect();
         assert_eq!(masks.mask(k), index.as_slice(), "mask {k}");
-        assert!(index.iter().any(|&v| v == 1), "pose {k} in view");
+        assert!(index.contains(&1), "pose {k} in view");
     }
 }
 
@@ -273,7 +273,7 @@ fn degenerate_and_non_finite_geometry_renders_without_nan() {
             &mut masks,
         )
         .unwrap();
-    assert!(masks.mask(0).iter().any(|&v| v == 1));
+    assert!(masks.mask(0).contains(&1));
 }
 
 #[test]

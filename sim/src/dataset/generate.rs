@@ -96,10 +96,30 @@ pub struct Generator {
     scenario_path: PathBuf,
 }
 
-/// The link poses and joints of an episode at each camera tick.
+/// The cell at one camera tick.
+struct Tick {
+    time_s: f64,
+    robot: Vec<Pose>,
+    human: Vec<Pose>,
+    robot_q: Vec<f64>,
+    human_q: Vec<f64>,
+}
+
+/// An episode's model and its camera ticks.
 struct Episode {
     model: CellModel,
-    ticks: Vec<(f64, Vec<Pose>, Vec<Pose>, Vec<f64>, Vec<f64>)>,
+    ticks: Vec<Tick>,
+}
+
+/// One camera draw of a sequence: its start, camera and unoccluded frames with the
+/// forearm's amodal masks.
+struct Draw {
+    attempts: usize,
+    first_tick: usize,
+    camera: Camera,
+    failing: usize,
+    distance_m: f64,
+    frames: Vec<(Frame, Vec<u8>)>,
 }
 
 /// A 64-bit mix (splitmix64's finaliser) to derive seeds.
@@ -186,13 +206,13 @@ impl Generator {
             while state.time_s() + 0.5 * dt < t {
                 step(&model, &mut state, &RobotCommand::Nominal)?;
             }
-            ticks.push((
-                state.time_s(),
-                state.robot_link_poses(),
-                state.human_link_poses().to_vec(),
-                state.q().to_vec(),
-                state.human_q().to_vec(),
-            ));
+            ticks.push(Tick {
+                time_s: state.time_s(),
+                robot: state.robot_link_poses(),
+                human: state.human_link_poses().to_vec(),
+                robot_q: state.q().to_vec(),
+                human_q: state.human_q().to_vec(),
+            });
         }
         Ok(Episode { model, ticks })
     }
@@ -219,7 +239,7 @@ impl Generator {
         let shoulder = cell
             .human_objects
             .iter()
-            .zip(&episode.ticks[0].2)
+            .zip(&episode.ticks[0].human)
             .find(|(o, _)| o.is_some_and(|k| cell.scene.objects[k].class == Class::UpperArm))
             .map_or(model.X_WH.translation, |(_, X)| X.translation);
         let centre = 0.5 * (model.X_WR.translation + shoulder);
@@ -228,7 +248,7 @@ impl Generator {
         let range = c.occlusion_levels[level].range;
         let mut renderer = CpuRenderer::new();
         let mut frame = Frame::new();
-        let mut best: Option<(usize, usize, Camera, usize, f64, Vec<(Frame, Vec<u8>)>)> = None;
+        let mut best: Option<Draw> = None;
         for attempt in 0..c.attempts {
             let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ mix(attempt as u64 + 0x5eed)));
             let first_tick = ((rng.random_range(c.start_s[0]..=c.start_s[1]) * c.rate_hz).round()
@@ -245,7 +265,7 @@ impl Generator {
             // Look at the forearm's mean position, a little off.
             let fl = cell.forearm_link.unwrap_or(0);
             let mean = (0..c.frames)
-                .map(|f| episode.ticks[first_tick + f].2[fl].translation)
+                .map(|f| episode.ticks[first_tick + f].human[fl].translation)
                 .fold(Vector::ZERO, |a, b| a + b)
                 / c.frames as f64;
             let jitter = 0.03 * d.sqrt();
@@ -266,7 +286,8 @@ impl Generator {
             let mut frames = Vec::with_capacity(c.frames);
             let mut failing = 0;
             for f in 0..c.frames {
-                let (_, robot, human, _, _) = &episode.ticks[first_tick + f];
+                let tick = &episode.ticks[first_tick + f];
+                let (robot, human) = (&tick.robot, &tick.human);
                 cell.set_link_poses(robot, human);
                 renderer.render(&cell.scene, &camera, &mut frame)?;
                 let amodal = amodal_mask(&cell, &camera, &[forearm]);
@@ -282,16 +303,31 @@ impl Generator {
                 }
                 frames.push((frame.clone(), amodal));
             }
-            let better = best.as_ref().is_none_or(|b| failing < b.3);
+            let better = best.as_ref().is_none_or(|b| failing < b.failing);
             if better {
-                best = Some((attempt + 1, first_tick, camera, failing, d, frames));
+                best = Some(Draw {
+                    attempts: attempt + 1,
+                    first_tick,
+                    camera,
+                    failing,
+                    distance_m: d,
+                    frames,
+                });
             }
             if failing == 0 {
                 break;
             }
         }
         timing.render += t.elapsed();
-        let Some((attempts, first_tick, camera, _, d, frames)) = best else {
+        let Some(Draw {
+            attempts,
+            first_tick,
+            camera,
+            distance_m: d,
+            frames,
+            ..
+        }) = best
+        else {
             return Err(SimError::Dataset {
                 path: self.scenario_path.clone(),
                 message: "no attempt was made".into(),
@@ -316,7 +352,13 @@ impl Generator {
         let n = w as usize * h as usize;
         let mut out = Vec::with_capacity(c.frames);
         for (f, (frame, amodal)) in frames.into_iter().enumerate() {
-            let (time_s, robot, human, robot_q, human_q) = &episode.ticks[first_tick + f];
+            let Tick {
+                time_s,
+                robot,
+                human,
+                robot_q,
+                human_q,
+            } = &episode.ticks[first_tick + f];
             cell.set_link_poses(robot, human);
             let shown: Vec<bool> = frame
                 .object

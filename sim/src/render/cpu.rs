@@ -399,8 +399,8 @@ impl Renderer for CpuRenderer {
                 (c, z)
             };
             frame.depth_m[p] = depth;
-            for k in 0..3 {
-                frame.rgb[3 * p + k] = to_srgb(table, c[k]);
+            for (out, v) in frame.rgb[3 * p..3 * p + 3].iter_mut().zip(c) {
+                *out = to_srgb(table, v);
             }
         }
         Ok(())

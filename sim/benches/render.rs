@@ -1,0 +1,144 @@
+//! Renderer speed: frames of the default scene, forearm masks for render-and-compare, and
+//! PNG encoding of a dataset frame. `cargo bench -p workcell-sim --bench render`; with
+//! `--features gpu` the wgpu backend runs the same cases beside the CPU.
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use workcell_robots::math::{Pose, Rotation, Vector};
+use workcell_sim::image::{PixelKind, encode_png};
+use workcell_sim::render::{
+    Camera, CellScene, CpuRenderer, Frame, MaskBatch, RenderMesh, Renderer,
+};
+use workcell_sim::{CellModel, CellState, RobotCommand, step};
+
+fn default_cell() -> (CellScene, Camera) {
+    let model = CellModel::from_file(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/default.toml"
+    ))
+    .expect("default cell");
+    let mut state = CellState::new(&model).expect("state");
+    for _ in 0..1000 {
+        step(&model, &mut state, &RobotCommand::Nominal).expect("step");
+    }
+    let mut cell = CellScene::new(&model);
+    cell.update(&state);
+    let camera = Camera::from_config(&model.scenario.cameras[0]).expect("camera");
+    (cell, camera)
+}
+
+/// 256 poses of the forearm around 0.7 m in front of the camera.
+fn mask_poses() -> Vec<Pose> {
+    (0..256)
+        .map(|k| {
+            let a = f64::from(k) * 0.05;
+            Pose::from_parts(
+                Vector::new(0.05 * a.sin(), 0.05 * a.cos(), 0.6 + 0.001 * f64::from(k)),
+                Rotation::from_scaled_axis(Vector::new(1.2 + 0.1 * a, 0.3 * a, 0.1)),
+            )
+        })
+        .collect()
+}
+
+fn cases(
+    c: &mut Criterion,
+    name: &str,
+    renderer: &mut (dyn Renderer + Send),
+    threads: Option<usize>,
+) {
+    let (cell, camera) = default_cell();
+    let forearm: RenderMesh =
+        (*cell.scene.objects[cell.forearm_object().expect("forearm")].mesh).clone();
+    let mut group = c.benchmark_group(format!("render/{name}"));
+    group.throughput(Throughput::Elements(1));
+    let mut frame = Frame::new();
+    for (w, h) in [(128, 128), (320, 240)] {
+        let cam = camera.resized(w, h).expect("size");
+        group.bench_function(format!("frame_{w}x{h}"), |b| {
+            b.iter(|| {
+                renderer
+                    .render(&cell.scene, &cam, &mut frame)
+                    .expect("render")
+            });
+        });
+    }
+    let poses = mask_poses();
+    group.throughput(Throughput::Elements(poses.len() as u64));
+    let pool = threads.map(|n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .expect("pool")
+    });
+    let mut masks = MaskBatch::new();
+    for side in [64, 128] {
+        let cam = Camera::look_at(
+            [0.0; 3],
+            [0.0, 0.0, 1.0],
+            [0.0, -1.0, 0.0],
+            side,
+            side,
+            40.0,
+        )
+        .expect("camera");
+        group.bench_function(format!("forearm_masks_{side}x{side}_x256"), |b| {
+            b.iter(|| {
+                match &pool {
+                    Some(pool) => {
+                        pool.install(|| renderer.render_masks(&forearm, &cam, &poses, &mut masks))
+                    }
+                    None => renderer.render_masks(&forearm, &cam, &poses, &mut masks),
+                }
+                .expect("masks")
+            });
+        });
+    }
+    group.finish();
+}
+
+fn cpu(c: &mut Criterion) {
+    eprintln!(
+        "default scene: {} triangles",
+        default_cell().0.scene.triangle_count()
+    );
+    cases(c, "cpu_1_thread", &mut CpuRenderer::new(), Some(1));
+    cases(c, "cpu_all_threads", &mut CpuRenderer::new(), None);
+}
+
+#[cfg(feature = "gpu")]
+fn gpu(c: &mut Criterion) {
+    let mut renderer = workcell_sim::render::GpuRenderer::new().expect("a Vulkan adapter");
+    eprintln!("wgpu adapter: {}", renderer.adapter());
+    cases(c, "wgpu", &mut renderer, None);
+}
+
+#[cfg(not(feature = "gpu"))]
+fn gpu(_: &mut Criterion) {}
+
+/// Encoding the five PNGs of one 128x128 dataset frame.
+fn png(c: &mut Criterion) {
+    let (cell, camera) = default_cell();
+    let mut frame = Frame::new();
+    CpuRenderer::new()
+        .render(&cell.scene, &camera, &mut frame)
+        .expect("render");
+    let classes = frame.classes(&cell.scene);
+    let mut group = c.benchmark_group("dataset");
+    group.throughput(Throughput::Elements(1));
+    group.bench_function("encode_frame_pngs_128x128", |b| {
+        b.iter(|| {
+            let mut bytes = encode_png(128, 128, PixelKind::Rgb, &frame.rgb)
+                .expect("png")
+                .len();
+            for _ in 0..4 {
+                bytes += encode_png(128, 128, PixelKind::Gray, &classes)
+                    .expect("png")
+                    .len();
+            }
+            bytes
+        });
+    });
+    group.finish();
+}
+
+criterion_group!(benches, cpu, gpu, png);
+criterion_main!(benches);
