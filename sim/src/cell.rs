@@ -256,8 +256,14 @@ impl CellState {
                     .can_sleep(false),
             );
             for (X_LS, shape) in shapes {
+                // Sensors: the human's geometry is there for distance queries, but a
+                // kinematic arm must not shove the robot (a real one would be hurt first;
+                // keeping the separation is the safety filter's job).
                 world.insert_collider(
-                    ColliderBuilder::new(shape).position(X_LS).density(0.0),
+                    ColliderBuilder::new(shape)
+                        .position(X_LS)
+                        .density(0.0)
+                        .sensor(true),
                     Some(body),
                 );
             }
