@@ -325,11 +325,7 @@ impl Scenario {
     /// [`SimError::Invalid`] naming the key.
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_toml(&text, path)
+        Self::from_toml(&read_text(path)?, path)
     }
 
     /// Parses and validates scenario text; `path` names it in errors.
@@ -337,10 +333,7 @@ impl Scenario {
     /// # Errors
     /// As [`Scenario::from_file`].
     pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
-        let scenario: Scenario = toml::from_str(text).map_err(|e| SimError::Parse {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let scenario: Scenario = parse_toml(text, path)?;
         scenario.validate(path)?;
         Ok(scenario)
     }
@@ -518,4 +511,20 @@ fn check_speed(speed_scale: f64, acceleration: f64) -> Result<(), String> {
         return Err(format!("acceleration_rad_s2 {acceleration} must be > 0"));
     }
     Ok(())
+}
+
+/// Reads a text file; errors name it.
+pub(crate) fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|source| SimError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Parses TOML into `T`; errors carry TOML's line and column and name `path`.
+pub(crate) fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> Result<T> {
+    toml::from_str(text).map_err(|e| SimError::Parse {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
 }

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
 use crate::occlusion::OccluderKind;
+use crate::scenario::{parse_toml, read_text};
 
 /// A camera distance class: cameras between `range_m` from the cell centre, with a field of
 /// view that narrows with distance like a zoom lens (the cell stays in frame but looks
@@ -116,11 +117,7 @@ impl DatasetConfig {
     /// # Errors
     /// [`SimError::Io`], [`SimError::Parse`] or [`SimError::Invalid`] naming the key.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_toml(&text, path)
+        Self::from_toml(&read_text(path)?, path)
     }
 
     /// Parses and validates; `path` names the source in errors.
@@ -128,10 +125,7 @@ impl DatasetConfig {
     /// # Errors
     /// As [`DatasetConfig::from_file`].
     pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
-        let config: Self = toml::from_str(text).map_err(|e| SimError::Parse {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let config: Self = parse_toml(text, path)?;
         config.validate(path)?;
         Ok(config)
     }

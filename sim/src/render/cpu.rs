@@ -112,21 +112,9 @@ impl Projection {
     }
 
     /// Clips triangle `(a, b, c)` (camera frame) to the view and rasterizes the pieces,
-    /// calling `pixel(index, 1/z)` for every covered pixel centre. With `cull`, triangles
-    /// not facing the camera (counter-clockwise seen from outside) are dropped.
+    /// calling `pixel(index, 1/z)` for every covered pixel centre.
     #[inline]
-    pub(crate) fn triangle(
-        &self,
-        t: [[f32; 3]; 3],
-        cull: bool,
-        pixel: &mut impl FnMut(usize, f32),
-    ) {
-        if cull {
-            let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
-            if dot(n, t[0]) >= 0.0 {
-                return;
-            }
-        }
+    pub(crate) fn triangle(&self, t: [[f32; 3]; 3], pixel: &mut impl FnMut(usize, f32)) {
         let inside = |p: [f32; 3], (n, d): ([f32; 3], f32)| dot(n, p) + d >= 0.0;
         if self
             .planes
@@ -356,30 +344,22 @@ impl Renderer for CpuRenderer {
         } = self;
         for (k, object) in scene.objects.iter().enumerate() {
             let X_CO = Affine::from_pose(&(X_CW * object.X_WO));
-            let mesh = &*object.mesh;
-            vertices.clear();
-            vertices.extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
             let id = (k + 1) as u16;
-            for (tri, albedo) in mesh.triangles.iter().zip(&mesh.colors) {
-                let t = tri.map(|i| vertices.get(i as usize).copied().unwrap_or([f32::NAN; 3]));
-                if !t.iter().flatten().all(|v| v.is_finite()) {
-                    continue;
-                }
-                let s = shade(cross(sub(t[1], t[0]), sub(t[2], t[0])), t[0], light_C);
+            front_faces(&object.mesh, &X_CO, vertices, |t, n, albedo| {
+                let s = shade(n, t[0], light_C);
                 let c = albedo.map(|a| a * s);
-                proj.triangle(t, mesh.closed, &mut |p, z| {
+                proj.triangle(t, &mut |p, z| {
                     if z > inv_z[p] {
                         inv_z[p] = z;
                         frame.object[p] = id;
                         color[p] = c;
                     }
                 });
-            }
+            });
         }
         // Resolve: texture, sRGB, depth.
         let table = srgb_table();
         let X_WC = Affine::from_pose(&camera.X_WC);
-        let texture: Vec<f32> = scene.objects.iter().map(|o| o.texture).collect();
         let (fx, fy, cx, cy) = (proj.fx, proj.fy, proj.cx, proj.cy);
         let w = camera.width as usize;
         for p in 0..n {
@@ -388,7 +368,7 @@ impl Renderer for CpuRenderer {
                 (scene.sky, 0.0)
             } else {
                 let z = 1.0 / inv_z[p];
-                let amplitude = texture[usize::from(id) - 1];
+                let amplitude = scene.objects[usize::from(id) - 1].texture;
                 let mut c = color[p];
                 if amplitude > 0.0 {
                     let (i, j) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
@@ -430,6 +410,32 @@ impl Renderer for CpuRenderer {
     }
 }
 
+/// The triangles of `mesh` at `X_CO` as both backends draw them: camera-frame vertices
+/// (transformed into `vertices`), triangles with a non-finite or missing vertex skipped, and
+/// for closed meshes the faces not turned to the camera (counter-clockwise seen from
+/// outside) culled. `face` gets the vertices, the unnormalised normal and the albedo.
+#[inline]
+pub(crate) fn front_faces(
+    mesh: &RenderMesh,
+    X_CO: &Affine,
+    vertices: &mut Vec<[f32; 3]>,
+    mut face: impl FnMut([[f32; 3]; 3], [f32; 3], [f32; 3]),
+) {
+    vertices.clear();
+    vertices.extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
+    for (tri, &albedo) in mesh.triangles.iter().zip(&mesh.colors) {
+        let t = tri.map(|i| vertices.get(i as usize).copied().unwrap_or([f32::NAN; 3]));
+        if !t.iter().flatten().all(|v| v.is_finite()) {
+            continue;
+        }
+        let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+        if mesh.closed && dot(n, t[0]) >= 0.0 {
+            continue;
+        }
+        face(t, n, albedo);
+    }
+}
+
 /// Covers the pixels of `mesh` at `X_CO` in `mask`.
 pub(crate) fn draw_mask(
     proj: &Projection,
@@ -438,14 +444,9 @@ pub(crate) fn draw_mask(
     vertices: &mut Vec<[f32; 3]>,
     mask: &mut [u8],
 ) {
-    vertices.clear();
-    vertices.extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
-    for tri in &mesh.triangles {
-        let t = tri.map(|i| vertices.get(i as usize).copied().unwrap_or([f32::NAN; 3]));
-        if t.iter().flatten().all(|v| v.is_finite()) {
-            proj.triangle(t, mesh.closed, &mut |p, _| mask[p] = 1);
-        }
-    }
+    front_faces(mesh, X_CO, vertices, |t, _, _| {
+        proj.triangle(t, &mut |p, _| mask[p] = 1);
+    });
 }
 
 #[cfg(test)]
@@ -488,7 +489,7 @@ mod tests {
                     [v(i, j), v(i + 1, j), v(i + 1, j + 1)],
                     [v(i, j), v(i + 1, j + 1), v(i, j + 1)],
                 ] {
-                    proj.triangle(t, false, &mut |p, _| hits[p] += 1);
+                    proj.triangle(t, &mut |p, _| hits[p] += 1);
                 }
             }
         }

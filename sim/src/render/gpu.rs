@@ -10,7 +10,7 @@ use wgpu::util::DeviceExt;
 use workcell_robots::math::Pose;
 
 use crate::error::{Result, SimError};
-use crate::render::cpu::{Affine, check_poses, check_scene, cross, dot, shade, sub};
+use crate::render::cpu::{Affine, check_poses, check_scene, front_faces, shade};
 use crate::render::{Camera, Frame, MaskBatch, NEAR_M, RenderMesh, Renderer, Scene};
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -356,31 +356,18 @@ impl GpuRenderer {
         texture: f32,
         light_C: Option<[f32; 3]>,
     ) {
-        self.scratch.clear();
-        self.scratch
-            .extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
-        for (tri, albedo) in mesh.triangles.iter().zip(&mesh.colors) {
-            let t = tri.map(|i| {
-                self.scratch
-                    .get(i as usize)
-                    .copied()
-                    .unwrap_or([f32::NAN; 3])
-            });
-            if !t.iter().flatten().all(|v| v.is_finite()) {
-                continue;
-            }
-            let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
-            if mesh.closed && dot(n, t[0]) >= 0.0 {
-                continue;
-            }
+        let Self {
+            vertices, scratch, ..
+        } = self;
+        front_faces(mesh, X_CO, scratch, |t, n, albedo| {
             let color = light_C.map_or([1.0; 3], |l| albedo.map(|a| a * shade(n, t[0], l)));
-            self.vertices.extend(t.map(|p_C| Vertex {
+            vertices.extend(t.map(|p_C| Vertex {
                 p_C,
                 color,
                 object,
                 texture,
             }));
-        }
+        });
     }
 }
 
