@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub use workcell_perception as perception;
 pub use workcell_robots as robots;
 pub use workcell_sim as sim;
 

@@ -35,6 +35,19 @@ enum Command {
         #[command(subcommand)]
         command: DatasetCommand,
     },
+    /// Train ProcNet on a dataset (resumable; progress bar, checkpoints, metrics, curves).
+    Train(cli::perception::TrainArgs),
+    /// Evaluate trained models.
+    Eval {
+        #[command(subcommand)]
+        command: EvalCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum EvalCommand {
+    /// ProcNet segmentation on a dataset split: Dice, focal and IoU per class and group.
+    Segmentation(cli::perception::EvalSegmentationArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -87,6 +100,10 @@ fn main() -> ExitCode {
         Command::Dataset {
             command: DatasetCommand::Show(a),
         } => cli::dataset::show(&a),
+        Command::Train(a) => cli::perception::train(&a),
+        Command::Eval {
+            command: EvalCommand::Segmentation(a),
+        } => cli::perception::eval_segmentation(&a),
     };
     match result {
         Ok(code) => code,

@@ -1,0 +1,39 @@
+//! The one error type of this crate.
+
+use std::path::PathBuf;
+
+/// What can go wrong while building, loading, training or running a ProcNet.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PerceptionError {
+    /// A configuration value is out of range; `key` names it.
+    #[error("{key}: {message}")]
+    Config { key: String, message: String },
+    /// A configuration file could not be read or parsed.
+    #[error("{path}: {message}")]
+    ConfigFile { path: PathBuf, message: String },
+    /// A frame handed to the network does not fit it.
+    #[error("invalid input: {message}")]
+    Input { message: String },
+    /// A weight file is missing, corrupt, truncated or of another configuration.
+    #[error("{path}: {message}")]
+    Weights { path: PathBuf, message: String },
+    /// The dataset could not be read.
+    #[error(transparent)]
+    Dataset(#[from] workcell_sim::SimError),
+    /// Writing an output (checkpoint, CSV, plot) failed.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Training diverged or was given data it cannot learn from.
+    #[error("training: {message}")]
+    Training { message: String },
+    /// The requested backend was not compiled in or failed to start.
+    #[error("backend {name}: {message}")]
+    Backend { name: String, message: String },
+}
+
+pub type Result<T, E = PerceptionError> = std::result::Result<T, E>;

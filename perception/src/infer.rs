@@ -1,0 +1,147 @@
+//! Inference on one camera stream: a stateful ProcNet that takes a frame, returns class masks.
+
+use std::path::Path;
+
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::backend::Backend;
+use crate::config::ProcNetConfig;
+use crate::error::{PerceptionError, Result};
+use crate::model::{ProcNetModel, ProcNetState};
+use crate::weights;
+
+/// Class probabilities of one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Masks {
+    pub classes: Vec<String>,
+    /// Side of the square masks (the model's input size).
+    pub size: usize,
+    /// `[classes, size, size]`, each in [0, 1].
+    pub probabilities: Vec<f32>,
+}
+
+impl Masks {
+    /// The probability plane of a class by name, `[size, size]`.
+    #[must_use]
+    pub fn class(&self, name: &str) -> Option<&[f32]> {
+        let i = self.classes.iter().position(|c| c == name)?;
+        let n = self.size * self.size;
+        self.probabilities.get(i * n..(i + 1) * n)
+    }
+
+    /// A class thresholded at `threshold`: 1 inside, 0 outside.
+    #[must_use]
+    pub fn binary(&self, name: &str, threshold: f32) -> Option<Vec<u8>> {
+        Some(
+            self.class(name)?
+                .iter()
+                .map(|&p| u8::from(p > threshold))
+                .collect(),
+        )
+    }
+}
+
+/// A ProcNet following one camera stream: each [`ProcNet::segment`] advances its state.
+pub struct ProcNet {
+    model: ProcNetModel,
+    config: ProcNetConfig,
+    device: Device,
+    state: Option<ProcNetState>,
+}
+
+impl std::fmt::Debug for ProcNet {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ProcNet")
+            .field("config", &self.config)
+            .field("device", &self.device)
+            .field("frames", &self.frames())
+            .finish()
+    }
+}
+
+impl ProcNet {
+    /// Loads a weight file onto a backend.
+    pub fn load(path: &Path, backend: Backend) -> Result<Self> {
+        let device = backend.device()?;
+        let (model, config) = weights::load(path, &device)?;
+        Ok(Self::new(model, config, device))
+    }
+
+    /// Wraps a model (e.g. fresh from training).
+    #[must_use]
+    pub fn new(model: ProcNetModel, config: ProcNetConfig, device: Device) -> Self {
+        Self {
+            model,
+            config,
+            device,
+            state: None,
+        }
+    }
+
+    #[must_use]
+    pub fn config(&self) -> &ProcNetConfig {
+        &self.config
+    }
+
+    /// Frames seen since the last reset.
+    #[must_use]
+    pub fn frames(&self) -> usize {
+        self.state.as_ref().map_or(0, |s| s.frames)
+    }
+
+    /// Forgets the stream (a new camera, a cut): the next frame starts from a zero state.
+    pub fn reset(&mut self) {
+        self.state = None;
+    }
+
+    /// Segments the next frame of the stream: `rgb` is `[3, size, size]` (planar) in [0, 1].
+    pub fn segment(&mut self, rgb: &[f32]) -> Result<Masks> {
+        let s = self.config.input_size;
+        if rgb.len() != 3 * s * s {
+            let side = ((rgb.len() / 3) as f64).sqrt();
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "expected a planar RGB frame of 3x{s}x{s} = {} values, got {} ({}); resize to {s}x{s}",
+                    3 * s * s,
+                    rgb.len(),
+                    if rgb.len() % 3 == 0 && side.fract() == 0.0 {
+                        format!("3x{side}x{side}")
+                    } else {
+                        "not 3 channels of a square image".to_string()
+                    }
+                ),
+            });
+        }
+        if let Some(i) = rgb.iter().position(|v| !v.is_finite()) {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "pixel value {} at index {i} (channel {}, row {}, column {}) is not finite",
+                    rgb[i],
+                    i / (s * s),
+                    (i / s) % s,
+                    i % s
+                ),
+            });
+        }
+        let x = Tensor::<4>::from_data(TensorData::new(rgb.to_vec(), [1, 3, s, s]), &self.device)
+            .clamp(0.0, 1.0);
+        let state = match self.state.take() {
+            Some(state) => state,
+            None => self.model.initial_state(1, s, s, &self.device),
+        };
+        let (out, state) = self.model.step(x, state);
+        self.state = Some(state);
+        let probabilities = burn::tensor::activation::sigmoid(out.logits)
+            .into_data()
+            .try_into_vec::<f32>()
+            .map_err(|e| PerceptionError::Backend {
+                name: format!("{:?}", self.device),
+                message: format!("cannot read the output: {e:?}"),
+            })?;
+        Ok(Masks {
+            classes: self.config.classes.clone(),
+            size: s,
+            probabilities,
+        })
+    }
+}

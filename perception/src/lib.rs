@@ -1,0 +1,26 @@
+//! ProcNet for workcell: a predictive-coding network (PredNet layers with hGRU, ConvLSTM or
+//! convolutional cells and a segmentation decoder) that segments the human arm in camera
+//! frames of the work-cell and stays robust when the arm is partly hidden.
+//!
+//! The model is written once; the [`Device`](burn::tensor::Device) picks the backend at run
+//! time: `flex` (pure Rust, the default), LibTorch (feature `tch`).
+
+pub mod backend;
+pub mod cells;
+pub mod config;
+pub mod data;
+mod error;
+pub mod eval;
+mod infer;
+pub mod loss;
+pub mod model;
+pub mod nn;
+pub mod train;
+pub mod weights;
+
+pub use backend::Backend;
+pub use config::{Activation, CellKind, ProcNetConfig};
+pub use error::{PerceptionError, Result};
+pub use infer::{Masks, ProcNet};
+pub use model::{ProcNetModel, ProcNetState, StepOutput};
+pub use train::{TrainConfig, Trainer};

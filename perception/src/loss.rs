@@ -1,0 +1,59 @@
+//! The segmentation losses of the paper (`reference/PROCNET.md`, "Losses and training").
+
+use burn::tensor::Tensor;
+use burn::tensor::activation::{log_sigmoid, sigmoid};
+
+/// Dice loss per sample and class, `1 - (2 sum(p y) + 1) / (sum p + sum y + 1)`.
+///
+/// # Shapes
+/// `p, y: [b, classes, h, w]` -> `[b, classes]`
+pub fn dice_per_class(p: Tensor<4>, y: Tensor<4>) -> Tensor<2> {
+    let [b, c, _, _] = p.dims();
+    let p = p.reshape([b as i32, c as i32, -1]);
+    let y = y.reshape([b as i32, c as i32, -1]);
+    let intersection = (p.clone() * y.clone()).sum_dim(2);
+    let total = p.sum_dim(2) + y.sum_dim(2);
+    let dice: Tensor<3> = (intersection * 2.0 + 1.0) / (total + 1.0);
+    dice.neg().add_scalar(1.0).reshape([b, c])
+}
+
+/// Focal loss per sample and class, averaged over pixels:
+/// `-|y - p|^gamma [alpha y log p + (1 - alpha)(1 - y) log(1 - p)]`, computed from logits
+/// so that it stays finite when p saturates.
+///
+/// # Shapes
+/// `logits, y: [b, classes, h, w]` -> `[b, classes]`
+pub fn focal_per_class(logits: Tensor<4>, y: Tensor<4>, alpha: f32, gamma: f32) -> Tensor<2> {
+    let [b, c, _, _] = logits.dims();
+    let p = sigmoid(logits.clone());
+    let log_p = log_sigmoid(logits.clone());
+    let log_not_p = log_sigmoid(logits.neg());
+    let modulation = (y.clone() - p).abs().powf_scalar(gamma);
+    let ce = y.clone() * log_p * alpha + y.neg().add_scalar(1.0) * log_not_p * (1.0 - alpha);
+    let focal = (modulation * ce).neg();
+    focal
+        .reshape([b as i32, c as i32, -1])
+        .mean_dim(2)
+        .reshape([b, c])
+}
+
+/// Intersection over union of thresholded masks per sample and class (1 when both are empty).
+///
+/// # Shapes
+/// `p, y: [b, classes, h, w]` -> `[b, classes]`
+pub fn iou_per_class(p: Tensor<4>, y: Tensor<4>, threshold: f32) -> Tensor<2> {
+    let [b, c, _, _] = p.dims();
+    let p = p
+        .greater_elem(threshold)
+        .float()
+        .reshape([b as i32, c as i32, -1]);
+    let y = y
+        .greater_elem(0.5)
+        .float()
+        .reshape([b as i32, c as i32, -1]);
+    let intersection = (p.clone() * y.clone()).sum_dim(2);
+    let union = (p + y).clamp(0.0, 1.0).sum_dim(2);
+    let empty = union.clone().equal_elem(0.0).float();
+    let iou: Tensor<3> = (intersection + empty.clone()) / (union + empty);
+    iou.reshape([b, c])
+}

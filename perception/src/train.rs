@@ -1,0 +1,677 @@
+//! Training: random 10-frame windows, Dice + focal + prediction-error losses, AdamW with
+//! gradient clipping and a one-cycle schedule; resumable from its checkpoints.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::grad_clipping::GradientClippingConfig;
+use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer, OptimizerRecord};
+use burn::tensor::{Device, Tensor};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use workcell_sim::dataset::{Dataset, Split};
+
+use crate::backend::Backend;
+use crate::config::ProcNetConfig;
+use crate::data::{Augment, SequenceTensors, load_split, make_batch};
+use crate::error::{PerceptionError, Result};
+use crate::loss::{dice_per_class, focal_per_class};
+use crate::model::{ProcNetModel, StepOutput};
+use crate::weights;
+
+/// Weights of the loss terms and the focal loss's parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LossConfig {
+    pub dice: f32,
+    pub focal: f32,
+    /// Weight of `sum_l mean(E_l)` (ignored when the model has no prediction loss).
+    pub prediction: f32,
+    pub focal_alpha: f32,
+    pub focal_gamma: f32,
+}
+
+impl Default for LossConfig {
+    fn default() -> Self {
+        Self {
+            dice: 1.0,
+            focal: 1.0,
+            prediction: 1.0,
+            focal_alpha: 0.5,
+            focal_gamma: 2.0,
+        }
+    }
+}
+
+/// Augmentation drawn per sequence.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AugmentConfig {
+    /// Mirror left-right with probability 1/2.
+    pub flip: bool,
+    /// Largest shift, in model pixels.
+    pub max_shift_px: i32,
+    /// Colour jitter: brightness offset and contrast, saturation factors within 1 +- this.
+    pub jitter: f32,
+}
+
+impl Default for AugmentConfig {
+    fn default() -> Self {
+        Self {
+            flip: true,
+            max_shift_px: 4,
+            jitter: 0.15,
+        }
+    }
+}
+
+/// A training run (`workcell train --config FILE`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// The dataset folder (`workcell dataset generate`), relative to the config file.
+    pub dataset: PathBuf,
+    pub seed: u64,
+    pub backend: Backend,
+    /// CPU threads for the backend.
+    pub threads: usize,
+    /// Optimiser steps; each sees `batch` windows of `window` frames.
+    pub steps: usize,
+    pub batch: usize,
+    /// Frames per BPTT window (random start within a sequence).
+    pub window: usize,
+    /// Peak learning rate of the one-cycle schedule.
+    pub lr: f64,
+    /// Fraction of the steps spent warming up.
+    pub warmup_fraction: f64,
+    pub weight_decay: f32,
+    /// Gradients are clipped to this global L2 norm.
+    pub clip_norm: f32,
+    pub loss: LossConfig,
+    pub augment: AugmentConfig,
+    /// Save a checkpoint every this many steps.
+    pub checkpoint_every: usize,
+    /// Evaluate on the validation split every this many steps (0: never).
+    pub validate_every: usize,
+    /// The network (starts from the `cpu` preset; override any key).
+    pub model: ProcNetConfig,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            dataset: PathBuf::from("out/dataset"),
+            seed: 1,
+            backend: Backend::Flex,
+            threads: 2,
+            steps: 2000,
+            batch: 4,
+            window: 10,
+            lr: 1e-3,
+            warmup_fraction: 0.3,
+            weight_decay: 1e-4,
+            clip_norm: 1.0,
+            loss: LossConfig::default(),
+            augment: AugmentConfig::default(),
+            checkpoint_every: 100,
+            validate_every: 250,
+            model: ProcNetConfig::cpu(),
+        }
+    }
+}
+
+impl TrainConfig {
+    /// Reads a TOML file; `dataset` is resolved against the file's folder.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| PerceptionError::ConfigFile {
+            path: path.to_path_buf(),
+            message: format!("cannot read: {e}"),
+        })?;
+        let mut config: TrainConfig =
+            toml::from_str(&text).map_err(|e| PerceptionError::ConfigFile {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+        if config.dataset.is_relative() {
+            let base = path.parent().unwrap_or(Path::new("."));
+            config.dataset = base.join(&config.dataset);
+        }
+        config.validate().map_err(|e| PerceptionError::ConfigFile {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        Ok(config)
+    }
+
+    /// The configuration as TOML, every default filled in.
+    #[must_use]
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).unwrap_or_default()
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let bad = |key: &str, message: String| {
+            Err(PerceptionError::Config {
+                key: key.into(),
+                message,
+            })
+        };
+        self.model.validate()?;
+        if self.steps == 0 {
+            return bad("steps", "at least 1".into());
+        }
+        if self.batch == 0 || self.batch > 256 {
+            return bad("batch", format!("1..=256, got {}", self.batch));
+        }
+        if self.window < 2 {
+            return bad(
+                "window",
+                format!(
+                    "at least 2 frames (frame 0 has weight 0), got {}",
+                    self.window
+                ),
+            );
+        }
+        if !(self.lr.is_finite() && self.lr > 0.0) {
+            return bad("lr", format!("a positive number, got {}", self.lr));
+        }
+        if !(0.0..1.0).contains(&self.warmup_fraction) {
+            return bad(
+                "warmup_fraction",
+                format!("in [0, 1), got {}", self.warmup_fraction),
+            );
+        }
+        if !(self.clip_norm.is_finite() && self.clip_norm > 0.0) {
+            return bad(
+                "clip_norm",
+                format!("a positive number, got {}", self.clip_norm),
+            );
+        }
+        if self.checkpoint_every == 0 {
+            return bad("checkpoint_every", "at least 1".into());
+        }
+        let l = &self.loss;
+        if [l.dice, l.focal, l.prediction, l.focal_gamma]
+            .iter()
+            .any(|w| !w.is_finite() || *w < 0.0)
+            || !(0.0..=1.0).contains(&l.focal_alpha)
+        {
+            return bad("loss", "weights and gamma >= 0, alpha in [0, 1]".into());
+        }
+        Ok(())
+    }
+
+    /// Learning rate at `step` of the one-cycle schedule: a cosine rise from lr/25 to lr, then
+    /// a cosine fall to lr/25e4 (PyTorch's OneCycleLR defaults).
+    #[must_use]
+    pub fn learning_rate(&self, step: usize) -> f64 {
+        let (max, start, end) = (self.lr, self.lr / 25.0, self.lr / 25e4);
+        let n = self.steps.max(1) as f64;
+        let warm = (self.warmup_fraction * n).max(1.0);
+        let s = step as f64;
+        let cos = |from: f64, to: f64, x: f64| {
+            to + (from - to) * 0.5 * (1.0 + (std::f64::consts::PI * x.clamp(0.0, 1.0)).cos())
+        };
+        if s < warm {
+            cos(start, max, s / warm)
+        } else {
+            cos(max, end, (s - warm) / (n - warm).max(1.0))
+        }
+    }
+}
+
+/// One line of `metrics.csv`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StepMetrics {
+    pub step: usize,
+    pub lr: f64,
+    pub loss: f64,
+    pub dice: f64,
+    pub focal: f64,
+    pub prediction: f64,
+    /// Validation Dice loss of the forearm (NaN when not evaluated at this step).
+    pub val_forearm_dice: f64,
+    pub elapsed_s: f64,
+}
+
+const CSV_HEADER: &str = "step,lr,loss,dice,focal,prediction,val_forearm_dice,elapsed_s";
+
+impl StepMetrics {
+    fn csv(&self) -> String {
+        format!(
+            "{},{:.6e},{:.6},{:.6},{:.6},{:.6},{:.6},{:.2}",
+            self.step,
+            self.lr,
+            self.loss,
+            self.dice,
+            self.focal,
+            self.prediction,
+            self.val_forearm_dice,
+            self.elapsed_s
+        )
+    }
+
+    fn parse(line: &str) -> Option<Self> {
+        let v: Vec<f64> = line
+            .split(',')
+            .map(|s| s.trim().parse().ok())
+            .collect::<Option<_>>()?;
+        (v.len() == 8).then(|| Self {
+            step: v[0] as usize,
+            lr: v[1],
+            loss: v[2],
+            dice: v[3],
+            focal: v[4],
+            prediction: v[5],
+            val_forearm_dice: v[6],
+            elapsed_s: v[7],
+        })
+    }
+}
+
+/// Reads `metrics.csv` of a run.
+pub fn read_metrics(path: &Path) -> Result<Vec<StepMetrics>> {
+    let text = std::fs::read_to_string(path).map_err(|source| PerceptionError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(text
+        .lines()
+        .skip(1)
+        .filter_map(StepMetrics::parse)
+        .collect())
+}
+
+/// The losses of one window, summed over frames with their weights.
+pub struct WindowLoss {
+    pub total: Tensor<1>,
+    pub dice: Tensor<1>,
+    pub focal: Tensor<1>,
+    pub prediction: Option<Tensor<1>>,
+}
+
+/// Runs `model` over a batch of windows from a zero state and returns the weighted losses
+/// (frame weight 0 at the window's first frame, 1 after).
+pub fn window_loss(
+    model: &ProcNetModel,
+    rgb: &[Tensor<4>],
+    target: &[Tensor<4>],
+    loss: &LossConfig,
+) -> WindowLoss {
+    let [b, _, h, w] = rgb[0].dims();
+    let device = rgb[0].device();
+    let mut state = model.initial_state(b, h, w, &device);
+    let mut dice_sum: Option<Tensor<1>> = None;
+    let mut focal_sum: Option<Tensor<1>> = None;
+    let mut pred_sum: Option<Tensor<1>> = None;
+    let add = |acc: Option<Tensor<1>>, v: Tensor<1>| Some(acc.map_or(v.clone(), |a| a + v));
+    let weighted = (rgb.len() - 1) as f64;
+    for (t, (x, y)) in rgb.iter().zip(target).enumerate() {
+        let (
+            StepOutput {
+                logits,
+                prediction_error,
+                ..
+            },
+            next,
+        ) = model.step(x.clone(), state);
+        state = next;
+        if t == 0 {
+            continue;
+        }
+        let p = burn::tensor::activation::sigmoid(logits.clone());
+        dice_sum = add(dice_sum, dice_per_class(p, y.clone()).mean());
+        focal_sum = add(
+            focal_sum,
+            focal_per_class(logits, y.clone(), loss.focal_alpha, loss.focal_gamma).mean(),
+        );
+        if let Some(pe) = prediction_error {
+            pred_sum = add(pred_sum, pe);
+        }
+    }
+    let zero = || Tensor::<1>::zeros([1], &device);
+    let dice = dice_sum.unwrap_or_else(zero) / weighted;
+    let focal = focal_sum.unwrap_or_else(zero) / weighted;
+    let prediction = pred_sum.map(|p| p / weighted);
+    let mut total = dice.clone() * loss.dice + focal.clone() * loss.focal;
+    if let Some(p) = &prediction {
+        total = total + p.clone() * loss.prediction;
+    }
+    WindowLoss {
+        total,
+        dice,
+        focal,
+        prediction,
+    }
+}
+
+/// What a progress callback is told after every step.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress {
+    pub step: usize,
+    pub steps: usize,
+    pub metrics: StepMetrics,
+}
+
+/// The files of a run folder.
+#[derive(Debug, Clone)]
+pub struct RunFiles {
+    pub dir: PathBuf,
+}
+
+impl RunFiles {
+    #[must_use]
+    pub fn weights(&self) -> PathBuf {
+        self.dir.join("procnet.safetensors")
+    }
+    #[must_use]
+    pub fn checkpoint_weights(&self) -> PathBuf {
+        self.dir.join("checkpoint").join("model.safetensors")
+    }
+    #[must_use]
+    pub fn checkpoint_optimizer(&self) -> PathBuf {
+        self.dir.join("checkpoint").join("optimizer.burn")
+    }
+    #[must_use]
+    pub fn checkpoint_step(&self) -> PathBuf {
+        self.dir.join("checkpoint").join("step.json")
+    }
+    #[must_use]
+    pub fn metrics(&self) -> PathBuf {
+        self.dir.join("metrics.csv")
+    }
+    #[must_use]
+    pub fn config(&self) -> PathBuf {
+        self.dir.join("train.toml")
+    }
+}
+
+/// The result of a finished run.
+#[derive(Debug, Clone)]
+pub struct TrainReport {
+    pub weights: PathBuf,
+    pub metrics: Vec<StepMetrics>,
+    /// The step this run started from (0, or the checkpoint it resumed).
+    pub resumed_from: usize,
+    pub wall_s: f64,
+}
+
+/// A training run into a folder.
+pub struct Trainer {
+    pub config: TrainConfig,
+    pub files: RunFiles,
+}
+
+fn io_err(path: &Path) -> impl Fn(std::io::Error) -> PerceptionError + '_ {
+    move |source| PerceptionError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+impl Trainer {
+    /// A run into `out`. A folder holding a checkpoint of the same configuration is resumed;
+    /// one of another configuration is refused.
+    pub fn new(config: TrainConfig, out: &Path) -> Result<Self> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            files: RunFiles {
+                dir: out.to_path_buf(),
+            },
+        })
+    }
+
+    /// Trains to the configured number of steps, calling `progress` after each.
+    pub fn run(&self, progress: &mut dyn FnMut(Progress)) -> Result<TrainReport> {
+        let cfg = &self.config;
+        let files = &self.files;
+        std::fs::create_dir_all(files.dir.join("checkpoint")).map_err(io_err(&files.dir))?;
+        self.check_or_write_config()?;
+
+        let dataset = Dataset::open(&cfg.dataset)?;
+        let train = load_split(&dataset, Split::Train, &cfg.model)?;
+        let validation = load_split(&dataset, Split::Validation, &cfg.model)?;
+        let usable: Vec<&SequenceTensors> =
+            train.iter().filter(|s| s.frames >= cfg.window).collect();
+        if usable.is_empty() {
+            return Err(PerceptionError::Training {
+                message: format!(
+                    "no training sequence has {} frames (window); the dataset has {} training sequences",
+                    cfg.window,
+                    train.len()
+                ),
+            });
+        }
+
+        let device: Device = cfg.backend.device()?.autodiff();
+        let mut model = cfg.model.init(&device, cfg.seed)?;
+        let mut optim: ModuleOptimizer = AdamWConfig::new()
+            .with_weight_decay(cfg.weight_decay)
+            .with_grad_clipping(Some(GradientClippingConfig::Norm(cfg.clip_norm)))
+            .init();
+
+        // Resume from the checkpoint if there is one.
+        let mut metrics: Vec<StepMetrics> = Vec::new();
+        let mut start = 0usize;
+        if let Ok(text) = std::fs::read_to_string(files.checkpoint_step()) {
+            start = serde_json::from_str::<usize>(text.trim()).map_err(|e| {
+                PerceptionError::Training {
+                    message: format!("{}: {e}", files.checkpoint_step().display()),
+                }
+            })?;
+            weights::load_checked(&mut model, &cfg.model, &files.checkpoint_weights())?;
+            let record = OptimizerRecord::load(files.checkpoint_optimizer()).map_err(|e| {
+                PerceptionError::Weights {
+                    path: files.checkpoint_optimizer(),
+                    message: format!("cannot load the optimizer state: {e:?}"),
+                }
+            })?;
+            optim = optim.load_record(record);
+            metrics = read_metrics(&files.metrics())
+                .unwrap_or_default()
+                .into_iter()
+                .filter(|m| m.step < start)
+                .collect();
+            tracing::info!(step = start, "resuming");
+        }
+        self.rewrite_metrics(&metrics)?;
+        let elapsed_before = metrics.last().map_or(0.0, |m| m.elapsed_s);
+
+        let clock = Instant::now();
+        let classes = cfg.model.num_classes();
+        let forearm = cfg.model.class_index("forearm");
+        for step in start..cfg.steps {
+            // Every step draws from its own generator: a resumed run sees the same windows.
+            let mut rng = ChaCha8Rng::seed_from_u64(
+                cfg.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ step as u64,
+            );
+            let picks: Vec<(&SequenceTensors, usize, Augment)> = (0..cfg.batch)
+                .map(|_| {
+                    let seq = usable[rng.random_range(0..usable.len())];
+                    let start = rng.random_range(0..=seq.frames - cfg.window);
+                    let aug = if cfg.augment.flip
+                        || cfg.augment.max_shift_px > 0
+                        || cfg.augment.jitter > 0.0
+                    {
+                        let mut a = Augment::draw(
+                            &mut rng,
+                            cfg.augment.max_shift_px.max(0),
+                            cfg.augment.jitter,
+                        );
+                        a.flip &= cfg.augment.flip;
+                        a
+                    } else {
+                        Augment::NONE
+                    };
+                    (seq, start, aug)
+                })
+                .collect();
+            let batch = make_batch(&picks, cfg.window, classes, &device);
+            let lr = cfg.learning_rate(step);
+            let losses = window_loss(&model, &batch.rgb, &batch.target, &cfg.loss);
+            let total = scalar(&losses.total);
+            if !total.is_finite() {
+                return Err(PerceptionError::Training {
+                    message: format!(
+                        "loss is {total} at step {step}; lower lr (now {lr:.2e}) or resume from the last checkpoint"
+                    ),
+                });
+            }
+            let grads = losses.total.backward();
+            let grads = GradientsParams::from_grads(grads, &model);
+            model = optim.step(lr, model, grads);
+
+            let done = step + 1;
+            let mut m = StepMetrics {
+                step: done,
+                lr,
+                loss: total,
+                dice: scalar(&losses.dice),
+                focal: scalar(&losses.focal),
+                prediction: losses.prediction.as_ref().map_or(0.0, scalar),
+                val_forearm_dice: f64::NAN,
+                elapsed_s: elapsed_before + clock.elapsed().as_secs_f64(),
+            };
+            if let Some(f) = forearm
+                && cfg.validate_every > 0
+                && (done % cfg.validate_every == 0 || done == cfg.steps)
+                && !validation.is_empty()
+            {
+                m.val_forearm_dice =
+                    validation_dice(&model.valid(), &validation, f, &cfg.backend.device()?);
+            }
+            self.append_metrics(&m)?;
+            metrics.push(m);
+            if done % cfg.checkpoint_every == 0 || done == cfg.steps {
+                self.checkpoint(&model, &optim, done)?;
+            }
+            progress(Progress {
+                step: done,
+                steps: cfg.steps,
+                metrics: m,
+            });
+        }
+        weights::save(&model.valid(), &cfg.model, &files.weights())?;
+        Ok(TrainReport {
+            weights: files.weights(),
+            metrics,
+            resumed_from: start,
+            wall_s: clock.elapsed().as_secs_f64(),
+        })
+    }
+
+    fn check_or_write_config(&self) -> Result<()> {
+        let path = self.files.config();
+        let mine = self.config.to_toml();
+        match std::fs::read_to_string(&path) {
+            Ok(existing) if existing != mine => {
+                let theirs: Option<TrainConfig> = toml::from_str(&existing).ok();
+                let what = theirs.map_or_else(
+                    || "an unreadable configuration".to_string(),
+                    |t| weights::config_difference(&self.config.model, &t.model),
+                );
+                Err(PerceptionError::Training {
+                    message: format!(
+                        "{} holds a run of another configuration ({}); choose another --out or delete it",
+                        self.files.dir.display(),
+                        if what.is_empty() {
+                            "training settings differ".into()
+                        } else {
+                            what
+                        }
+                    ),
+                })
+            }
+            Ok(_) => Ok(()),
+            Err(_) => std::fs::write(&path, mine).map_err(io_err(&path)),
+        }
+    }
+
+    fn checkpoint(&self, model: &ProcNetModel, optim: &ModuleOptimizer, step: usize) -> Result<()> {
+        let files = &self.files;
+        weights::save(
+            &model.valid(),
+            &self.config.model,
+            &files.checkpoint_weights(),
+        )?;
+        let opt_path = files.checkpoint_optimizer();
+        let tmp = opt_path.with_extension("tmp");
+        optim
+            .to_record()
+            .save(&tmp)
+            .map_err(|e| PerceptionError::Weights {
+                path: opt_path.clone(),
+                message: format!("cannot save the optimizer state: {e:?}"),
+            })?;
+        std::fs::rename(&tmp, &opt_path).map_err(io_err(&opt_path))?;
+        // The step file is written last: it marks the checkpoint complete.
+        let step_path = files.checkpoint_step();
+        std::fs::write(&step_path, step.to_string()).map_err(io_err(&step_path))
+    }
+
+    fn rewrite_metrics(&self, metrics: &[StepMetrics]) -> Result<()> {
+        let path = self.files.metrics();
+        let mut text = String::from(CSV_HEADER);
+        text.push('\n');
+        for m in metrics {
+            text.push_str(&m.csv());
+            text.push('\n');
+        }
+        std::fs::write(&path, text).map_err(io_err(&path))
+    }
+
+    fn append_metrics(&self, m: &StepMetrics) -> Result<()> {
+        let path = self.files.metrics();
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&path)
+            .map_err(io_err(&path))?;
+        writeln!(f, "{}", m.csv()).map_err(io_err(&path))
+    }
+}
+
+/// The value of a one-element tensor.
+pub fn scalar(t: &Tensor<1>) -> f64 {
+    t.clone().into_scalar::<f32>() as f64
+}
+
+/// Mean forearm Dice loss over the validation sequences (frames after the first), at the
+/// model's resolution.
+fn validation_dice(
+    model: &ProcNetModel,
+    sequences: &[SequenceTensors],
+    class: usize,
+    device: &Device,
+) -> f64 {
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for seq in sequences {
+        let batch = make_batch(
+            &[(seq, 0, Augment::NONE)],
+            seq.frames,
+            model_classes(model),
+            device,
+        );
+        let mut state = model.initial_state(1, seq.size, seq.size, device);
+        for (t, (x, y)) in batch.rgb.iter().zip(&batch.target).enumerate() {
+            let (out, next) = model.step(x.clone(), state);
+            state = next;
+            if t == 0 {
+                continue;
+            }
+            let p = burn::tensor::activation::sigmoid(out.logits);
+            let d = dice_per_class(p, y.clone());
+            sum += d.slice([0..1, class..class + 1]).into_scalar::<f32>() as f64;
+            n += 1;
+        }
+    }
+    if n == 0 { f64::NAN } else { sum / n as f64 }
+}
+
+fn model_classes(model: &ProcNetModel) -> usize {
+    model.head.weight.dims()[0]
+}

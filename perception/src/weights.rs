@@ -1,0 +1,178 @@
+//! Weight files: safetensors with the model's configuration in the metadata, so that a file
+//! is refused by a model of another configuration with an error that says what differs.
+
+use std::path::Path;
+
+use burn::store::{ModuleSnapshot, SafetensorsStore};
+use burn::tensor::Device;
+
+use crate::config::ProcNetConfig;
+use crate::error::{PerceptionError, Result};
+use crate::model::ProcNetModel;
+
+/// The `format` entry of a weight file's metadata.
+pub const FORMAT: &str = "workcell-procnet/1";
+
+fn weights_error(path: &Path, message: impl Into<String>) -> PerceptionError {
+    PerceptionError::Weights {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// Reads and checks a safetensors header: its metadata, and that the file holds every byte
+/// the header points to.
+pub fn read_metadata(path: &Path) -> Result<serde_json::Map<String, serde_json::Value>> {
+    let bytes =
+        std::fs::read(path).map_err(|e| weights_error(path, format!("cannot read: {e}")))?;
+    let header_len = bytes
+        .get(..8)
+        .map(|b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
+        .ok_or_else(|| weights_error(path, "not a safetensors file: shorter than its header"))?;
+    let header_end = usize::try_from(header_len)
+        .ok()
+        .and_then(|n| n.checked_add(8))
+        .filter(|&end| end <= bytes.len())
+        .ok_or_else(|| {
+            weights_error(
+                path,
+                format!("truncated or corrupt: header of {header_len} bytes"),
+            )
+        })?;
+    let header: serde_json::Map<String, serde_json::Value> =
+        serde_json::from_slice(&bytes[8..header_end])
+            .map_err(|e| weights_error(path, format!("corrupt header: {e}")))?;
+    let data_len = bytes.len() - header_end;
+    for (name, info) in &header {
+        if name == "__metadata__" {
+            continue;
+        }
+        let end = info
+            .get("data_offsets")
+            .and_then(|o| o.get(1))
+            .and_then(serde_json::Value::as_u64)
+            .ok_or_else(|| weights_error(path, format!("corrupt header entry {name:?}")))?;
+        if end > data_len as u64 {
+            return Err(weights_error(
+                path,
+                format!(
+                    "truncated: tensor {name:?} ends at byte {end} of a {data_len}-byte data section"
+                ),
+            ));
+        }
+    }
+    match header.get("__metadata__") {
+        Some(serde_json::Value::Object(m)) => Ok(m.clone()),
+        _ => Ok(serde_json::Map::new()),
+    }
+}
+
+/// The configuration stored in a weight file.
+pub fn read_config(path: &Path) -> Result<ProcNetConfig> {
+    let meta = read_metadata(path)?;
+    let format = meta.get("format").and_then(|v| v.as_str()).unwrap_or("");
+    if format != FORMAT {
+        return Err(weights_error(
+            path,
+            format!("not a workcell ProcNet weight file (format {format:?}, expected {FORMAT:?})"),
+        ));
+    }
+    let text = meta
+        .get("config")
+        .and_then(|v| v.as_str())
+        .ok_or_else(|| weights_error(path, "no configuration in the metadata"))?;
+    let config: ProcNetConfig = serde_json::from_str(text)
+        .map_err(|e| weights_error(path, format!("bad configuration in the metadata: {e}")))?;
+    config
+        .validate()
+        .map_err(|e| weights_error(path, format!("configuration: {e}")))?;
+    Ok(config)
+}
+
+/// Saves a model and its configuration.
+pub fn save(model: &ProcNetModel, config: &ProcNetConfig, path: &Path) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|source| PerceptionError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    // Write beside, then rename: an interrupted save never leaves a half file.
+    let tmp = path.with_extension("safetensors.tmp");
+    let mut store = SafetensorsStore::from_file(&tmp)
+        .metadata("format", FORMAT)
+        .metadata("config", config.to_json())
+        .overwrite(true);
+    model
+        .save_into(&mut store)
+        .map_err(|e| weights_error(path, format!("cannot save: {e}")))?;
+    std::fs::rename(&tmp, path).map_err(|source| PerceptionError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Loads weights into a fresh model of the file's own configuration.
+pub fn load(path: &Path, device: &Device) -> Result<(ProcNetModel, ProcNetConfig)> {
+    let config = read_config(path)?;
+    let mut model = config.init(device, 0)?;
+    load_into(&mut model, path)?;
+    Ok((model, config))
+}
+
+/// Loads weights into `model`, which must be of the configuration `expected`.
+pub fn load_checked(model: &mut ProcNetModel, expected: &ProcNetConfig, path: &Path) -> Result<()> {
+    let found = read_config(path)?;
+    if &found != expected {
+        return Err(weights_error(
+            path,
+            format!(
+                "weights of another configuration: {}",
+                config_difference(expected, &found)
+            ),
+        ));
+    }
+    load_into(model, path)
+}
+
+fn load_into(model: &mut ProcNetModel, path: &Path) -> Result<()> {
+    let mut store = SafetensorsStore::from_file(path);
+    let result = model
+        .load_from(&mut store)
+        .map_err(|e| weights_error(path, format!("cannot load: {e}")))?;
+    if !result.missing.is_empty() || !result.errors.is_empty() {
+        return Err(weights_error(
+            path,
+            format!(
+                "does not fit the model: missing {:?}, errors {:?}",
+                result.missing, result.errors
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The keys that differ between two configurations, as `key: expected vs found`.
+#[must_use]
+pub fn config_difference(expected: &ProcNetConfig, found: &ProcNetConfig) -> String {
+    let (a, b) = (
+        serde_json::to_value(expected).unwrap_or_default(),
+        serde_json::to_value(found).unwrap_or_default(),
+    );
+    let mut diffs = Vec::new();
+    if let (Some(a), Some(b)) = (a.as_object(), b.as_object()) {
+        let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();
+        keys.sort();
+        keys.dedup();
+        for k in keys {
+            if a.get(k) != b.get(k) {
+                diffs.push(format!(
+                    "{k}: expected {} found {}",
+                    a.get(k).map_or("-".into(), ToString::to_string),
+                    b.get(k).map_or("-".into(), ToString::to_string)
+                ));
+            }
+        }
+    }
+    diffs.join("; ")
+}

@@ -1,0 +1,36 @@
+//! Helpers shared by the perception tests (tiny configurations).
+
+#![allow(dead_code)]
+
+use workcell_perception::{CellKind, ProcNetConfig};
+
+/// A 3-layer network small enough for debug-build tests.
+pub fn tiny(cell: CellKind) -> ProcNetConfig {
+    ProcNetConfig {
+        input_size: 16,
+        repr_channels: vec![4, 6, 8],
+        input_channels: vec![3, 4, 6],
+        cell,
+        classes: vec!["forearm".into(), "robot".into()],
+        ..ProcNetConfig::cpu()
+    }
+}
+
+/// The deterministic test frames of `bench/procnet.py reference` (same formula), frame `t`,
+/// batch entry `b`: `0.5 + 0.5 sin(0.37 x + 0.23 y + 1.1 c + 0.5 t + 0.7 b)`.
+pub fn reference_frame(t: usize, b: usize, size: usize) -> Vec<f32> {
+    let mut v = Vec::with_capacity(3 * size * size);
+    for c in 0..3 {
+        for y in 0..size {
+            for x in 0..size {
+                let a = 0.37 * x as f64
+                    + 0.23 * y as f64
+                    + 1.1 * c as f64
+                    + 0.5 * t as f64
+                    + 0.7 * b as f64;
+                v.push((0.5 + 0.5 * a.sin()) as f32);
+            }
+        }
+    }
+    v
+}

@@ -1,0 +1,241 @@
+//! ProcNet's shapes, state, weight files and bad input.
+
+mod common;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use common::{reference_frame, tiny};
+use workcell_perception::{Backend, CellKind, PerceptionError, ProcNet, ProcNetConfig, weights};
+
+fn frame(t: usize, b: usize, s: usize, device: &Device) -> Tensor<4> {
+    let v: Vec<f32> = (0..b).flat_map(|k| reference_frame(t, k, s)).collect();
+    Tensor::from_data(TensorData::new(v, [b, 3, s, s]), device)
+}
+
+#[test]
+fn every_switch_of_table_1_gives_the_documented_shapes() {
+    let device = Device::flex();
+    for cell in CellKind::ALL {
+        for layers in [3, 4] {
+            for axonal_delay in [false, true] {
+                for prediction_loss in [false, true] {
+                    let mut config = ProcNetConfig {
+                        cell,
+                        axonal_delay,
+                        prediction_loss,
+                        ..tiny(cell)
+                    };
+                    if layers == 4 {
+                        config.repr_channels = vec![4, 6, 8, 8];
+                        config.input_channels = vec![3, 4, 6, 8];
+                    }
+                    let model = config.init(&device, 3).unwrap();
+                    let (b, s) = (2, config.input_size);
+                    let mut state = model.initial_state(b, s, s, &device);
+                    for t in 0..3 {
+                        let (out, next) = model.step(frame(t, b, s, &device), state);
+                        state = next;
+                        let what = format!(
+                            "{cell:?} {layers} layers delay {axonal_delay} pred {prediction_loss}"
+                        );
+                        assert_eq!(out.logits.dims(), [b, 2, s, s], "{what}");
+                        assert_eq!(
+                            out.prediction.as_ref().map(Tensor::dims),
+                            prediction_loss.then_some([b, 3, s, s]),
+                            "{what}"
+                        );
+                        assert_eq!(out.prediction_error.is_some(), prediction_loss, "{what}");
+                        let top = &state.cells[layers - 1].h;
+                        assert_eq!(
+                            top.dims(),
+                            [
+                                b,
+                                config.repr_channels[layers - 1],
+                                s >> (layers - 1),
+                                s >> (layers - 1)
+                            ],
+                            "{what}"
+                        );
+                        let v: Vec<f32> = out.logits.into_data().try_to_vec().unwrap();
+                        assert!(v.iter().all(|x| x.is_finite()), "{what}");
+                    }
+                    assert_eq!(state.frames, 3);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_state_carries_information_and_reset_forgets_it() {
+    let device = Device::flex();
+    let config = tiny(CellKind::Hgru);
+    let model = config.init(&device, 5).unwrap();
+    let mut net = ProcNet::new(model, config.clone(), device);
+    let s = config.input_size;
+    let first = net.segment(&reference_frame(0, 0, s)).unwrap();
+    let again = net.segment(&reference_frame(0, 0, s)).unwrap();
+    // The same frame twice: the recurrent state makes the second answer differ.
+    assert_ne!(first.probabilities, again.probabilities);
+    assert_eq!(net.frames(), 2);
+    net.reset();
+    let after_reset = net.segment(&reference_frame(0, 0, s)).unwrap();
+    assert_eq!(first.probabilities, after_reset.probabilities);
+    assert!(first.probabilities.iter().all(|p| (0.0..=1.0).contains(p)));
+    assert_eq!(first.class("robot").unwrap().len(), s * s);
+}
+
+#[test]
+fn save_and_load_give_identical_outputs() {
+    let device = Device::flex();
+    let dir = tempfile::tempdir().unwrap();
+    for cell in CellKind::ALL {
+        let config = tiny(cell);
+        let model = config.init(&device, 11).unwrap();
+        let path = dir.path().join(format!("{}.safetensors", cell.name()));
+        weights::save(&model, &config, &path).unwrap();
+        let mut a = ProcNet::new(model, config.clone(), device.clone());
+        let mut b = ProcNet::load(&path, Backend::Flex).unwrap();
+        assert_eq!(b.config(), &config);
+        for t in 0..3 {
+            let x = reference_frame(t, 0, config.input_size);
+            assert_eq!(
+                a.segment(&x).unwrap(),
+                b.segment(&x).unwrap(),
+                "{cell:?} frame {t}"
+            );
+        }
+    }
+}
+
+#[test]
+fn seeds_decide_the_initial_weights() {
+    let device = Device::flex();
+    let config = tiny(CellKind::ConvLstm);
+    let x = reference_frame(0, 0, config.input_size);
+    let run = |seed| {
+        let mut net = ProcNet::new(
+            config.init(&device, seed).unwrap(),
+            config.clone(),
+            device.clone(),
+        );
+        net.segment(&x).unwrap().probabilities
+    };
+    assert_eq!(run(1), run(1));
+    assert_ne!(run(1), run(2));
+}
+
+#[test]
+fn bad_frames_are_clear_errors() {
+    let device = Device::flex();
+    let config = tiny(CellKind::Hgru);
+    let mut net = ProcNet::new(config.init(&device, 1).unwrap(), config.clone(), device);
+    let s = config.input_size;
+    // Wrong size: a 32x32 frame for a 16x16 network.
+    let e = net.segment(&vec![0.5; 3 * 32 * 32]).unwrap_err();
+    assert!(matches!(e, PerceptionError::Input { .. }), "{e}");
+    assert!(e.to_string().contains("3x32x32"), "{e}");
+    // Wrong channel count: one gray plane.
+    let e = net.segment(&vec![0.5; s * s]).unwrap_err().to_string();
+    assert!(e.contains("3x16x16"), "{e}");
+    // A NaN pixel, located.
+    let mut x = reference_frame(0, 0, s);
+    x[s * s + 2 * s + 5] = f32::NAN;
+    let e = net.segment(&x).unwrap_err().to_string();
+    assert!(e.contains("channel 1, row 2, column 5"), "{e}");
+    // The failed calls did not advance the stream.
+    assert_eq!(net.frames(), 0);
+}
+
+#[test]
+fn bad_weight_files_are_clear_errors() {
+    let device = Device::flex();
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny(CellKind::Hgru);
+    let model = config.init(&device, 1).unwrap();
+    let good = dir.path().join("good.safetensors");
+    weights::save(&model, &config, &good).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+
+    let missing = dir.path().join("missing.safetensors");
+    let e = ProcNet::load(&missing, Backend::Flex)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("missing.safetensors") && e.contains("cannot read"),
+        "{e}"
+    );
+
+    let truncated = dir.path().join("truncated.safetensors");
+    std::fs::write(&truncated, &bytes[..bytes.len() - 100]).unwrap();
+    let e = ProcNet::load(&truncated, Backend::Flex)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("truncated"), "{e}");
+
+    let short = dir.path().join("short.safetensors");
+    std::fs::write(&short, &bytes[..5]).unwrap();
+    let e = ProcNet::load(&short, Backend::Flex)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not a safetensors file"), "{e}");
+
+    let corrupt = dir.path().join("corrupt.safetensors");
+    let mut c = bytes.clone();
+    c[10] = b'#';
+    std::fs::write(&corrupt, &c).unwrap();
+    let e = ProcNet::load(&corrupt, Backend::Flex)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("corrupt header"), "{e}");
+
+    let huge = dir.path().join("huge.safetensors");
+    let mut h = bytes.clone();
+    h[..8].copy_from_slice(&u64::MAX.to_le_bytes());
+    std::fs::write(&huge, &h).unwrap();
+    let e = ProcNet::load(&huge, Backend::Flex).unwrap_err().to_string();
+    assert!(e.contains("truncated or corrupt"), "{e}");
+
+    // Weights of another configuration, loaded into this one.
+    let other = ProcNetConfig {
+        repr_channels: vec![4, 6, 10],
+        ..config.clone()
+    };
+    let other_path = dir.path().join("other.safetensors");
+    weights::save(&other.init(&device, 1).unwrap(), &other, &other_path).unwrap();
+    let mut mine = config.init(&device, 1).unwrap();
+    let e = weights::load_checked(&mut mine, &config, &other_path)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("another configuration") && e.contains("repr_channels"),
+        "{e}"
+    );
+}
+
+#[cfg(feature = "tch")]
+#[test]
+fn flex_and_libtorch_give_the_same_masks() {
+    let dir = tempfile::tempdir().unwrap();
+    for cell in CellKind::ALL {
+        let config = tiny(cell);
+        let path = dir.path().join("w.safetensors");
+        weights::save(&config.init(&Device::flex(), 4).unwrap(), &config, &path).unwrap();
+        let mut flex = ProcNet::load(&path, Backend::Flex).unwrap();
+        let mut tch = ProcNet::load(&path, Backend::Tch).unwrap();
+        for t in 0..4 {
+            let x = reference_frame(t, 0, config.input_size);
+            let (a, b) = (flex.segment(&x).unwrap(), tch.segment(&x).unwrap());
+            let worst = a
+                .probabilities
+                .iter()
+                .zip(&b.probabilities)
+                .map(|(p, q)| (p - q).abs())
+                .fold(0f32, f32::max);
+            // f32 on both sides, different summation orders: agreement to 1e-5.
+            assert!(
+                worst < 1e-5,
+                "{cell:?} frame {t}: probabilities differ by {worst}"
+            );
+        }
+    }
+}

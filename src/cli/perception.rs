@@ -1,0 +1,217 @@
+//! `workcell train` and `workcell eval segmentation`: ProcNet.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use workcell::perception::eval::evaluate;
+use workcell::perception::train::{TrainConfig, Trainer, read_metrics};
+use workcell::perception::{Backend, backend, weights};
+use workcell::plot::{Panel, svg_panels};
+use workcell::sim::dataset::{Dataset, Split};
+
+#[derive(Debug, clap::Args)]
+pub struct TrainArgs {
+    /// Training configuration (TOML), e.g. configs/train.toml.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Run folder: checkpoints, metrics.csv, loss_curve.svg, procnet.safetensors. A folder
+    /// holding a checkpoint of the same configuration is resumed.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Override the configuration's backend (flex, tch).
+    #[arg(long)]
+    pub backend: Option<String>,
+    /// Override the configuration's number of steps.
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Print the configuration with every default filled in, then exit.
+    #[arg(long)]
+    pub print_defaults: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct EvalSegmentationArgs {
+    /// ProcNet weights (safetensors), e.g. perception/weights/procnet-cpu.safetensors.
+    #[arg(long)]
+    pub weights: PathBuf,
+    /// Dataset folder.
+    #[arg(long, default_value = "out/dataset")]
+    pub dataset: PathBuf,
+    /// Which split: train, validation or test.
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// flex or tch.
+    #[arg(long, default_value = "flex")]
+    pub backend: String,
+    /// CPU threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Also write the Markdown table to this file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+fn bar(len: u64, template: &str) -> ProgressBar {
+    ProgressBar::new(len).with_style(
+        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
+    )
+}
+
+pub fn train(args: &TrainArgs) -> Result<ExitCode> {
+    if args.print_defaults {
+        print!("{}", TrainConfig::default().to_toml());
+        return Ok(ExitCode::SUCCESS);
+    }
+    let path = args
+        .config
+        .clone()
+        .context("--config FILE is required (see configs/train.toml)")?;
+    let mut config = TrainConfig::from_file(&path)?;
+    if let Some(b) = &args.backend {
+        config.backend = Backend::parse(b)?;
+    }
+    if let Some(s) = args.steps {
+        config.steps = s;
+    }
+    backend::set_threads(config.threads);
+    let trainer = Trainer::new(config, &args.out)?;
+    let progress = bar(
+        trainer.config.steps as u64,
+        "{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}",
+    );
+    let report = trainer.run(&mut |p| {
+        progress.set_position(p.step as u64);
+        progress.set_message(format!("loss {:.4}", p.metrics.loss));
+    })?;
+    progress.finish_and_clear();
+    let metrics = read_metrics(&trainer.files.metrics())?;
+    let svg = trainer.files.dir.join("loss_curve.svg");
+    write_loss_curve(&metrics, &svg)?;
+    let last = report.metrics.last().copied().unwrap_or_default();
+    println!(
+        "{} steps ({} this run, {:.0} s) -> {}\n  last loss {:.4} (Dice {:.4}, focal {:.4}, prediction {:.4}); validation forearm Dice loss {:.4}\n  metrics: {}, curve: {}",
+        trainer.config.steps,
+        trainer.config.steps - report.resumed_from,
+        report.wall_s,
+        report.weights.display(),
+        last.loss,
+        last.dice,
+        last.focal,
+        last.prediction,
+        last.val_forearm_dice,
+        trainer.files.metrics().display(),
+        svg.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn write_loss_curve(
+    metrics: &[workcell::perception::train::StepMetrics],
+    path: &std::path::Path,
+) -> Result<()> {
+    let x: Vec<f64> = metrics.iter().map(|m| m.step as f64).collect();
+    let smooth = |v: Vec<f64>| -> Vec<f64> {
+        // Exponential moving average, so that the trend shows through the batch noise.
+        let mut acc = f64::NAN;
+        v.into_iter()
+            .map(|y| {
+                acc = if acc.is_nan() {
+                    y
+                } else {
+                    0.95 * acc + 0.05 * y
+                };
+                acc
+            })
+            .collect()
+    };
+    let mut val_x = Vec::new();
+    let mut val = Vec::new();
+    for m in metrics.iter().filter(|m| m.val_forearm_dice.is_finite()) {
+        val_x.push(m.step as f64);
+        val.push(m.val_forearm_dice);
+    }
+    let panels = vec![
+        Panel {
+            title: "training loss (moving average)".into(),
+            y_label: "loss".into(),
+            series: vec![
+                (
+                    "total".into(),
+                    smooth(metrics.iter().map(|m| m.loss).collect()),
+                ),
+                (
+                    "Dice".into(),
+                    smooth(metrics.iter().map(|m| m.dice).collect()),
+                ),
+                (
+                    "focal".into(),
+                    smooth(metrics.iter().map(|m| m.focal).collect()),
+                ),
+                (
+                    "prediction".into(),
+                    smooth(metrics.iter().map(|m| m.prediction).collect()),
+                ),
+            ],
+        },
+        Panel {
+            title: "learning rate".into(),
+            y_label: "lr".into(),
+            series: vec![("lr".into(), metrics.iter().map(|m| m.lr).collect())],
+        },
+    ];
+    let mut svg = svg_panels(&x, "step", &panels);
+    if !val.is_empty() {
+        let val_panel = vec![Panel {
+            title: "validation forearm Dice loss".into(),
+            y_label: "Dice loss".into(),
+            series: vec![("forearm".into(), val)],
+        }];
+        // A separate document for the validation curve (its own x samples).
+        let val_svg = svg_panels(&val_x, "step", &val_panel);
+        std::fs::write(path.with_file_name("validation_curve.svg"), val_svg)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    svg.push('\n');
+    std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
+    let split = match args.split.as_str() {
+        "train" => Split::Train,
+        "validation" => Split::Validation,
+        "test" => Split::Test,
+        other => anyhow::bail!("unknown split {other:?} (train, validation, test)"),
+    };
+    backend::set_threads(args.threads);
+    let device = Backend::parse(&args.backend)?.device()?;
+    let (model, config) = weights::load(&args.weights, &device)?;
+    let dataset = Dataset::open(&args.dataset)?;
+    let n = dataset.entries(Some(split)).count();
+    let progress = bar(
+        n as u64,
+        "{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})",
+    );
+    let ev = evaluate(&model, &config, &dataset, split, &device, &mut |done, _| {
+        progress.set_position(done as u64);
+    })?;
+    progress.finish_and_clear();
+    let md = format!(
+        "# ProcNet segmentation: {}\n\nWeights `{}` ({} cell, {} layers, {}x{} input), dataset `{}`.\n\n{}",
+        args.split,
+        args.weights.display(),
+        config.cell.name(),
+        config.layers(),
+        config.input_size,
+        config.input_size,
+        args.dataset.display(),
+        ev.to_markdown()
+    );
+    print!("{md}");
+    if let Some(out) = &args.out {
+        std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
