@@ -102,7 +102,8 @@ class ProcNet:
         return torch.sigmoid(o + po) * torch.tanh(c_new), c_new
 
     def cell_step(self, l, x, h, c):
-        p = f"layers.{l}.cell."
+        variant = {"hgru": "Hgru", "convlstm": "ConvLstm", "conv": "Conv"}[self.cell]
+        p = f"layers.{l}.cell.{variant}."
         if self.cell == "hgru":
             return self.hgru(p, x, h), c
         if self.cell == "convlstm":
@@ -179,7 +180,7 @@ def cmd_reference(args):
         for t in range(args.frames):
             logits, pred, pe, state = net.step(frames[t], state)
         probs = torch.sigmoid(logits)
-        out["logits_mean_per_class"] = logits.mean(dim=(0, 2, 3)).tolist()
+        out["logits_abs_mean_per_class"] = logits.abs().mean(dim=(0, 2, 3)).tolist()
         out["probs_sample"] = [probs[0, c, (7 * c) % s, (11 * c + 3) % s].item()
                                for c in range(probs.shape[1])]
         out["prediction_error"] = None if pe is None else pe.item()

@@ -26,7 +26,9 @@ impl Init<'_> {
     fn param<const D: usize>(&mut self, values: Vec<f32>, shape: [usize; D]) -> Param<Tensor<D>> {
         let tensor = Tensor::from_data(TensorData::new(values, shape), self.device);
         self.next_id += 1;
-        Param::initialized(ParamId::from(self.next_id), tensor)
+        let mut param = Param::from_tensor(tensor);
+        param.id = ParamId::from(self.next_id);
+        param
     }
 
     /// Uniform in [-bound, bound].
