@@ -37,6 +37,8 @@ enum Command {
     },
     /// Train ProcNet on a dataset (resumable; progress bar, checkpoints, metrics, curves).
     Train(cli::perception::TrainArgs),
+    /// Time ProcNet's training step and inference per backend (JSON lines).
+    Bench(cli::perception::BenchArgs),
     /// Evaluate trained models.
     Eval {
         #[command(subcommand)]
@@ -101,6 +103,7 @@ fn main() -> ExitCode {
             command: DatasetCommand::Show(a),
         } => cli::dataset::show(&a),
         Command::Train(a) => cli::perception::train(&a),
+        Command::Bench(a) => cli::perception::bench(&a),
         Command::Eval {
             command: EvalCommand::Segmentation(a),
         } => cli::perception::eval_segmentation(&a),

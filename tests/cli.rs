@@ -210,3 +210,123 @@ fn dataset_generate_then_show_writes_a_contact_sheet() {
         text(&bad.stderr)
     );
 }
+
+#[test]
+fn train_resumes_then_eval_segmentation_prints_the_table() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/default.toml");
+    let data_cfg = tmp.path().join("data.toml");
+    std::fs::write(
+        &data_cfg,
+        format!(
+            "scenario = {:?}\nsequences_per_pair = 2\nframes = 4\nwidth_px = 32\nheight_px = 32\nstart_s = [0.5, 1.0]\nsplits = [0.5, 0.0, 0.5]\n",
+            scenario.display().to_string()
+        ),
+    )
+    .expect("config");
+    let data = tmp.path().join("data");
+    let data_s = data.to_str().expect("utf-8");
+    let run = workcell(&[
+        "dataset",
+        "generate",
+        "--config",
+        data_cfg.to_str().expect("utf-8"),
+        "--out",
+        data_s,
+    ]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+
+    let train_cfg = tmp.path().join("train.toml");
+    let recipe = |steps: usize, channels: &str| {
+        format!(
+            "dataset = \"data\"\nsteps = {steps}\nbatch = 2\nwindow = 3\ncheckpoint_every = 2\nvalidate_every = 2\n\n[model]\ninput_size = 16\nrepr_channels = {channels}\ninput_channels = [3, 4, 4]\n"
+        )
+    };
+    std::fs::write(&train_cfg, recipe(6, "[4, 4, 4]")).expect("train config");
+    let out = tmp.path().join("run");
+    let (cfg_s, out_s) = (
+        train_cfg.to_str().expect("utf-8"),
+        out.to_str().expect("utf-8"),
+    );
+    // Interrupted after 4 of 6 steps ...
+    let first = workcell(&[
+        "train",
+        "--config",
+        cfg_s,
+        "--out",
+        out_s,
+        "--stop-after",
+        "4",
+    ]);
+    assert!(first.status.success(), "{}", text(&first.stderr));
+    assert!(
+        text(&first.stdout).contains("stopped at step 4 of 6"),
+        "{}",
+        text(&first.stdout)
+    );
+    assert!(!out.join("procnet.safetensors").exists());
+    // ... the same command resumes from the checkpoint and finishes.
+    let resumed = workcell(&["train", "--config", cfg_s, "--out", out_s]);
+    assert!(resumed.status.success(), "{}", text(&resumed.stderr));
+    assert!(
+        text(&resumed.stdout).contains("6 steps (2 this run"),
+        "{}",
+        text(&resumed.stdout)
+    );
+    for file in [
+        "procnet.safetensors",
+        "metrics.csv",
+        "loss_curve.svg",
+        "train.toml",
+        "checkpoint/step.json",
+    ] {
+        assert!(out.join(file).exists(), "{file} missing");
+    }
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).expect("metrics");
+    assert_eq!(
+        metrics.lines().count(),
+        7,
+        "header and one line per step:\n{metrics}"
+    );
+    // ... and a model of another shape is refused, naming what differs.
+    std::fs::write(&train_cfg, recipe(6, "[4, 4, 8]")).expect("train config");
+    let other = workcell(&["train", "--config", cfg_s, "--out", out_s]);
+    assert!(!other.status.success());
+    assert!(
+        text(&other.stderr).contains("repr_channels"),
+        "{}",
+        text(&other.stderr)
+    );
+
+    let weights = out.join("procnet.safetensors");
+    let eval = workcell(&[
+        "eval",
+        "segmentation",
+        "--weights",
+        weights.to_str().expect("utf-8"),
+        "--dataset",
+        data_s,
+        "--split",
+        "test",
+    ]);
+    assert!(eval.status.success(), "{}", text(&eval.stderr));
+    let md = text(&eval.stdout);
+    assert!(
+        md.contains("| forearm |") && md.contains("occlusion"),
+        "{md}"
+    );
+    let bad = workcell(&[
+        "eval",
+        "segmentation",
+        "--weights",
+        data_s,
+        "--dataset",
+        data_s,
+    ]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("cannot read"),
+        "{}",
+        text(&bad.stderr)
+    );
+}

@@ -51,7 +51,10 @@ impl Backend {
     pub fn device(self) -> Result<Device> {
         match self {
             Backend::Flex => Ok(Device::flex()),
+            // burn 0.22 marks LibTorch deprecated in favour of its CubeCL backends; it is still
+            // the fastest CPU training backend here (docs/perception.md).
             #[cfg(feature = "tch")]
+            #[allow(deprecated)]
             Backend::Tch => Ok(Device::libtorch()),
             #[cfg(not(feature = "tch"))]
             Backend::Tch => Err(PerceptionError::Backend {
@@ -77,6 +80,6 @@ pub fn set_threads(threads: usize) {
 #[cfg(feature = "tch")]
 fn tch_threads(threads: usize) {
     let threads = i32::try_from(threads).unwrap_or(i32::MAX);
-    burn::backend::libtorch::tch::set_num_threads(threads);
-    burn::backend::libtorch::tch::set_num_interop_threads(1);
+    tch::set_num_threads(threads);
+    tch::set_num_interop_threads(1);
 }

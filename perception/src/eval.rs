@@ -47,15 +47,21 @@ impl Scores {
     /// Mean Dice loss of class `c`.
     #[must_use]
     pub fn dice(&self, c: usize) -> f64 {
-        self.dice[c] / self.frames.max(1) as f64
+        self.dice
+            .get(c)
+            .map_or(f64::NAN, |v| v / self.frames.max(1) as f64)
     }
     #[must_use]
     pub fn focal(&self, c: usize) -> f64 {
-        self.focal[c] / self.frames.max(1) as f64
+        self.focal
+            .get(c)
+            .map_or(f64::NAN, |v| v / self.frames.max(1) as f64)
     }
     #[must_use]
     pub fn iou(&self, c: usize) -> f64 {
-        self.iou[c] / self.frames.max(1) as f64
+        self.iou
+            .get(c)
+            .map_or(f64::NAN, |v| v / self.frames.max(1) as f64)
     }
 }
 
@@ -94,6 +100,15 @@ pub fn evaluate(
 ) -> Result<Evaluation> {
     let map = class_map(config, dataset)?;
     let entries: Vec<_> = dataset.entries(Some(split)).cloned().collect();
+    if entries.is_empty() {
+        return Err(crate::error::PerceptionError::Input {
+            message: format!(
+                "the dataset at {} has no {} sequences",
+                dataset.root.display(),
+                split.name()
+            ),
+        });
+    }
     let mut ev = Evaluation {
         classes: config.classes.clone(),
         split: split.name().to_string(),

@@ -6,6 +6,7 @@
 //! time: `flex` (pure Rust, the default), LibTorch (feature `tch`).
 
 pub mod backend;
+pub mod bench;
 pub mod cells;
 pub mod config;
 pub mod data;

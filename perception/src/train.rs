@@ -392,6 +392,10 @@ impl RunFiles {
 /// The result of a finished run.
 #[derive(Debug, Clone)]
 pub struct TrainReport {
+    /// All configured steps are done and the final weights written.
+    pub finished: bool,
+    /// Steps done in total (this run and before).
+    pub steps_done: usize,
     pub weights: PathBuf,
     pub metrics: Vec<StepMetrics>,
     /// The step this run started from (0, or the checkpoint it resumed).
@@ -425,8 +429,13 @@ impl Trainer {
         })
     }
 
-    /// Trains to the configured number of steps, calling `progress` after each.
-    pub fn run(&self, progress: &mut dyn FnMut(Progress)) -> Result<TrainReport> {
+    /// Trains to the configured number of steps, calling `progress` after each. With
+    /// `stop_after`, stops (checkpointed, resumable) after that many steps of this run.
+    pub fn run(
+        &self,
+        stop_after: Option<usize>,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<TrainReport> {
         let cfg = &self.config;
         let files = &self.files;
         std::fs::create_dir_all(files.dir.join("checkpoint")).map_err(io_err(&files.dir))?;
@@ -474,7 +483,7 @@ impl Trainer {
             metrics = read_metrics(&files.metrics())
                 .unwrap_or_default()
                 .into_iter()
-                .filter(|m| m.step < start)
+                .filter(|m| m.step <= start)
                 .collect();
             tracing::info!(step = start, "resuming");
         }
@@ -484,7 +493,8 @@ impl Trainer {
         let clock = Instant::now();
         let classes = cfg.model.num_classes();
         let forearm = cfg.model.class_index("forearm");
-        for step in start..cfg.steps {
+        let end = stop_after.map_or(cfg.steps, |n| (start + n).min(cfg.steps));
+        for step in start..end {
             // Every step draws from its own generator: a resumed run sees the same windows.
             let mut rng = ChaCha8Rng::seed_from_u64(
                 cfg.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ step as u64,
@@ -546,7 +556,7 @@ impl Trainer {
             }
             self.append_metrics(&m)?;
             metrics.push(m);
-            if done % cfg.checkpoint_every == 0 || done == cfg.steps {
+            if done % cfg.checkpoint_every == 0 || done == end {
                 self.checkpoint(&model, &optim, done)?;
             }
             progress(Progress {
@@ -555,8 +565,13 @@ impl Trainer {
                 metrics: m,
             });
         }
-        weights::save(&model.valid(), &cfg.model, &files.weights())?;
+        let finished = end == cfg.steps;
+        if finished {
+            weights::save(&model.valid(), &cfg.model, &files.weights())?;
+        }
         Ok(TrainReport {
+            finished,
+            steps_done: end,
             weights: files.weights(),
             metrics,
             resumed_from: start,

@@ -26,6 +26,9 @@ pub struct TrainArgs {
     /// Override the configuration's number of steps.
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Stop after this many steps of this run (checkpointed; the same command resumes).
+    #[arg(long)]
+    pub stop_after: Option<usize>,
     /// Print the configuration with every default filled in, then exit.
     #[arg(long)]
     pub print_defaults: bool,
@@ -81,7 +84,7 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
         trainer.config.steps as u64,
         "{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}",
     );
-    let report = trainer.run(&mut |p| {
+    let report = trainer.run(args.stop_after, &mut |p| {
         progress.set_position(p.step as u64);
         progress.set_message(format!("loss {:.4}", p.metrics.loss));
     })?;
@@ -90,6 +93,17 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     let svg = trainer.files.dir.join("loss_curve.svg");
     write_loss_curve(&metrics, &svg)?;
     let last = report.metrics.last().copied().unwrap_or_default();
+    if !report.finished {
+        println!(
+            "stopped at step {} of {} ({} this run, {:.0} s); the same command resumes. Metrics: {}",
+            report.steps_done,
+            trainer.config.steps,
+            report.steps_done - report.resumed_from,
+            report.wall_s,
+            trainer.files.metrics().display()
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
     println!(
         "{} steps ({} this run, {:.0} s) -> {}\n  last loss {:.4} (Dice {:.4}, focal {:.4}, prediction {:.4}); validation forearm Dice loss {:.4}\n  metrics: {}, curve: {}",
         trainer.config.steps,
@@ -212,6 +226,56 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
     print!("{md}");
     if let Some(out) = &args.out {
         std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Model preset (cpu, paper) ...
+    #[arg(long, default_value = "cpu")]
+    pub preset: String,
+    /// ... or the configuration of a weight file.
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Backends to time (flex, tch), comma-separated.
+    #[arg(long, default_value = "flex")]
+    pub backends: String,
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    #[arg(long, default_value_t = 4)]
+    pub batch: usize,
+    #[arg(long, default_value_t = 10)]
+    pub frames: usize,
+    #[arg(long, default_value_t = 5)]
+    pub iters: usize,
+    /// Write the benchmarked model's initial weights here (bench/procnet.py reads them).
+    #[arg(long)]
+    pub write_weights: Option<PathBuf>,
+}
+
+/// Prints one JSON line per backend: seconds per training step and per inference frame.
+pub fn bench(args: &BenchArgs) -> Result<ExitCode> {
+    use workcell::perception::ProcNetConfig;
+    let config = match &args.weights {
+        Some(w) => weights::read_config(w)?,
+        None => ProcNetConfig::preset(&args.preset)?,
+    };
+    backend::set_threads(args.threads);
+    if let Some(path) = &args.write_weights {
+        let model = config.init(&Backend::Flex.device()?, 0)?;
+        weights::save(&model, &config, path)?;
+    }
+    for name in args.backends.split(',').filter(|n| !n.trim().is_empty()) {
+        let b = Backend::parse(name.trim())?;
+        let t = workcell::perception::bench::time(&config, b, args.batch, args.frames, args.iters)?;
+        println!(
+            "{{\"backend\": \"{}\", \"threads\": {}, \"train_step_s\": {:.6}, \"infer_frame_s\": {:.6}}}",
+            b.name(),
+            args.threads,
+            t.train_step_s,
+            t.infer_frame_s
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
