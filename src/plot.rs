@@ -343,3 +343,20 @@ mod hull_tests {
         assert_eq!(svg.matches("<polyline").count(), 2);
     }
 }
+
+/// Rasterises an SVG document of this module to PNG (text in the system's sans-serif font;
+/// without any installed font the text is left out and the lines still drawn).
+pub fn svg_to_png(svg: &str, path: &std::path::Path) -> Result<(), String> {
+    use resvg::{tiny_skia, usvg};
+    let mut options = usvg::Options::default();
+    options.fontdb_mut().load_system_fonts();
+    let tree = usvg::Tree::from_str(svg, &options).map_err(|e| format!("SVG: {e}"))?;
+    let size = tree.size().to_int_size();
+    let mut pixmap = tiny_skia::Pixmap::new(size.width(), size.height())
+        .ok_or_else(|| format!("empty image {}x{}", size.width(), size.height()))?;
+    pixmap.fill(tiny_skia::Color::WHITE);
+    resvg::render(&tree, tiny_skia::Transform::default(), &mut pixmap.as_mut());
+    pixmap
+        .save_png(path)
+        .map_err(|e| format!("{}: {e}", path.display()))
+}

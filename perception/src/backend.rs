@@ -14,6 +14,8 @@ pub enum Backend {
     Flex,
     /// LibTorch on the CPU (cargo feature `tch`).
     Tch,
+    /// The default GPU through wgpu (Vulkan, Metal or DX12; cargo feature `gpu`).
+    Gpu,
 }
 
 impl Backend {
@@ -22,6 +24,7 @@ impl Backend {
         match self {
             Backend::Flex => "flex",
             Backend::Tch => "tch",
+            Backend::Gpu => "gpu",
         }
     }
 
@@ -30,9 +33,10 @@ impl Backend {
         match name {
             "flex" => Ok(Backend::Flex),
             "tch" => Ok(Backend::Tch),
+            "gpu" => Ok(Backend::Gpu),
             other => Err(PerceptionError::Backend {
                 name: other.into(),
-                message: "unknown backend (known: flex, tch)".into(),
+                message: "unknown backend (known: flex, tch, gpu)".into(),
             }),
         }
     }
@@ -43,6 +47,9 @@ impl Backend {
         let mut v = vec![Backend::Flex];
         if cfg!(feature = "tch") {
             v.push(Backend::Tch);
+        }
+        if cfg!(feature = "gpu") {
+            v.push(Backend::Gpu);
         }
         v
     }
@@ -60,6 +67,13 @@ impl Backend {
             Backend::Tch => Err(PerceptionError::Backend {
                 name: "tch".into(),
                 message: "not compiled in: build with `--features tch` (see the README)".into(),
+            }),
+            #[cfg(feature = "gpu")]
+            Backend::Gpu => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
+            #[cfg(not(feature = "gpu"))]
+            Backend::Gpu => Err(PerceptionError::Backend {
+                name: "gpu".into(),
+                message: "not compiled in: build with `--features gpu` (see the README)".into(),
             }),
         }
     }

@@ -75,18 +75,21 @@ pub fn time(
         ..LossConfig::default()
     };
     let mut step = |model: crate::model::ProcNetModel| {
-        let l = window_loss(&model, &rgb, &target, &loss);
+        let l = window_loss(&model, &rgb, &target, &loss, None);
         let grads = GradientsParams::from_grads(l.total.backward(), &model);
         optim.step(1e-3, model, grads)
     };
-    model = step(model);
-    let _ = inner.sync();
-    let start = Instant::now();
-    for _ in 0..iters {
+    let mut train_step_s = f64::NAN;
+    if iters > 0 {
         model = step(model);
+        let _ = inner.sync();
+        let start = Instant::now();
+        for _ in 0..iters {
+            model = step(model);
+        }
+        let _ = inner.sync();
+        train_step_s = start.elapsed().as_secs_f64() / iters as f64;
     }
-    let _ = inner.sync();
-    let train_step_s = start.elapsed().as_secs_f64() / iters.max(1) as f64;
 
     let model = model.valid();
     let frame = Tensor::<4>::from_data(random([1, 3, s, s], false), &inner);
@@ -102,7 +105,7 @@ pub fn time(
     for _ in 0..5 {
         state = infer(state);
     }
-    let n = 10 * iters.max(1);
+    let n = if iters == 0 { 100 } else { 10 * iters };
     let start = Instant::now();
     for _ in 0..n {
         state = infer(state);

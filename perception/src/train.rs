@@ -32,6 +32,9 @@ pub struct LossConfig {
     pub prediction: f32,
     pub focal_alpha: f32,
     pub focal_gamma: f32,
+    /// Per-class weights of the Dice and focal terms, by class name (unlisted classes: 1).
+    /// Small parts (the forearm) can be weighted up against the large robot and torso.
+    pub class_weights: std::collections::BTreeMap<String, f32>,
 }
 
 impl Default for LossConfig {
@@ -42,7 +45,23 @@ impl Default for LossConfig {
             prediction: 1.0,
             focal_alpha: 0.5,
             focal_gamma: 2.0,
+            class_weights: std::collections::BTreeMap::new(),
         }
+    }
+}
+
+impl LossConfig {
+    /// The per-class weights in the model's class order, normalised to mean 1.
+    #[must_use]
+    pub fn weights_for(&self, classes: &[String]) -> Vec<f32> {
+        let w: Vec<f32> = classes
+            .iter()
+            .map(|c| self.class_weights.get(c).copied().unwrap_or(1.0))
+            .collect();
+        let mean = w.iter().sum::<f32>() / w.len().max(1) as f32;
+        w.into_iter()
+            .map(|v| v / mean.max(f32::MIN_POSITIVE))
+            .collect()
     }
 }
 
@@ -294,12 +313,14 @@ pub struct WindowLoss {
 }
 
 /// Runs `model` over a batch of windows from a zero state and returns the weighted losses
-/// (frame weight 0 at the window's first frame, 1 after).
+/// (frame weight 0 at the window's first frame, 1 after; per-class weights, one per output
+/// channel, when given).
 pub fn window_loss(
     model: &ProcNetModel,
     rgb: &[Tensor<4>],
     target: &[Tensor<4>],
     loss: &LossConfig,
+    class_weights: Option<&[f32]>,
 ) -> WindowLoss {
     let [b, _, h, w] = rgb[0].dims();
     let device = rgb[0].device();
@@ -309,6 +330,12 @@ pub fn window_loss(
     let mut pred_sum: Option<Tensor<1>> = None;
     let add = |acc: Option<Tensor<1>>, v: Tensor<1>| Some(acc.map_or(v.clone(), |a| a + v));
     let weighted = (rgb.len() - 1) as f64;
+    let c = target[0].dims()[1];
+    let class_weights = class_weights.map(|w| Tensor::<1>::from_floats(w, &device).reshape([1, c]));
+    let reduce = |per_class: Tensor<2>| match &class_weights {
+        Some(w) => (per_class * w.clone()).mean(),
+        None => per_class.mean(),
+    };
     for (t, (x, y)) in rgb.iter().zip(target).enumerate() {
         let (
             StepOutput {
@@ -323,10 +350,15 @@ pub fn window_loss(
             continue;
         }
         let p = burn::tensor::activation::sigmoid(logits.clone());
-        dice_sum = add(dice_sum, dice_per_class(p, y.clone()).mean());
+        dice_sum = add(dice_sum, reduce(dice_per_class(p, y.clone())));
         focal_sum = add(
             focal_sum,
-            focal_per_class(logits, y.clone(), loss.focal_alpha, loss.focal_gamma).mean(),
+            reduce(focal_per_class(
+                logits,
+                y.clone(),
+                loss.focal_alpha,
+                loss.focal_gamma,
+            )),
         );
         if let Some(pe) = prediction_error {
             pred_sum = add(pred_sum, pe);
@@ -493,6 +525,8 @@ impl Trainer {
         let clock = Instant::now();
         let classes = cfg.model.num_classes();
         let forearm = cfg.model.class_index("forearm");
+        let class_weights =
+            (!cfg.loss.class_weights.is_empty()).then(|| cfg.loss.weights_for(&cfg.model.classes));
         let end = stop_after.map_or(cfg.steps, |n| (start + n).min(cfg.steps));
         for step in start..end {
             // Every step draws from its own generator: a resumed run sees the same windows.
@@ -522,7 +556,13 @@ impl Trainer {
                 .collect();
             let batch = make_batch(&picks, cfg.window, classes, &device);
             let lr = cfg.learning_rate(step);
-            let losses = window_loss(&model, &batch.rgb, &batch.target, &cfg.loss);
+            let losses = window_loss(
+                &model,
+                &batch.rgb,
+                &batch.target,
+                &cfg.loss,
+                class_weights.as_deref(),
+            );
             let total = scalar(&losses.total);
             if !total.is_finite() {
                 return Err(PerceptionError::Training {

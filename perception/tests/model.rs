@@ -212,19 +212,19 @@ fn bad_weight_files_are_clear_errors() {
     );
 }
 
-#[cfg(feature = "tch")]
-#[test]
-fn flex_and_libtorch_give_the_same_masks() {
+/// The same weights on flex and on `other` give the same masks, frame after frame.
+#[cfg(any(feature = "tch", feature = "gpu"))]
+fn same_masks_as_flex(other: Backend) {
     let dir = tempfile::tempdir().unwrap();
     for cell in CellKind::ALL {
         let config = tiny(cell);
         let path = dir.path().join("w.safetensors");
         weights::save(&config.init(&Device::flex(), 4).unwrap(), &config, &path).unwrap();
         let mut flex = ProcNet::load(&path, Backend::Flex).unwrap();
-        let mut tch = ProcNet::load(&path, Backend::Tch).unwrap();
+        let mut them = ProcNet::load(&path, other).unwrap();
         for t in 0..4 {
             let x = reference_frame(t, 0, config.input_size);
-            let (a, b) = (flex.segment(&x).unwrap(), tch.segment(&x).unwrap());
+            let (a, b) = (flex.segment(&x).unwrap(), them.segment(&x).unwrap());
             let worst = a
                 .probabilities
                 .iter()
@@ -234,8 +234,20 @@ fn flex_and_libtorch_give_the_same_masks() {
             // f32 on both sides, different summation orders: agreement to 1e-5.
             assert!(
                 worst < 1e-5,
-                "{cell:?} frame {t}: probabilities differ by {worst}"
+                "{cell:?} frame {t} on {other:?}: probabilities differ by {worst}"
             );
         }
     }
+}
+
+#[cfg(feature = "tch")]
+#[test]
+fn flex_and_libtorch_give_the_same_masks() {
+    same_masks_as_flex(Backend::Tch);
+}
+
+#[cfg(feature = "gpu")]
+#[test]
+fn flex_and_the_gpu_give_the_same_masks() {
+    same_masks_as_flex(Backend::Gpu);
 }

@@ -212,10 +212,10 @@ fn a_tiny_batch_overfits() {
     let mut model = config.init(&device, 4).unwrap();
     let mut optim = AdamWConfig::new().init();
     let loss = LossConfig::default();
-    let first = window_loss(&model, &rgb, &target, &loss);
+    let first = window_loss(&model, &rgb, &target, &loss, None);
     let first_dice = f64::from(first.dice.into_scalar::<f32>());
     for _ in 0..150 {
-        let l = window_loss(&model, &rgb, &target, &loss);
+        let l = window_loss(&model, &rgb, &target, &loss, None);
         let grads = GradientsParams::from_grads(l.total.backward(), &model);
         model = optim.step(1e-2, model, grads);
     }

@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use workcell::perception::eval::evaluate;
 use workcell::perception::train::{TrainConfig, Trainer, read_metrics};
 use workcell::perception::{Backend, backend, weights};
-use workcell::plot::{Panel, svg_panels};
+use workcell::plot::{Panel, svg_panels, svg_to_png};
 use workcell::sim::dataset::{Dataset, Split};
 
 #[derive(Debug, clap::Args)]
@@ -92,6 +92,7 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     let metrics = read_metrics(&trainer.files.metrics())?;
     let svg = trainer.files.dir.join("loss_curve.svg");
     write_loss_curve(&metrics, &svg)?;
+    let png = svg.with_extension("png");
     let last = report.metrics.last().copied().unwrap_or_default();
     if !report.finished {
         println!(
@@ -116,7 +117,7 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
         last.prediction,
         last.val_forearm_dice,
         trainer.files.metrics().display(),
-        svg.display()
+        png.display()
     );
     Ok(ExitCode::SUCCESS)
 }
@@ -184,11 +185,14 @@ fn write_loss_curve(
         }];
         // A separate document for the validation curve (its own x samples).
         let val_svg = svg_panels(&val_x, "step", &val_panel);
-        std::fs::write(path.with_file_name("validation_curve.svg"), val_svg)
-            .with_context(|| format!("writing {}", path.display()))?;
+        let val_path = path.with_file_name("validation_curve.svg");
+        std::fs::write(&val_path, &val_svg)
+            .with_context(|| format!("writing {}", val_path.display()))?;
+        svg_to_png(&val_svg, &val_path.with_extension("png")).map_err(anyhow::Error::msg)?;
     }
     svg.push('\n');
-    std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))?;
+    std::fs::write(path, &svg).with_context(|| format!("writing {}", path.display()))?;
+    svg_to_png(&svg, &path.with_extension("png")).map_err(anyhow::Error::msg)?;
     Ok(())
 }
 
