@@ -349,7 +349,24 @@ mod hull_tests {
 pub fn svg_to_png(svg: &str, path: &std::path::Path) -> Result<(), String> {
     use resvg::{tiny_skia, usvg};
     let mut options = usvg::Options::default();
-    options.fontdb_mut().load_system_fonts();
+    let fonts = options.fontdb_mut();
+    fonts.load_system_fonts();
+    // The documents ask for "sans-serif": map it to an installed sans face (fontdb's default,
+    // Arial, is rarely installed on Linux), else to any face at all.
+    let family = fonts
+        .faces()
+        .flat_map(|f| f.families.iter().map(|(name, _)| name.clone()))
+        .find(|name| name.contains("Sans") && !name.contains("Mono"))
+        .or_else(|| {
+            fonts
+                .faces()
+                .flat_map(|f| f.families.first().map(|(name, _)| name.clone()))
+                .next()
+        });
+    if let Some(family) = family {
+        fonts.set_sans_serif_family(family.clone());
+        options.font_family = family;
+    }
     let tree = usvg::Tree::from_str(svg, &options).map_err(|e| format!("SVG: {e}"))?;
     let size = tree.size().to_int_size();
     let mut pixmap = tiny_skia::Pixmap::new(size.width(), size.height())

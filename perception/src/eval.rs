@@ -80,13 +80,12 @@ pub struct Evaluation {
     pub by_pair: BTreeMap<(String, String), Scores>,
 }
 
-/// Order of the dataset's levels in tables.
-fn level_rank(name: &str) -> usize {
-    ["short", "medium", "large", "light", "heavy"]
-        .iter()
-        .position(|n| *n == name)
-        .unwrap_or(9)
+/// Order of the dataset's distance classes and occlusion levels in tables (others last).
+fn rank(order: &[&str], name: &str) -> usize {
+    order.iter().position(|n| *n == name).unwrap_or(order.len())
 }
+const DISTANCES: [&str; 3] = ["short", "medium", "large"];
+const LEVELS: [&str; 3] = ["light", "medium", "heavy"];
 
 /// Evaluates `model` on a split. Frame 0 of each sequence (weight 0 in training) is left out.
 /// `progress` is called after each sequence with (done, total).
@@ -204,13 +203,13 @@ impl Evaluation {
         };
         let mut groups: Vec<(String, &Scores)> = Vec::new();
         let mut occ: Vec<_> = self.by_occlusion.iter().collect();
-        occ.sort_by_key(|(k, _)| level_rank(k));
+        occ.sort_by_key(|(k, _)| rank(&LEVELS, k));
         let mut dist: Vec<_> = self.by_distance.iter().collect();
-        dist.sort_by_key(|(k, _)| level_rank(k));
+        dist.sort_by_key(|(k, _)| rank(&DISTANCES, k));
         groups.extend(dist.iter().map(|(k, s)| (format!("distance {k}"), *s)));
         groups.extend(occ.iter().map(|(k, s)| (format!("occlusion {k}"), *s)));
         let mut pairs: Vec<_> = self.by_pair.iter().collect();
-        pairs.sort_by_key(|((d, o), _)| (level_rank(d), level_rank(o)));
+        pairs.sort_by_key(|((d, o), _)| (rank(&DISTANCES, d), rank(&LEVELS, o)));
         groups.extend(pairs.iter().map(|((d, o), s)| (format!("{d} / {o}"), *s)));
         let _ = writeln!(
             md,

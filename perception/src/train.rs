@@ -349,18 +349,16 @@ pub fn window_loss(
         if t == 0 {
             continue;
         }
-        let p = burn::tensor::activation::sigmoid(logits.clone());
-        dice_sum = add(dice_sum, reduce(dice_per_class(p, y.clone())));
-        focal_sum = add(
-            focal_sum,
-            reduce(focal_per_class(
-                logits,
-                y.clone(),
-                loss.focal_alpha,
-                loss.focal_gamma,
-            )),
-        );
-        if let Some(pe) = prediction_error {
+        // Terms of weight 0 are not computed (nor differentiated).
+        if loss.dice > 0.0 {
+            let p = burn::tensor::activation::sigmoid(logits.clone());
+            dice_sum = add(dice_sum, reduce(dice_per_class(p, y.clone())));
+        }
+        if loss.focal > 0.0 {
+            let focal = focal_per_class(logits, y.clone(), loss.focal_alpha, loss.focal_gamma);
+            focal_sum = add(focal_sum, reduce(focal));
+        }
+        if let Some(pe) = prediction_error.filter(|_| loss.prediction > 0.0) {
             pred_sum = add(pred_sum, pe);
         }
     }
@@ -619,30 +617,45 @@ impl Trainer {
         })
     }
 
+    /// The run's settings as JSON, without what may change between sessions of one run
+    /// (where the dataset lives, the backend, the thread count).
+    fn run_identity(config: &TrainConfig) -> serde_json::Value {
+        let mut v = serde_json::to_value(config).unwrap_or_default();
+        if let Some(map) = v.as_object_mut() {
+            for key in ["dataset", "backend", "threads"] {
+                map.remove(key);
+            }
+        }
+        v
+    }
+
     fn check_or_write_config(&self) -> Result<()> {
         let path = self.files.config();
-        let mine = self.config.to_toml();
         match std::fs::read_to_string(&path) {
-            Ok(existing) if existing != mine => {
-                let theirs: Option<TrainConfig> = toml::from_str(&existing).ok();
-                let what = theirs.map_or_else(
-                    || "an unreadable configuration".to_string(),
-                    |t| weights::config_difference(&self.config.model, &t.model),
+            Ok(existing) => {
+                let theirs: TrainConfig =
+                    toml::from_str(&existing).map_err(|e| PerceptionError::ConfigFile {
+                        path: path.clone(),
+                        message: e.to_string(),
+                    })?;
+                let (mine, theirs) = (
+                    Self::run_identity(&self.config),
+                    Self::run_identity(&theirs),
                 );
+                if mine == theirs {
+                    return Ok(());
+                }
                 Err(PerceptionError::Training {
                     message: format!(
                         "{} holds a run of another configuration ({}); choose another --out or delete it",
                         self.files.dir.display(),
-                        if what.is_empty() {
-                            "training settings differ".into()
-                        } else {
-                            what
-                        }
+                        weights::value_difference(&theirs, &mine)
+                            .replace("expected", "was")
+                            .replace("found", "now")
                     ),
                 })
             }
-            Ok(_) => Ok(()),
-            Err(_) => std::fs::write(&path, mine).map_err(io_err(&path)),
+            Err(_) => std::fs::write(&path, self.config.to_toml()).map_err(io_err(&path)),
         }
     }
 

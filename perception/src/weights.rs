@@ -155,10 +155,16 @@ fn load_into(model: &mut ProcNetModel, path: &Path) -> Result<()> {
 /// The keys that differ between two configurations, as `key: expected vs found`.
 #[must_use]
 pub fn config_difference(expected: &ProcNetConfig, found: &ProcNetConfig) -> String {
-    let (a, b) = (
-        serde_json::to_value(expected).unwrap_or_default(),
-        serde_json::to_value(found).unwrap_or_default(),
-    );
+    value_difference(
+        &serde_json::to_value(expected).unwrap_or_default(),
+        &serde_json::to_value(found).unwrap_or_default(),
+    )
+}
+
+/// The top-level keys that differ between two JSON objects, as `key: expected vs found`,
+/// sorted by key.
+#[must_use]
+pub fn value_difference(a: &serde_json::Value, b: &serde_json::Value) -> String {
     let mut diffs = Vec::new();
     if let (Some(a), Some(b)) = (a.as_object(), b.as_object()) {
         let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();

@@ -251,3 +251,25 @@ fn flex_and_libtorch_give_the_same_masks() {
 fn flex_and_the_gpu_give_the_same_masks() {
     same_masks_as_flex(Backend::Gpu);
 }
+
+/// The shipped weights load, are of the configuration `configs/train.toml` trains, and run.
+#[test]
+fn the_shipped_weights_load_and_match_their_recipe() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("weights/procnet-cpu.safetensors");
+    let size = std::fs::metadata(&path).unwrap().len();
+    assert!(
+        size < 20 * 1024 * 1024,
+        "{size} bytes: over the 20 MB budget"
+    );
+    let mut net = ProcNet::load(&path, Backend::Flex).unwrap();
+    let recipe =
+        workcell_perception::TrainConfig::from_file(&root.join("../configs/train.toml")).unwrap();
+    assert_eq!(net.config(), &recipe.model);
+    let s = net.config().input_size;
+    let masks = net.segment(&reference_frame(0, 0, s)).unwrap();
+    assert_eq!(
+        masks.classes,
+        ["robot", "torso", "upper_arm", "forearm", "hand"]
+    );
+}

@@ -171,9 +171,9 @@ fn write_loss_curve(
             ],
         },
         Panel {
-            title: "learning rate".into(),
-            y_label: "lr".into(),
-            series: vec![("lr".into(), metrics.iter().map(|m| m.lr).collect())],
+            title: "learning rate (one-cycle)".into(),
+            y_label: "lr x 1000".into(),
+            series: vec![("lr".into(), metrics.iter().map(|m| 1e3 * m.lr).collect())],
         },
     ];
     let mut svg = svg_panels(&x, "step", &panels);
