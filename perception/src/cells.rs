@@ -146,6 +146,8 @@ pub struct ConvCell {
 }
 
 /// One representation cell.
+// One per layer, built once: the size difference between variants costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Module, Debug)]
 pub enum Cell {
     Hgru(Hgru),

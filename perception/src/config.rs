@@ -172,7 +172,10 @@ impl ProcNetConfig {
             );
         }
         let stride = 1 << (layers - 1);
-        if self.input_size < stride || self.input_size % stride != 0 || self.input_size > 2048 {
+        if self.input_size < stride
+            || !self.input_size.is_multiple_of(stride)
+            || self.input_size > 2048
+        {
             return invalid(
                 "input_size",
                 format!(
@@ -181,7 +184,7 @@ impl ProcNetConfig {
                 ),
             );
         }
-        if self.cell_kernel % 2 == 0 || self.cell_kernel > 15 {
+        if self.cell_kernel.is_multiple_of(2) || self.cell_kernel > 15 {
             return invalid(
                 "cell_kernel",
                 format!("an odd size up to 15, got {}", self.cell_kernel),

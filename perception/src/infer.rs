@@ -104,7 +104,7 @@ impl ProcNet {
                     "expected a planar RGB frame of 3x{s}x{s} = {} values, got {} ({}); resize to {s}x{s}",
                     3 * s * s,
                     rgb.len(),
-                    if rgb.len() % 3 == 0 && side.fract() == 0.0 {
+                    if rgb.len().is_multiple_of(3) && side.fract() == 0.0 {
                         format!("3x{side}x{side}")
                     } else {
                         "not 3 channels of a square image".to_string()

@@ -184,7 +184,7 @@ impl Norm {
 pub fn decoder_groups(channels: usize) -> usize {
     [8, 4, 2, 1]
         .into_iter()
-        .find(|g| channels % g == 0)
+        .find(|&g| channels.is_multiple_of(g))
         .unwrap_or(1)
 }
 
