@@ -95,6 +95,8 @@ impl ProcNet {
     }
 
     /// Segments the next frame of the stream: `rgb` is `[3, size, size]` (planar) in [0, 1].
+    /// A frame of the wrong size, with a NaN or a value outside [0, 1] is an error, and the
+    /// stream's state is left as it was.
     pub fn segment(&mut self, rgb: &[f32]) -> Result<Masks> {
         let s = self.config.input_size;
         if rgb.len() != 3 * s * s {
@@ -123,8 +125,15 @@ impl ProcNet {
                 ),
             });
         }
-        let x = Tensor::<4>::from_data(TensorData::new(rgb.to_vec(), [1, 3, s, s]), &self.device)
-            .clamp(0.0, 1.0);
+        if let Some(i) = rgb.iter().position(|v| !(0.0..=1.0).contains(v)) {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "pixel value {} at index {i} is outside [0, 1] (8-bit images: divide by 255)",
+                    rgb[i]
+                ),
+            });
+        }
+        let x = Tensor::<4>::from_data(TensorData::new(rgb.to_vec(), [1, 3, s, s]), &self.device);
         let state = match self.state.take() {
             Some(state) => state,
             None => self.model.initial_state(1, s, s, &self.device),

@@ -142,6 +142,12 @@ fn bad_frames_are_clear_errors() {
     x[s * s + 2 * s + 5] = f32::NAN;
     let e = net.segment(&x).unwrap_err().to_string();
     assert!(e.contains("channel 1, row 2, column 5"), "{e}");
+    // An 8-bit image passed as is.
+    let e = net
+        .segment(&vec![255.0; 3 * s * s])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("outside [0, 1]") && e.contains("255"), "{e}");
     // The failed calls did not advance the stream.
     assert_eq!(net.frames(), 0);
 }
