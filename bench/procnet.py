@@ -14,7 +14,6 @@ Needs torch 2.9.0 and safetensors (pip install torch==2.9.0 safetensors).
 
 import argparse
 import json
-import math
 import sys
 import time
 

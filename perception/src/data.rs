@@ -98,16 +98,24 @@ pub fn one_hot(classes: &[u8], map: &[u8]) -> Vec<f32> {
     out
 }
 
+/// The frames of a sequence at the model's resolution, `[frames, 3, size, size]`.
+pub fn model_frames(sequence: &Sequence, config: &ProcNetConfig) -> Result<Vec<f32>> {
+    let f = scale_factor(config, sequence.width, sequence.height)?;
+    let (w, h) = (sequence.width as usize, sequence.height as usize);
+    Ok((0..sequence.len())
+        .flat_map(|t| downsample(sequence.rgb_frame(t), 3, h, w, f))
+        .collect())
+}
+
 impl SequenceTensors {
     /// Converts a loaded sequence to the model's resolution.
     pub fn new(sequence: &Sequence, config: &ProcNetConfig, map: &[u8]) -> Result<Self> {
         let f = scale_factor(config, sequence.width, sequence.height)?;
         let (w, h) = (sequence.width as usize, sequence.height as usize);
         let frames = sequence.len();
-        let mut rgb = Vec::with_capacity(frames * 3 * (w / f) * (h / f));
+        let rgb = model_frames(sequence, config)?;
         let mut target = Vec::with_capacity(frames * map.len() * (w / f) * (h / f));
         for t in 0..frames {
-            rgb.extend(downsample(sequence.rgb_frame(t), 3, h, w, f));
             let planes = one_hot(sequence.class_frame(t), map);
             target.extend(downsample(&planes, map.len(), h, w, f));
         }

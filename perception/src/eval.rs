@@ -14,7 +14,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use workcell_sim::dataset::{Dataset, Split};
 
 use crate::config::ProcNetConfig;
-use crate::data::{SequenceTensors, class_map, one_hot};
+use crate::data::{class_map, model_frames, one_hot};
 use crate::error::Result;
 use crate::loss::{dice_per_class, focal_per_class, iou_per_class};
 use crate::model::ProcNetModel;
@@ -117,16 +117,13 @@ pub fn evaluate(
     let c = map.len();
     for (k, entry) in entries.iter().enumerate() {
         let seq = dataset.load(entry)?;
-        let small = SequenceTensors::new(&seq, config, &map)?;
+        let frames = model_frames(&seq, config)?;
         let (w, h) = (seq.width as usize, seq.height as usize);
-        let s = small.size;
+        let s = config.input_size;
         let mut state = model.initial_state(1, s, s, device);
         for t in 0..seq.len() {
             let x = Tensor::<4>::from_data(
-                TensorData::new(
-                    small.rgb[t * 3 * s * s..][..3 * s * s].to_vec(),
-                    [1, 3, s, s],
-                ),
+                TensorData::new(frames[t * 3 * s * s..][..3 * s * s].to_vec(), [1, 3, s, s]),
                 device,
             );
             let (out, next) = model.step(x, state);

@@ -20,7 +20,7 @@ pub struct TrainArgs {
     /// holding a checkpoint of the same configuration is resumed.
     #[arg(long)]
     pub out: PathBuf,
-    /// Override the configuration's backend (flex, tch).
+    /// Override the configuration's backend (flex, tch, gpu).
     #[arg(long)]
     pub backend: Option<String>,
     /// Override the configuration's number of steps.
@@ -45,7 +45,7 @@ pub struct EvalSegmentationArgs {
     /// Which split: train, validation or test.
     #[arg(long, default_value = "test")]
     pub split: String,
-    /// flex or tch.
+    /// flex, tch or gpu (the latter two with their cargo features).
     #[arg(long, default_value = "flex")]
     pub backend: String,
     /// CPU threads.
@@ -242,7 +242,7 @@ pub struct BenchArgs {
     /// ... or the configuration of a weight file.
     #[arg(long)]
     pub weights: Option<PathBuf>,
-    /// Backends to time (flex, tch), comma-separated.
+    /// Backends to time (flex, tch, gpu), comma-separated.
     #[arg(long, default_value = "flex")]
     pub backends: String,
     #[arg(long, default_value_t = 2)]
