@@ -1,0 +1,238 @@
+//! Robot-human distance queries: every robot link against every human part, with the
+//! Jacobian row of the robot's witness point for the safety filter.
+
+use parry3d_f64::shape::SharedShape;
+use workcell_robots::collision::{LinkCapsule, link_bounding_capsule, link_collision_shape};
+use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
+
+use crate::error::{Result, SafetyError};
+use crate::geometry::{Capsule, SignedDistancePair, capsule_capsule, shape_capsule};
+use crate::human::HumanEstimate;
+
+/// Most joints a guarded robot may have (rows are fixed-size arrays to keep the tick free of
+/// allocation).
+pub const MAX_DOF: usize = 16;
+
+/// One robot-link / human-part pair within the detection distance, ready for a constraint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PairConstraint {
+    pub pair: SignedDistancePair,
+    /// `nhat_BA_W^T J_A(q)`: how fast each joint moves the robot witness point away from the
+    /// human part (m/s per rad/s). Entries past the robot's dof are zero.
+    pub normal_jacobian: [f64; MAX_DOF],
+    /// `nhat_BA_W^T v_B`: the human part's velocity at its witness point along the normal;
+    /// positive when the part moves toward the robot (the normal points from human to robot).
+    pub human_normal_speed_m_s: f64,
+    /// Speed of the robot witness point under the last nominal command, m/s (filled by the
+    /// filters that need it).
+    pub robot_speed_m_s: f64,
+}
+
+/// The robot's geometry for distance queries: a bounding capsule per link (used by the
+/// filters: conservative and exact in closed form) and the exact collision shape per link
+/// (used to measure the true separation).
+#[derive(Debug, Clone)]
+pub struct RobotGeometry {
+    links: Vec<GuardedLink>,
+    dof: usize,
+    jacobian: Jacobian,
+}
+
+#[derive(Debug, Clone)]
+struct GuardedLink {
+    capsule: LinkCapsule,
+    shape: Option<SharedShape>,
+    /// At least one joint between the link and the root moves it.
+    movable: bool,
+}
+
+impl RobotGeometry {
+    /// The geometry of every link of `robot` that has collision geometry.
+    ///
+    /// # Errors
+    /// [`SafetyError::Robot`] when no link has collision geometry or the robot has more than
+    /// [`MAX_DOF`] joints.
+    pub fn new(robot: &RobotModel) -> Result<Self> {
+        if robot.dof() > MAX_DOF {
+            return Err(SafetyError::Robot {
+                robot: robot.name().to_string(),
+                message: format!(
+                    "{} joints; the safety filter handles at most {MAX_DOF}",
+                    robot.dof()
+                ),
+            });
+        }
+        let links: Vec<GuardedLink> = (0..robot.links().len())
+            .filter_map(|l| {
+                let capsule = link_bounding_capsule(robot, l)?;
+                Some(GuardedLink {
+                    capsule,
+                    shape: link_collision_shape(robot, l),
+                    movable: has_moving_ancestor(robot, l),
+                })
+            })
+            .collect();
+        if links.is_empty() {
+            return Err(SafetyError::Robot {
+                robot: robot.name().to_string(),
+                message:
+                    "no link has collision geometry: there is nothing to keep away from the human"
+                        .into(),
+            });
+        }
+        Ok(Self {
+            links,
+            dof: robot.dof(),
+            jacobian: Jacobian::zeros(robot.dof()),
+        })
+    }
+
+    /// Number of guarded links.
+    #[must_use]
+    pub fn link_count(&self) -> usize {
+        self.links.len()
+    }
+
+    /// Number of links the robot can move (the ones that get constraints).
+    #[must_use]
+    pub fn movable_link_count(&self) -> usize {
+        self.links.iter().filter(|l| l.movable).count()
+    }
+
+    /// The robot's joint count.
+    #[must_use]
+    pub fn dof(&self) -> usize {
+        self.dof
+    }
+
+    /// The bounding capsule of every guarded link at the configuration of `kinematics`.
+    pub fn capsules<'a>(
+        &'a self,
+        kinematics: &'a KinematicState,
+    ) -> impl Iterator<Item = (LinkId, Capsule)> + 'a {
+        self.links.iter().map(move |g| {
+            let (a_W, b_W) = g
+                .capsule
+                .segment_in_world(kinematics.link_pose(g.capsule.link));
+            (g.capsule.link, Capsule::new(a_W, b_W, g.capsule.radius_m))
+        })
+    }
+
+    /// The constraint of every pair of a movable link's capsule and an inflated human part
+    /// closer than `detection_m`, into `out` (cleared first; keeps its capacity).
+    pub fn pair_constraints(
+        &mut self,
+        robot: &RobotModel,
+        kinematics: &KinematicState,
+        human: &HumanEstimate,
+        detection_m: f64,
+        out: &mut Vec<PairConstraint>,
+    ) {
+        out.clear();
+        for g in &self.links {
+            if !g.movable {
+                continue;
+            }
+            let (a_W, b_W) = g
+                .capsule
+                .segment_in_world(kinematics.link_pose(g.capsule.link));
+            let link_capsule = Capsule::new(a_W, b_W, g.capsule.radius_m);
+            for (estimate, capsule) in human.inflated() {
+                let pair = capsule_capsule(g.capsule.link, &link_capsule, estimate.part, &capsule);
+                if pair.distance_m > detection_m {
+                    continue;
+                }
+                robot.point_jacobian(kinematics, g.capsule.link, pair.p_WA, &mut self.jacobian);
+                let mut normal_jacobian = [0.0; MAX_DOF];
+                for (j, col) in self.jacobian.columns().iter().enumerate() {
+                    normal_jacobian[j] = pair.nhat_BA_W.x * col[0]
+                        + pair.nhat_BA_W.y * col[1]
+                        + pair.nhat_BA_W.z * col[2];
+                }
+                out.push(PairConstraint {
+                    pair,
+                    normal_jacobian,
+                    human_normal_speed_m_s: pair.nhat_BA_W.dot(estimate.velocity_at(pair.t_B)),
+                    robot_speed_m_s: 0.0,
+                });
+            }
+        }
+    }
+
+    /// The smallest signed distance between the robot's exact collision shapes and the
+    /// human's capsules (not inflated), with its pair; `None` when nothing is within
+    /// `max_distance_m`. This is the true separation of the evaluation metrics.
+    #[must_use]
+    pub fn min_exact_distance(
+        &self,
+        kinematics: &KinematicState,
+        human: &HumanEstimate,
+        max_distance_m: f64,
+    ) -> Option<SignedDistancePair> {
+        let mut best: Option<SignedDistancePair> = None;
+        for g in &self.links {
+            let X_WL = kinematics.link_pose(g.capsule.link);
+            for p in &human.parts {
+                let limit = best.map_or(max_distance_m, |b| b.distance_m.min(max_distance_m));
+                let pair = match &g.shape {
+                    Some(shape) => shape_capsule(
+                        g.capsule.link,
+                        X_WL,
+                        shape.as_ref(),
+                        p.part,
+                        &p.capsule,
+                        limit,
+                    ),
+                    None => {
+                        let (a_W, b_W) = g.capsule.segment_in_world(X_WL);
+                        Some(capsule_capsule(
+                            g.capsule.link,
+                            &Capsule::new(a_W, b_W, g.capsule.radius_m),
+                            p.part,
+                            &p.capsule,
+                        ))
+                    }
+                };
+                if let Some(pair) = pair
+                    && pair.distance_m <= limit
+                    && best.is_none_or(|b| pair.distance_m < b.distance_m)
+                {
+                    best = Some(pair);
+                }
+            }
+        }
+        best
+    }
+
+    /// The smallest capsule-capsule signed distance (robot bounding capsules against the
+    /// inflated human capsules): what the filters see.
+    #[must_use]
+    pub fn min_capsule_distance(
+        &self,
+        kinematics: &KinematicState,
+        human: &HumanEstimate,
+    ) -> Option<SignedDistancePair> {
+        let mut best: Option<SignedDistancePair> = None;
+        for (link, capsule) in self.capsules(kinematics) {
+            for (estimate, part) in human.inflated() {
+                let pair = capsule_capsule(link, &capsule, estimate.part, &part);
+                if best.is_none_or(|b| pair.distance_m < b.distance_m) {
+                    best = Some(pair);
+                }
+            }
+        }
+        best
+    }
+}
+
+fn has_moving_ancestor(robot: &RobotModel, link: LinkId) -> bool {
+    let mut current = robot.links()[link].parent_joint;
+    while let Some(j) = current {
+        let joint = &robot.joints()[j];
+        if joint.kind.is_movable() {
+            return true;
+        }
+        current = robot.links()[joint.parent].parent_joint;
+    }
+    false
+}

@@ -1,0 +1,506 @@
+//! The safety filter of one robot: nominal joint velocities in, safe joint velocities out,
+//! every tick, with a status that says what it did and why.
+
+use serde::{Deserialize, Serialize};
+use workcell_robots::math::Pose;
+use workcell_robots::{KinematicState, RobotModel};
+
+use crate::distance::{PairConstraint, RobotGeometry};
+use crate::error::{Result, invalid};
+use crate::human::HumanEstimate;
+use crate::iso::SsmConfig;
+use crate::qp::{QpFailure, QpFilter};
+
+/// Which filter guards the robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FilterMode {
+    /// The nominal command passes unchanged (the baseline that shows what could go wrong).
+    None,
+    /// The QP safety filter (control barrier function rows).
+    Qp,
+    /// Speed and separation monitoring: the nominal command scaled down (ISO/TS 15066).
+    Ssm,
+}
+
+impl std::fmt::Display for FilterMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            FilterMode::None => "none",
+            FilterMode::Qp => "qp",
+            FilterMode::Ssm => "ssm",
+        })
+    }
+}
+
+/// Settings of the filter (the `[safety]` table of an evaluation file).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FilterConfig {
+    /// Smallest allowed separation between robot and human surfaces, m. Default 0.10.
+    pub d_min_m: f64,
+    /// Pairs farther apart than this (capsule distance) get no constraint, m. Default 0.6.
+    pub detection_m: f64,
+    /// Barrier rate gamma of the QP rows, 1/s: the gap to d_min may close at most at
+    /// gamma (d - d_min). Default 4.
+    pub gamma_per_s: f64,
+    /// Rows reserved for pairs in the QP (the closest pairs win). Default 24.
+    pub max_pairs: usize,
+    /// Joint acceleration bound where the URDF gives none, rad/s^2; also the braking rate of
+    /// the fail-safe stop. Default 8.
+    pub acceleration_rad_s2: f64,
+    /// Joint position limits become velocity bounds `gain (q_max - q)`, 1/s. Default 10.
+    pub position_gain_per_s: f64,
+    /// Speed and separation monitoring.
+    pub ssm: SsmConfig,
+}
+
+impl Default for FilterConfig {
+    fn default() -> Self {
+        Self {
+            d_min_m: 0.10,
+            detection_m: 0.6,
+            gamma_per_s: 4.0,
+            max_pairs: 24,
+            acceleration_rad_s2: 8.0,
+            position_gain_per_s: 10.0,
+            ssm: SsmConfig::default(),
+        }
+    }
+}
+
+impl FilterConfig {
+    /// Checks ranges.
+    ///
+    /// # Errors
+    /// [`SafetyError::InvalidConfig`] naming the key.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(invalid(key, format!("must be finite and > 0, got {v}")))
+            }
+        };
+        if !(self.d_min_m.is_finite() && self.d_min_m >= 0.0) {
+            return Err(invalid(
+                "safety.d_min_m",
+                format!("must be finite and >= 0, got {}", self.d_min_m),
+            ));
+        }
+        positive("safety.detection_m", self.detection_m)?;
+        positive("safety.gamma_per_s", self.gamma_per_s)?;
+        positive("safety.acceleration_rad_s2", self.acceleration_rad_s2)?;
+        positive("safety.position_gain_per_s", self.position_gain_per_s)?;
+        if self.max_pairs == 0 || self.max_pairs > 256 {
+            return Err(invalid(
+                "safety.max_pairs",
+                format!("must be in 1..=256, got {}", self.max_pairs),
+            ));
+        }
+        self.ssm.validate()
+    }
+}
+
+/// Why the filter commanded a braking stop instead of a filtered command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BrakeReason {
+    /// A joint position, nominal velocity or the time step is NaN or infinite, or has the
+    /// wrong length.
+    InvalidRobotInput,
+    /// A human part's capsule or velocity is NaN or infinite, or the uncertainty is.
+    InvalidHumanEstimate,
+    /// Perception reports no human at all: nothing can be guaranteed.
+    NoHumanEstimate,
+    /// The QP solver did not return a usable solution (infeasible rows, iteration limit...).
+    Solver(QpFailure),
+    /// The joint bounds contradict each other (e.g. outside a position limit and unable to
+    /// return within the acceleration bound).
+    ConflictingBounds,
+    /// SSM: the separation is below the protective distance even for a standing robot.
+    ProtectiveStop,
+}
+
+impl std::fmt::Display for BrakeReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BrakeReason::InvalidRobotInput => f.write_str("invalid robot input"),
+            BrakeReason::InvalidHumanEstimate => f.write_str("invalid human estimate"),
+            BrakeReason::NoHumanEstimate => f.write_str("no human estimate"),
+            BrakeReason::Solver(e) => write!(f, "QP failed: {e}"),
+            BrakeReason::ConflictingBounds => f.write_str("conflicting joint bounds"),
+            BrakeReason::ProtectiveStop => f.write_str("protective stop"),
+        }
+    }
+}
+
+/// What the filter did this tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FilterStatus {
+    /// The nominal command was safe (within bounds, no constraint active): passed unchanged.
+    Pass,
+    /// The command was changed to keep the separation (or the joint bounds).
+    Modified,
+    /// Fail-safe: braking toward standstill within the acceleration bound.
+    Braking(BrakeReason),
+}
+
+impl FilterStatus {
+    /// A short name for tables: `pass`, `modified`, or `brake: <reason>`.
+    #[must_use]
+    pub fn label(&self) -> String {
+        match self {
+            FilterStatus::Pass => "pass".into(),
+            FilterStatus::Modified => "modified".into(),
+            FilterStatus::Braking(r) => format!("brake: {r}"),
+        }
+    }
+}
+
+/// The result of one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FilterOutput {
+    pub status: FilterStatus,
+    /// Pairs within the detection distance.
+    pub active_pairs: usize,
+    /// Smallest capsule distance the filter saw (robot capsules against the inflated human),
+    /// m; infinite when no pair was within the detection distance.
+    pub min_distance_m: f64,
+    /// SSM: the factor applied to the nominal command; QP: 1 (see the command itself).
+    pub scale: f64,
+}
+
+/// The safety filter of one robot. Build once, call [`SafetyFilter::tick`] every control
+/// period; the tick does not allocate (clarabel's own solve aside).
+#[derive(Debug)]
+pub struct SafetyFilter {
+    mode: FilterMode,
+    config: FilterConfig,
+    geometry: RobotGeometry,
+    qp: Option<QpFilter>,
+    kinematics: KinematicState,
+    pairs: Vec<PairConstraint>,
+    qdot: Vec<f64>,
+    qdot_prev: Vec<f64>,
+    lb: Vec<f64>,
+    ub: Vec<f64>,
+    velocity_limit: Vec<f64>,
+    acceleration_limit: Vec<f64>,
+    position_limits: Vec<[f64; 2]>,
+}
+
+impl SafetyFilter {
+    /// A filter for `robot` with its root at `X_WB`.
+    ///
+    /// # Errors
+    /// [`SafetyError`] for an invalid configuration, a robot without collision geometry, or
+    /// with too many joints.
+    pub fn new(
+        robot: &RobotModel,
+        X_WB: Pose,
+        mode: FilterMode,
+        config: FilterConfig,
+    ) -> Result<Self> {
+        config.validate()?;
+        let geometry = RobotGeometry::new(robot)?;
+        let dof = robot.dof();
+        let qp = match mode {
+            FilterMode::Qp => Some(QpFilter::new(dof, config.max_pairs)?),
+            _ => None,
+        };
+        let mut kinematics = KinematicState::new(robot);
+        kinematics.X_WB = X_WB;
+        let joints: Vec<_> = robot
+            .actuated_joints()
+            .iter()
+            .map(|&j| robot.joints()[j].limits)
+            .collect();
+        let velocity_limit = joints
+            .iter()
+            .map(|l| {
+                if l.velocity > 0.0 {
+                    l.velocity
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect();
+        let acceleration_limit = joints
+            .iter()
+            .map(|l| {
+                if l.acceleration.is_finite() && l.acceleration > 0.0 {
+                    l.acceleration
+                } else {
+                    config.acceleration_rad_s2
+                }
+            })
+            .collect();
+        Ok(Self {
+            mode,
+            geometry,
+            qp,
+            kinematics,
+            pairs: Vec::with_capacity(robot.links().len() * 3),
+            qdot: vec![0.0; dof],
+            qdot_prev: vec![0.0; dof],
+            lb: vec![0.0; dof],
+            ub: vec![0.0; dof],
+            velocity_limit,
+            acceleration_limit,
+            position_limits: robot.position_limits(),
+            config,
+        })
+    }
+
+    /// The filter's mode.
+    #[must_use]
+    pub fn mode(&self) -> FilterMode {
+        self.mode
+    }
+
+    /// The filter's settings.
+    #[must_use]
+    pub fn config(&self) -> &FilterConfig {
+        &self.config
+    }
+
+    /// The robot geometry (capsules, exact shapes) the filter guards.
+    #[must_use]
+    pub fn geometry(&self) -> &RobotGeometry {
+        &self.geometry
+    }
+
+    /// The kinematics of the last tick's configuration.
+    #[must_use]
+    pub fn kinematics(&self) -> &KinematicState {
+        &self.kinematics
+    }
+
+    /// The pairs of the last tick (within the detection distance).
+    #[must_use]
+    pub fn pairs(&self) -> &[PairConstraint] {
+        &self.pairs
+    }
+
+    /// The command of the last tick.
+    #[must_use]
+    pub fn command(&self) -> &[f64] {
+        &self.qdot
+    }
+
+    /// Forgets the previous command (the robot is standing).
+    pub fn reset(&mut self) {
+        self.qdot.fill(0.0);
+        self.qdot_prev.fill(0.0);
+    }
+
+    /// One control tick: the robot at joint positions `q` wants `qdot_nom`; the human is as
+    /// `human` says; the command holds for `dt_s`. Returns what was done; the command is in
+    /// [`SafetyFilter::command`]. Never panics and never returns a non-finite command: bad
+    /// input gives a braking command.
+    pub fn tick(
+        &mut self,
+        robot: &RobotModel,
+        q: &[f64],
+        qdot_nom: &[f64],
+        human: &HumanEstimate,
+        dt_s: f64,
+    ) -> FilterOutput {
+        let dof = self.qdot.len();
+        self.qdot_prev.copy_from_slice(&self.qdot);
+        let mut out = FilterOutput {
+            status: FilterStatus::Pass,
+            active_pairs: 0,
+            min_distance_m: f64::INFINITY,
+            scale: 1.0,
+        };
+        let robot_ok = q.len() == dof
+            && qdot_nom.len() == dof
+            && dt_s.is_finite()
+            && dt_s > 0.0
+            && q.iter().chain(qdot_nom).all(|v| v.is_finite());
+        if !robot_ok || robot.dof() != dof {
+            return self.brake(out, BrakeReason::InvalidRobotInput, dt_s);
+        }
+        if self.mode == FilterMode::None {
+            self.qdot.copy_from_slice(qdot_nom);
+            // Still measured, so that unfiltered runs report distances too.
+            if human.parts.iter().all(|p| p.is_valid())
+                && robot.forward_kinematics(q, &mut self.kinematics).is_ok()
+            {
+                self.geometry.pair_constraints(
+                    robot,
+                    &self.kinematics,
+                    human,
+                    self.config.detection_m,
+                    &mut self.pairs,
+                );
+                out.active_pairs = self.pairs.len();
+                out.min_distance_m = self
+                    .pairs
+                    .iter()
+                    .map(|p| p.pair.distance_m)
+                    .fold(f64::INFINITY, f64::min);
+            }
+            return out;
+        }
+        if human.parts.is_empty() {
+            return self.brake(out, BrakeReason::NoHumanEstimate, dt_s);
+        }
+        if !(human.uncertainty_m.is_finite() && human.uncertainty_m >= 0.0)
+            || !human.parts.iter().all(|p| p.is_valid())
+        {
+            return self.brake(out, BrakeReason::InvalidHumanEstimate, dt_s);
+        }
+        if robot.forward_kinematics(q, &mut self.kinematics).is_err() {
+            return self.brake(out, BrakeReason::InvalidRobotInput, dt_s);
+        }
+        self.geometry.pair_constraints(
+            robot,
+            &self.kinematics,
+            human,
+            self.config.detection_m,
+            &mut self.pairs,
+        );
+        out.active_pairs = self.pairs.len();
+        out.min_distance_m = self
+            .pairs
+            .iter()
+            .map(|p| p.pair.distance_m)
+            .fold(f64::INFINITY, f64::min);
+
+        // Joint bounds: velocity limit, acceleration from the last command, position limit.
+        let gain = self.config.position_gain_per_s;
+        for j in 0..dof {
+            let [lo, hi] = self.position_limits[j];
+            let dv = self.acceleration_limit[j] * dt_s;
+            let v = self.velocity_limit[j];
+            let ub = v.min(self.qdot_prev[j] + dv).min(if hi.is_finite() {
+                gain * (hi - q[j])
+            } else {
+                f64::INFINITY
+            });
+            let lb = (-v).max(self.qdot_prev[j] - dv).max(if lo.is_finite() {
+                gain * (lo - q[j])
+            } else {
+                f64::NEG_INFINITY
+            });
+            if !(lb <= ub) {
+                return self.brake(out, BrakeReason::ConflictingBounds, dt_s);
+            }
+            self.lb[j] = lb;
+            self.ub[j] = ub;
+        }
+
+        match self.mode {
+            FilterMode::None => unreachable!("handled above"),
+            FilterMode::Qp => self.tick_qp(qdot_nom, out, dt_s),
+            FilterMode::Ssm => self.tick_ssm(qdot_nom, out, dt_s),
+        }
+    }
+
+    fn tick_qp(&mut self, qdot_nom: &[f64], mut out: FilterOutput, dt_s: f64) -> FilterOutput {
+        let within = qdot_nom
+            .iter()
+            .zip(self.lb.iter().zip(&self.ub))
+            .all(|(v, (lo, hi))| lo <= v && v <= hi);
+        let (gamma, d_min) = (self.config.gamma_per_s, self.config.d_min_m);
+        let satisfied = self.pairs.iter().all(|c| {
+            let rate: f64 = c
+                .normal_jacobian
+                .iter()
+                .zip(qdot_nom)
+                .map(|(a, v)| a * v)
+                .sum();
+            rate - c.human_normal_speed_m_s >= -gamma * (c.pair.distance_m - d_min)
+        });
+        if within && satisfied {
+            self.qdot.copy_from_slice(qdot_nom);
+            return out;
+        }
+        let Some(qp) = self.qp.as_mut() else {
+            return self.brake(out, BrakeReason::Solver(QpFailure::BadSolution), dt_s);
+        };
+        match qp.solve(
+            qdot_nom,
+            &mut self.pairs,
+            &self.lb,
+            &self.ub,
+            gamma,
+            d_min,
+            &mut self.qdot,
+        ) {
+            Ok(()) => {
+                out.status = FilterStatus::Modified;
+                out
+            }
+            Err(e) => self.brake(out, BrakeReason::Solver(e), dt_s),
+        }
+    }
+
+    fn tick_ssm(&mut self, qdot_nom: &[f64], mut out: FilterOutput, dt_s: f64) -> FilterOutput {
+        // The capsule distance already subtracts the sensing uncertainty (the human capsules
+        // are inflated by it), so Z_d is 0 here.
+        let mut scale: f64 = 1.0;
+        for c in &mut self.pairs {
+            let rate: f64 = c
+                .normal_jacobian
+                .iter()
+                .zip(qdot_nom)
+                .map(|(a, v)| a * v)
+                .sum();
+            let approach = (-rate).max(0.0);
+            c.robot_speed_m_s = approach;
+            if approach <= 0.0 {
+                continue;
+            }
+            let allowed = self
+                .config
+                .ssm
+                .max_robot_speed_m_s(c.pair.distance_m - self.config.d_min_m, 0.0);
+            scale = scale.min(allowed / approach);
+        }
+        out.scale = scale;
+        if scale <= 0.0 {
+            return self.brake(out, BrakeReason::ProtectiveStop, dt_s);
+        }
+        let mut changed = scale < 1.0;
+        for j in 0..qdot_nom.len() {
+            let v = qdot_nom[j] * scale;
+            let clamped = v.clamp(self.lb[j], self.ub[j]);
+            changed |= clamped != v;
+            self.qdot[j] = clamped;
+        }
+        if changed {
+            out.status = FilterStatus::Modified;
+        }
+        out
+    }
+
+    /// The fail-safe: every joint decelerates toward 0 at its acceleration bound. Without a
+    /// valid time step the ramp cannot be computed: the command is 0 (the drive's own ramp
+    /// applies).
+    fn brake(&mut self, mut out: FilterOutput, reason: BrakeReason, dt_s: f64) -> FilterOutput {
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            dt_s
+        } else {
+            f64::INFINITY
+        };
+        for j in 0..self.qdot.len() {
+            let v = if self.qdot_prev[j].is_finite() {
+                self.qdot_prev[j]
+            } else {
+                0.0
+            };
+            let dv = self.acceleration_limit[j] * dt;
+            self.qdot[j] = if v > 0.0 {
+                (v - dv).max(0.0)
+            } else {
+                (v + dv).min(0.0)
+            };
+        }
+        out.status = FilterStatus::Braking(reason);
+        out.scale = 0.0;
+        out
+    }
+}

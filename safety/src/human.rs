@@ -1,0 +1,146 @@
+//! The human as the safety layer sees it: one capsule per arm part, with velocities and the
+//! uncertainty that perception reports.
+
+use serde::{Deserialize, Serialize};
+use workcell_robots::collision::{LinkCapsule, link_bounding_capsule};
+use workcell_robots::math::Vector;
+use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
+
+use crate::error::{Result, SafetyError};
+use crate::geometry::Capsule;
+
+/// The parts of the arm that the safety layer models, each an ISO/TS 15066 body region.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HumanPart {
+    UpperArm,
+    Forearm,
+    Hand,
+}
+
+impl HumanPart {
+    /// Every part, in the order used in tables.
+    pub const ALL: [HumanPart; 3] = [HumanPart::UpperArm, HumanPart::Forearm, HumanPart::Hand];
+
+    /// The link name of the part in the catalogue `human_arm`.
+    #[must_use]
+    pub fn link_name(self) -> &'static str {
+        match self {
+            HumanPart::UpperArm => "upper_arm",
+            HumanPart::Forearm => "forearm",
+            HumanPart::Hand => "hand",
+        }
+    }
+}
+
+impl std::fmt::Display for HumanPart {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.link_name())
+    }
+}
+
+/// One part as estimated: its capsule (not yet inflated) and the velocities of its two axis
+/// end points, in the world.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PartEstimate {
+    pub part: HumanPart,
+    pub capsule: Capsule,
+    pub v_a_W: Vector,
+    pub v_b_W: Vector,
+}
+
+impl PartEstimate {
+    /// Velocity of the axis point at parameter `t` (exact on the axis of a rigid part: the
+    /// velocity field of a rigid body is affine along a line).
+    #[must_use]
+    #[inline]
+    pub fn velocity_at(&self, t: f64) -> Vector {
+        self.v_a_W + (self.v_b_W - self.v_a_W) * t
+    }
+
+    /// `true` when the capsule and the velocities are finite.
+    #[must_use]
+    pub fn is_valid(&self) -> bool {
+        self.capsule.is_valid() && self.v_a_W.is_finite() && self.v_b_W.is_finite()
+    }
+}
+
+/// What perception knows about the human at one instant.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct HumanEstimate {
+    /// Estimated parts; empty when perception sees no human (the filter then brakes).
+    pub parts: Vec<PartEstimate>,
+    /// The sensing uncertainty Z_d of ISO/TS 15066, m: every capsule is inflated by it.
+    pub uncertainty_m: f64,
+}
+
+impl HumanEstimate {
+    /// The inflated capsule of each part.
+    pub fn inflated(&self) -> impl Iterator<Item = (&PartEstimate, Capsule)> {
+        let margin = self.uncertainty_m;
+        self.parts
+            .iter()
+            .map(move |p| (p, p.capsule.inflated(margin)))
+    }
+}
+
+/// The capsules of a human arm model's parts, in link frames, to turn joint states into
+/// [`HumanEstimate`]s.
+#[derive(Debug, Clone)]
+pub struct HumanGeometry {
+    parts: Vec<(HumanPart, LinkCapsule)>,
+    jacobian: Jacobian,
+}
+
+impl HumanGeometry {
+    /// Bounding capsules of the `upper_arm`, `forearm` and `hand` links of `human` (the
+    /// catalogue `human_arm` or a model with links of those names).
+    ///
+    /// # Errors
+    /// [`SafetyError::Robot`] when a part's link is missing or has no collision geometry.
+    pub fn new(human: &RobotModel) -> Result<Self> {
+        let mut parts = Vec::with_capacity(HumanPart::ALL.len());
+        for part in HumanPart::ALL {
+            let missing = |what: &str| SafetyError::Robot {
+                robot: human.name().to_string(),
+                message: format!("human part '{part}': {what}"),
+            };
+            let link: LinkId = human
+                .link_id(part.link_name())
+                .ok_or_else(|| missing("no link of this name"))?;
+            let capsule = link_bounding_capsule(human, link)
+                .ok_or_else(|| missing("the link has no collision geometry"))?;
+            parts.push((part, capsule));
+        }
+        Ok(Self {
+            parts,
+            jacobian: Jacobian::zeros(human.dof()),
+        })
+    }
+
+    /// The exact estimate of a human in state `kinematics` (forward kinematics done) moving
+    /// with joint velocities `qd`: ground truth, zero uncertainty. `out` is overwritten.
+    pub fn estimate_into(
+        &mut self,
+        human: &RobotModel,
+        kinematics: &KinematicState,
+        qd: &[f64],
+        out: &mut HumanEstimate,
+    ) {
+        out.parts.clear();
+        out.uncertainty_m = 0.0;
+        for (part, c) in &self.parts {
+            let (a_W, b_W) = c.segment_in_world(kinematics.link_pose(c.link));
+            human.point_jacobian(kinematics, c.link, a_W, &mut self.jacobian);
+            let v_a_W = self.jacobian.linear_velocity(qd);
+            human.point_jacobian(kinematics, c.link, b_W, &mut self.jacobian);
+            let v_b_W = self.jacobian.linear_velocity(qd);
+            out.parts.push(PartEstimate {
+                part: *part,
+                capsule: Capsule::new(a_W, b_W, c.radius_m),
+                v_a_W,
+                v_b_W,
+            });
+        }
+    }
+}

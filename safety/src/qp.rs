@@ -1,0 +1,213 @@
+//! The velocity-level QP safety filter, solved by clarabel with a fixed sparsity pattern.
+//!
+//! ```text
+//! minimize    1/2 ||qdot - qdot_nom||^2
+//! subject to  nhat^T (J qdot - v_B) >= -gamma (d - d_min)    one row per pair (padded)
+//!             lb <= qdot <= ub                                 velocity, acceleration and
+//!                                                              position limits
+//! ```
+//!
+//! With `qdot` as the variable, gamma is a rate (1/s); the v_B term is the human's own
+//! approach speed, which filters that assume a static obstacle leave out.
+//!
+//! clarabel's form is `A x + s = b, s >= 0`, so every row is written as `a^T qdot <= b`.
+//! The matrix `A` has, column by column, `max_pairs` pair entries (explicit zeros on unused
+//! rows) and the two bound entries: its pattern never changes, so the solver is built once
+//! and each tick only overwrites values (presolve, equilibration and zero dropping off, as
+//! clarabel requires for data updates).
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
+};
+
+use crate::distance::PairConstraint;
+use crate::error::{Result, SafetyError};
+
+/// The QP of one robot, built once.
+pub struct QpFilter {
+    dof: usize,
+    max_pairs: usize,
+    solver: DefaultSolver<f64>,
+    a_values: Vec<f64>,
+    b: Vec<f64>,
+    q: Vec<f64>,
+}
+
+impl std::fmt::Debug for QpFilter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("QpFilter")
+            .field("dof", &self.dof)
+            .field("max_pairs", &self.max_pairs)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Why a QP solve gave no usable command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum QpFailure {
+    /// The solver ended with this status instead of `Solved`.
+    Status(SolverStatus),
+    /// The solver said `Solved` but the answer is not finite or breaks a row by more than
+    /// the tolerance.
+    BadSolution,
+}
+
+impl std::fmt::Display for QpFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            QpFailure::Status(s) => write!(f, "solver status {s:?}"),
+            QpFailure::BadSolution => f.write_str("solution breaks a constraint"),
+        }
+    }
+}
+
+/// Tolerance on a row of the returned solution, in the row's units (m/s or rad/s).
+const ROW_TOLERANCE: f64 = 1e-5;
+
+impl QpFilter {
+    /// A filter for `dof` joints with room for `max_pairs` pair rows.
+    ///
+    /// # Errors
+    /// [`SafetyError::Solver`] if clarabel refuses the setup (a bug).
+    pub fn new(dof: usize, max_pairs: usize) -> Result<Self> {
+        let m = max_pairs + 2 * dof;
+        // P = I (upper triangle: the diagonal).
+        let p = CscMatrix::new(
+            dof,
+            dof,
+            (0..=dof).collect(),
+            (0..dof).collect(),
+            vec![1.0; dof],
+        );
+        let per_column = max_pairs + 2;
+        let mut colptr = Vec::with_capacity(dof + 1);
+        let mut rowval = Vec::with_capacity(dof * per_column);
+        for j in 0..dof {
+            colptr.push(j * per_column);
+            rowval.extend(0..max_pairs);
+            rowval.push(max_pairs + j); // qdot_j <= ub_j
+            rowval.push(max_pairs + dof + j); // -qdot_j <= -lb_j
+        }
+        colptr.push(dof * per_column);
+        let mut a_values = vec![0.0; dof * per_column];
+        for j in 0..dof {
+            a_values[j * per_column + max_pairs] = 1.0;
+            a_values[j * per_column + max_pairs + 1] = -1.0;
+        }
+        let a = CscMatrix::new(m, dof, colptr, rowval, a_values.clone());
+        let b = vec![1.0; m];
+        let q = vec![0.0; dof];
+        let settings = DefaultSettingsBuilder::default()
+            .verbose(false)
+            .presolve_enable(false)
+            .equilibrate_enable(false)
+            .input_sparse_dropzeros(false)
+            .max_iter(60)
+            .build()
+            .map_err(|e| SafetyError::Solver {
+                message: e.to_string(),
+            })?;
+        let solver =
+            DefaultSolver::new(&p, &q, &a, &b, &[NonnegativeConeT(m)], settings).map_err(|e| {
+                SafetyError::Solver {
+                    message: e.to_string(),
+                }
+            })?;
+        Ok(Self {
+            dof,
+            max_pairs,
+            solver,
+            a_values,
+            b,
+            q,
+        })
+    }
+
+    /// Pair rows the QP has room for.
+    #[must_use]
+    pub fn max_pairs(&self) -> usize {
+        self.max_pairs
+    }
+
+    /// Solves for the command closest to `qdot_nom` within `lb..=ub` that keeps every pair
+    /// of `pairs` from closing faster than `gamma_per_s (d - d_min_m)`. When there are more
+    /// pairs than rows, the closest ones are kept (`pairs` is reordered). Writes the command
+    /// into `qdot`.
+    ///
+    /// # Errors
+    /// [`QpFailure`] when the solver does not return a solution that satisfies every row:
+    /// the caller must then brake.
+    #[allow(clippy::too_many_arguments)]
+    pub fn solve(
+        &mut self,
+        qdot_nom: &[f64],
+        pairs: &mut [PairConstraint],
+        lb: &[f64],
+        ub: &[f64],
+        gamma_per_s: f64,
+        d_min_m: f64,
+        qdot: &mut [f64],
+    ) -> std::result::Result<(), QpFailure> {
+        let (n, rows) = (self.dof, self.max_pairs);
+        let per_column = rows + 2;
+        if pairs.len() > rows {
+            pairs.select_nth_unstable_by(rows - 1, |x, y| {
+                x.pair.distance_m.total_cmp(&y.pair.distance_m)
+            });
+        }
+        let used = pairs.len().min(rows);
+        for i in 0..rows {
+            if let Some(c) = pairs.get(i).filter(|_| i < used) {
+                for j in 0..n {
+                    self.a_values[j * per_column + i] = -c.normal_jacobian[j];
+                }
+                self.b[i] = gamma_per_s * (c.pair.distance_m - d_min_m) - c.human_normal_speed_m_s;
+            } else {
+                for j in 0..n {
+                    self.a_values[j * per_column + i] = 0.0;
+                }
+                self.b[i] = 1.0;
+            }
+        }
+        for j in 0..n {
+            self.b[rows + j] = ub[j];
+            self.b[rows + n + j] = -lb[j];
+            self.q[j] = -qdot_nom[j];
+        }
+        let updated = self
+            .solver
+            .update_A(&self.a_values)
+            .and_then(|()| self.solver.update_b(&self.b))
+            .and_then(|()| self.solver.update_q(&self.q));
+        if updated.is_err() {
+            return Err(QpFailure::Status(SolverStatus::Unsolved));
+        }
+        self.solver.solve();
+        let status = self.solver.solution.status;
+        if status != SolverStatus::Solved {
+            return Err(QpFailure::Status(status));
+        }
+        let x = &self.solver.solution.x;
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(QpFailure::BadSolution);
+        }
+        // Check every row ourselves: a safety command is never taken on trust.
+        for i in 0..used {
+            let lhs: f64 = (0..n)
+                .map(|j| self.a_values[j * per_column + i] * x[j])
+                .sum();
+            if lhs > self.b[i] + ROW_TOLERANCE {
+                return Err(QpFailure::BadSolution);
+            }
+        }
+        for j in 0..n {
+            if x[j] > ub[j] + ROW_TOLERANCE || x[j] < lb[j] - ROW_TOLERANCE {
+                return Err(QpFailure::BadSolution);
+            }
+            // Clarabel's interior point stops within its tolerance of the boundary.
+            qdot[j] = x[j].clamp(lb[j], ub[j]);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,523 @@
+//! The QP filter against hand-solved QPs, the barrier holding against a moving human, the
+//! fail-safe on bad input, and the ISO/TS 15066 formulas.
+
+use approx::assert_abs_diff_eq;
+use workcell_robots::math::{Pose, Vector};
+use workcell_robots::{KinematicState, RobotModel};
+use workcell_safety::geometry::capsule_capsule;
+use workcell_safety::iso::effective_robot_mass_kg;
+use workcell_safety::{
+    BodyRegion, BrakeReason, Capsule, FilterConfig, FilterMode, FilterStatus, HumanEstimate,
+    HumanPart, MAX_DOF, PairConstraint, PartEstimate, QpFailure, QpFilter, SafetyFilter,
+    SignedDistancePair, SsmConfig,
+};
+
+fn row(normal_jacobian: &[f64], distance_m: f64, human_normal_speed_m_s: f64) -> PairConstraint {
+    let mut nj = [0.0; MAX_DOF];
+    nj[..normal_jacobian.len()].copy_from_slice(normal_jacobian);
+    PairConstraint {
+        pair: SignedDistancePair {
+            link: 0,
+            part: HumanPart::Hand,
+            distance_m,
+            p_WA: Vector::ZERO,
+            p_WB: Vector::ZERO,
+            nhat_BA_W: Vector::X,
+            t_B: 0.0,
+        },
+        normal_jacobian: nj,
+        human_normal_speed_m_s,
+        robot_speed_m_s: 0.0,
+    }
+}
+
+#[test]
+fn qp_projects_the_nominal_command_onto_a_single_barrier() {
+    let mut qp = QpFilter::new(2, 4).expect("setup");
+    // Row: qdot_0 - 0.2 >= -2 (0.15 - 0.1)  =>  qdot_0 >= 0.1 ... with the human approaching
+    // at 0.2 m/s: qdot_0 >= 0.2 - 0.1 = 0.1.
+    let mut pairs = [row(&[1.0, 0.0], 0.15, 0.2)];
+    let mut qdot = [0.0; 2];
+    qp.solve(
+        &[-0.4, 0.3],
+        &mut pairs,
+        &[-2.0; 2],
+        &[2.0; 2],
+        2.0,
+        0.1,
+        &mut qdot,
+    )
+    .expect("solved");
+    // The closest point of the half-plane qdot_0 >= 0.1 to (-0.4, 0.3).
+    assert_abs_diff_eq!(qdot[0], 0.1, epsilon = 1e-6);
+    assert_abs_diff_eq!(qdot[1], 0.3, epsilon = 1e-6);
+
+    // A diagonal row at d = d_min with the human approaching at 0.5 m/s:
+    // (qdot_0 + qdot_1)/sqrt 2 >= 0.5; projection of (0, 0) is (0.3536, 0.3536).
+    let s = 0.5f64.sqrt();
+    let mut pairs = [row(&[s, s], 0.1, 0.5)];
+    qp.solve(
+        &[0.0, 0.0],
+        &mut pairs,
+        &[-2.0; 2],
+        &[2.0; 2],
+        1.0,
+        0.1,
+        &mut qdot,
+    )
+    .expect("solved");
+    assert_abs_diff_eq!(qdot[0], 0.5 * s, epsilon = 1e-6);
+    assert_abs_diff_eq!(qdot[1], 0.5 * s, epsilon = 1e-6);
+}
+
+#[test]
+fn qp_respects_bounds_and_reports_infeasibility() {
+    let mut qp = QpFilter::new(2, 2).expect("setup");
+    let mut qdot = [0.0; 2];
+    // Bounds only (an inactive pair): the nominal command clipped to the box.
+    let mut pairs = [row(&[1.0, 0.0], 1.0, 0.0)];
+    qp.solve(
+        &[3.0, -3.0],
+        &mut pairs,
+        &[-1.0; 2],
+        &[1.0; 2],
+        1.0,
+        0.1,
+        &mut qdot,
+    )
+    .expect("solved");
+    assert_abs_diff_eq!(qdot[0], 1.0, epsilon = 1e-6);
+    assert_abs_diff_eq!(qdot[1], -1.0, epsilon = 1e-6);
+    // qdot_0 >= 3 but qdot_0 <= 1: infeasible.
+    let mut pairs = [row(&[1.0, 0.0], 0.1, 3.0)];
+    let err = qp
+        .solve(
+            &[0.0, 0.0],
+            &mut pairs,
+            &[-1.0; 2],
+            &[1.0; 2],
+            1.0,
+            0.1,
+            &mut qdot,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            QpFailure::Status(clarabel::solver::SolverStatus::PrimalInfeasible)
+        ),
+        "{err:?}"
+    );
+}
+
+#[test]
+fn qp_keeps_the_closest_pairs_when_rows_run_out() {
+    let mut qp = QpFilter::new(1, 2).expect("setup");
+    let mut qdot = [0.0];
+    // Three rows, room for two: the far pair (qdot >= -0.9) must go, the close ones stay.
+    let mut pairs = [
+        row(&[1.0], 1.0, 0.0),
+        row(&[1.0], 0.12, 0.3),
+        row(&[1.0], 0.2, 0.0),
+    ];
+    qp.solve(&[-1.0], &mut pairs, &[-2.0], &[2.0], 1.0, 0.1, &mut qdot)
+        .expect("solved");
+    // Binding row: qdot >= 0.3 - 0.02 = 0.28.
+    assert_abs_diff_eq!(qdot[0], 0.28, epsilon = 1e-6);
+}
+
+fn iiwa() -> RobotModel {
+    RobotModel::from_catalogue("iiwa14_kinematics").expect("catalogue robot")
+}
+
+fn forearm(a: Vector, b: Vector, v: Vector) -> HumanEstimate {
+    HumanEstimate {
+        parts: vec![PartEstimate {
+            part: HumanPart::Forearm,
+            capsule: Capsule::new(a, b, 0.04),
+            v_a_W: v,
+            v_b_W: v,
+        }],
+        uncertainty_m: 0.0,
+    }
+}
+
+/// Smallest capsule distance between the robot at `q` and `human`.
+fn capsule_gap(filter: &SafetyFilter, robot: &RobotModel, q: &[f64], human: &HumanEstimate) -> f64 {
+    let mut k = KinematicState::new(robot);
+    robot.forward_kinematics(q, &mut k).expect("fk");
+    filter
+        .geometry()
+        .capsules(&k)
+        .flat_map(|(l, c)| {
+            human
+                .parts
+                .iter()
+                .map(move |p| capsule_capsule(l, &c, p.part, &p.capsule).distance_m)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// A forearm sweeps toward the arm at 0.5 m/s while the nominal command drives the arm toward
+/// it. With the human velocity term the gap never drops below d_min (up to the first-order
+/// error of 1 ms steps); without it (a filter told the human stands still) the gap shrinks
+/// below d_min. The second half is what shows the term is needed.
+#[test]
+fn barrier_holds_d_min_against_a_moving_human_only_with_the_velocity_term() {
+    let robot = iiwa();
+    let config = FilterConfig {
+        acceleration_rad_s2: 100.0,
+        ..FilterConfig::default()
+    };
+    let d_min = config.d_min_m;
+    let run = |tell_velocity: bool| {
+        let mut filter = SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config.clone())
+            .expect("filter");
+        let dt = 0.001;
+        let mut q = vec![0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+        let v_human = Vector::new(-0.5, 0.0, 0.0);
+        let (mut a, mut b) = (Vector::new(1.3, -0.3, 0.6), Vector::new(1.3, 0.3, 0.6));
+        // The arm reaches forward (+x) by raising joint 2.
+        let qdot_nom = [0.0, 0.4, 0.0, 0.3, 0.0, 0.0, 0.0];
+        let mut min_gap = f64::INFINITY;
+        let mut braked = 0;
+        for _ in 0..1500 {
+            let told = forearm(a, b, if tell_velocity { v_human } else { Vector::ZERO });
+            let out = filter.tick(&robot, &q, &qdot_nom, &told, dt);
+            if matches!(out.status, FilterStatus::Braking(_)) {
+                braked += 1;
+            }
+            for (qi, v) in q.iter_mut().zip(filter.command()) {
+                *qi += v * dt;
+            }
+            a += v_human * dt;
+            b += v_human * dt;
+            // Stop the human at 0.55 m from the base axis.
+            if a.x < 0.55 {
+                a.x = 0.55;
+                b.x = 0.55;
+            }
+            min_gap = min_gap.min(capsule_gap(
+                &filter,
+                &robot,
+                &q,
+                &forearm(a, b, Vector::ZERO),
+            ));
+        }
+        (min_gap, braked)
+    };
+    let (with_term, braked) = run(true);
+    assert!(
+        with_term >= d_min - 1e-3,
+        "gap {with_term} fell below d_min {d_min}"
+    );
+    assert_eq!(braked, 0, "the filter found a solution every tick");
+    let (without_term, _) = run(false);
+    assert!(
+        without_term < d_min - 5e-3,
+        "without the human velocity the gap was {without_term}"
+    );
+}
+
+#[test]
+fn bad_input_gives_a_finite_braking_command() {
+    let robot = iiwa();
+    let human = forearm(
+        Vector::new(0.8, -0.3, 0.6),
+        Vector::new(0.8, 0.3, 0.6),
+        Vector::ZERO,
+    );
+    let q = [0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+    let nominal = [0.3; 7];
+    for mode in [FilterMode::Qp, FilterMode::Ssm] {
+        let mut filter = SafetyFilter::new(&robot, Pose::IDENTITY, mode, FilterConfig::default())
+            .expect("filter");
+        let dt = 0.004;
+        // Get moving first so that braking has something to ramp down.
+        for _ in 0..20 {
+            filter.tick(
+                &robot,
+                &q,
+                &[0.2; 7],
+                &forearm(
+                    Vector::new(3.0, 0.0, 0.6),
+                    Vector::new(3.0, 0.1, 0.6),
+                    Vector::ZERO,
+                ),
+                dt,
+            );
+        }
+        let moving = filter.command().to_vec();
+        assert!(moving.iter().all(|v| *v > 0.1), "{mode}: {moving:?}");
+
+        let mut nan_q = q;
+        nan_q[3] = f64::NAN;
+        let mut nan_human = human.clone();
+        nan_human.parts[0].capsule.a_W.y = f64::INFINITY;
+        let mut nan_velocity = human.clone();
+        nan_velocity.parts[0].v_b_W.z = f64::NAN;
+        let mut nan_uncertainty = human.clone();
+        nan_uncertainty.uncertainty_m = f64::NAN;
+        let cases: [(&str, &[f64], &[f64], HumanEstimate, BrakeReason); 6] = [
+            (
+                "NaN joint",
+                &nan_q,
+                &nominal,
+                human.clone(),
+                BrakeReason::InvalidRobotInput,
+            ),
+            (
+                "short q",
+                &q[..5],
+                &nominal,
+                human.clone(),
+                BrakeReason::InvalidRobotInput,
+            ),
+            (
+                "infinite capsule",
+                &q,
+                &nominal,
+                nan_human,
+                BrakeReason::InvalidHumanEstimate,
+            ),
+            (
+                "NaN velocity",
+                &q,
+                &nominal,
+                nan_velocity,
+                BrakeReason::InvalidHumanEstimate,
+            ),
+            (
+                "NaN uncertainty",
+                &q,
+                &nominal,
+                nan_uncertainty,
+                BrakeReason::InvalidHumanEstimate,
+            ),
+            (
+                "empty estimate",
+                &q,
+                &nominal,
+                HumanEstimate::default(),
+                BrakeReason::NoHumanEstimate,
+            ),
+        ];
+        for (what, q, nominal, human, reason) in cases {
+            let before = filter.command().to_vec();
+            let out = filter.tick(&robot, q, nominal, &human, dt);
+            assert_eq!(out.status, FilterStatus::Braking(reason), "{mode}, {what}");
+            for (v, v0) in filter.command().iter().zip(&before) {
+                assert!(v.is_finite(), "{mode}, {what}");
+                // Toward zero, never past it, by at most the acceleration bound.
+                assert!(
+                    v.abs() <= v0.abs() + 1e-12 && v * v0 >= 0.0,
+                    "{mode}, {what}: {v0} -> {v}"
+                );
+                assert!(
+                    (v - v0).abs() <= 8.0 * dt + 1e-12,
+                    "{mode}, {what}: {v0} -> {v}"
+                );
+            }
+        }
+        // A NaN nominal command and a NaN time step.
+        let mut nan_nominal = nominal;
+        nan_nominal[0] = f64::NAN;
+        let out = filter.tick(&robot, &q, &nan_nominal, &human, dt);
+        assert_eq!(
+            out.status,
+            FilterStatus::Braking(BrakeReason::InvalidRobotInput)
+        );
+        let out = filter.tick(&robot, &q, &nominal, &human, f64::NAN);
+        assert_eq!(
+            out.status,
+            FilterStatus::Braking(BrakeReason::InvalidRobotInput)
+        );
+        assert!(
+            filter.command().iter().all(|v| *v == 0.0),
+            "no time step: stop"
+        );
+    }
+}
+
+/// d_min larger than the whole cell: every row demands more than the joints can give. The
+/// QP filter says so and brakes; nothing is NaN.
+#[test]
+fn an_impossible_separation_brakes_with_the_solver_status() {
+    let robot = iiwa();
+    let config = FilterConfig {
+        d_min_m: 50.0,
+        detection_m: 100.0,
+        ..FilterConfig::default()
+    };
+    let mut filter =
+        SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config).expect("filter");
+    let human = forearm(
+        Vector::new(0.8, -0.3, 0.6),
+        Vector::new(0.8, 0.3, 0.6),
+        Vector::ZERO,
+    );
+    let out = filter.tick(
+        &robot,
+        &[0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0],
+        &[0.1; 7],
+        &human,
+        0.004,
+    );
+    assert!(
+        matches!(out.status, FilterStatus::Braking(BrakeReason::Solver(_))),
+        "{:?}",
+        out.status
+    );
+    assert!(filter.command().iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn invalid_configurations_are_refused_with_the_key() {
+    let robot = iiwa();
+    for (config, key) in [
+        (
+            FilterConfig {
+                d_min_m: -0.1,
+                ..FilterConfig::default()
+            },
+            "safety.d_min_m",
+        ),
+        (
+            FilterConfig {
+                gamma_per_s: f64::NAN,
+                ..FilterConfig::default()
+            },
+            "safety.gamma_per_s",
+        ),
+        (
+            FilterConfig {
+                max_pairs: 0,
+                ..FilterConfig::default()
+            },
+            "safety.max_pairs",
+        ),
+        (
+            FilterConfig {
+                ssm: SsmConfig {
+                    braking_m_s2: 0.0,
+                    ..SsmConfig::default()
+                },
+                ..FilterConfig::default()
+            },
+            "ssm.braking_m_s2",
+        ),
+    ] {
+        let err = SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config).unwrap_err();
+        assert!(err.to_string().contains(key), "{err}");
+    }
+}
+
+#[test]
+fn protective_separation_round_trips_through_the_speed_limit() {
+    let ssm = SsmConfig::default();
+    for z_d in [0.0, 0.02, 0.1] {
+        for d in [0.3, 0.5, 1.0, 2.0] {
+            let v = ssm.max_robot_speed_m_s(d, z_d);
+            assert!(v > 0.0);
+            assert_abs_diff_eq!(ssm.protective_separation_m(v, z_d), d, epsilon = 1e-12);
+        }
+    }
+    // At the standstill distance v_h T_r + C + Z_d + Z_r the robot must stand.
+    let standstill = 1.6 * 0.1 + 0.0 + 0.02 + 0.005;
+    assert_eq!(ssm.max_robot_speed_m_s(standstill, 0.02), 0.0);
+    assert!(ssm.max_robot_speed_m_s(standstill + 1e-3, 0.02) > 0.0);
+    assert_eq!(ssm.max_robot_speed_m_s(f64::NAN, 0.0), 0.0);
+    // Hand-computed anchor (v_h 1.6 m/s, T_r 0.1 s, a 5 m/s^2, C = Z = 0, D = 1 m):
+    // v = -(0.5 + 1.6) + sqrt(0.25 + 2.56 + 10) = 1.479109 m/s.
+    let bare = SsmConfig {
+        robot_uncertainty_m: 0.0,
+        ..SsmConfig::default()
+    };
+    assert_abs_diff_eq!(
+        bare.max_robot_speed_m_s(1.0, 0.0),
+        12.81f64.sqrt() - 2.1,
+        epsilon = 1e-12
+    );
+}
+
+#[test]
+fn pfl_contact_speeds_follow_annex_a() {
+    // Forearm, robot effective mass 30/2 + 0 kg: mu = 1 / (1/2 + 1/15) = 1.764706 kg,
+    // v = 160 / sqrt(1.764706 * 40000) = 0.602218 m/s (hand computation).
+    let m_r = effective_robot_mass_kg(30.0, 0.0);
+    let forearm = BodyRegion::of(HumanPart::Forearm);
+    assert_abs_diff_eq!(
+        forearm.max_contact_speed_m_s(m_r, false),
+        0.602_218,
+        epsilon = 1e-6
+    );
+    assert_abs_diff_eq!(
+        forearm.max_contact_speed_m_s(m_r, true),
+        2.0 * 0.602_218,
+        epsilon = 2e-6
+    );
+    // Hand: mu = 1 / (1/0.6 + 1/15) = 0.576923 kg, v = 140 / sqrt(0.576923 * 75000) = 0.673036.
+    let hand = BodyRegion::of(HumanPart::Hand).max_contact_speed_m_s(m_r, false);
+    assert_abs_diff_eq!(hand, 0.673_036, epsilon = 1e-6);
+    // Upper arm: mu = 1 / (1/3 + 1/15) = 2.5 kg, v = 150 / sqrt(2.5 * 30000) = 0.547723.
+    let upper = BodyRegion::of(HumanPart::UpperArm).max_contact_speed_m_s(m_r, false);
+    assert_abs_diff_eq!(upper, 0.547_723, epsilon = 1e-6);
+    // A heavier robot must hit more slowly.
+    assert!(forearm.max_contact_speed_m_s(40.0, false) < forearm.max_contact_speed_m_s(m_r, false));
+}
+
+/// SSM scales the command: the closer the human, the slower the approach, stopping at the
+/// protective distance.
+#[test]
+fn ssm_slows_the_approach_as_the_human_gets_closer() {
+    let robot = iiwa();
+    let q = [0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+    let nominal = [0.0, 0.4, 0.0, 0.3, 0.0, 0.0, 0.0];
+    let mut scales = Vec::new();
+    for x in [1.6, 1.3, 1.1, 0.95] {
+        let mut filter = SafetyFilter::new(
+            &robot,
+            Pose::IDENTITY,
+            FilterMode::Ssm,
+            FilterConfig::default(),
+        )
+        .expect("filter");
+        // Start from the nominal speed so that the acceleration bound does not decide.
+        for _ in 0..200 {
+            filter.tick(
+                &robot,
+                &q,
+                &nominal,
+                &forearm(
+                    Vector::new(9.0, 0.0, 0.6),
+                    Vector::new(9.0, 0.1, 0.6),
+                    Vector::ZERO,
+                ),
+                0.004,
+            );
+        }
+        let out = filter.tick(
+            &robot,
+            &q,
+            &nominal,
+            &forearm(
+                Vector::new(x, -0.3, 0.6),
+                Vector::new(x, 0.3, 0.6),
+                Vector::ZERO,
+            ),
+            0.004,
+        );
+        scales.push((x, out.scale, out.status));
+    }
+    for w in scales.windows(2) {
+        assert!(w[1].1 <= w[0].1, "{scales:?}");
+    }
+    assert!(scales[0].1 > scales[scales.len() - 1].1, "{scales:?}");
+    assert!(
+        matches!(
+            scales[scales.len() - 1].2,
+            FilterStatus::Braking(BrakeReason::ProtectiveStop) | FilterStatus::Modified
+        ),
+        "{scales:?}"
+    );
+}
