@@ -2,6 +2,8 @@
 
 pub use workcell_perception as perception;
 pub use workcell_robots as robots;
+pub use workcell_safety as safety;
 pub use workcell_sim as sim;
 
+pub mod evaluate;
 pub mod plot;

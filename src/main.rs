@@ -28,6 +28,8 @@ enum Command {
         #[command(subcommand)]
         command: RobotCommand,
     },
+    /// Closed-loop safety evaluation: episodes of a cell with a safety filter and a report.
+    Evaluate(cli::evaluate::EvaluateArgs),
     /// Run a scenario and write joint trajectories and human part poses (CSV) and a plot.
     Simulate(cli::simulate::SimulateArgs),
     /// Camera datasets for ProcNet: generate them, look at them.
@@ -95,6 +97,7 @@ fn main() -> ExitCode {
         Command::Robot {
             command: RobotCommand::List,
         } => cli::robot::list(),
+        Command::Evaluate(a) => cli::evaluate::run(&a),
         Command::Simulate(a) => cli::simulate::run(&a),
         Command::Dataset {
             command: DatasetCommand::Generate(a),

@@ -59,16 +59,25 @@ pub fn svg_panels(x: &[f64], x_label: &str, panels: &[Panel]) -> String {
         }
         for (i, (name, values)) in panel.series.iter().enumerate() {
             let color = COLORS[i % COLORS.len()];
-            let mut points = String::new();
-            // At most ~2 points per pixel column: the SVG stays small for long runs.
+            // At most ~2 points per pixel column: the SVG stays small for long runs. A
+            // non-finite value (no sample there) breaks the line.
             let stride = (values.len() / (2 * plot_w as usize)).max(1);
+            let mut runs: Vec<String> = vec![String::new()];
             for (xv, yv) in x.iter().zip(values).step_by(stride) {
-                let _ = write!(points, "{:.1},{:.1} ", sx(*xv), sy(*yv));
+                if xv.is_finite() && yv.is_finite() {
+                    if let Some(run) = runs.last_mut() {
+                        let _ = write!(run, "{:.1},{:.1} ", sx(*xv), sy(*yv));
+                    }
+                } else if runs.last().is_some_and(|r| !r.is_empty()) {
+                    runs.push(String::new());
+                }
             }
-            let _ = writeln!(
-                svg,
-                r#"<polyline fill="none" stroke="{color}" stroke-width="1.2" points="{points}"/>"#
-            );
+            for points in runs.iter().filter(|r| !r.is_empty()) {
+                let _ = writeln!(
+                    svg,
+                    r#"<polyline fill="none" stroke="{color}" stroke-width="1.2" points="{points}"/>"#
+                );
+            }
             let ly = y_top + 14.0 + 16.0 * i as f64;
             let lx = width - right + 10.0;
             let _ = writeln!(
@@ -147,6 +156,19 @@ mod tests {
         assert_eq!(svg.matches("<polyline").count(), 2);
         assert!(svg.contains("a &lt; b"));
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
+    }
+
+    #[test]
+    fn non_finite_values_break_the_line_instead_of_drawing_nan() {
+        let x = [0.0, 1.0, 2.0, 3.0, 4.0];
+        let panels = [Panel {
+            title: "gap".into(),
+            y_label: "m".into(),
+            series: vec![("a".into(), vec![0.0, 1.0, f64::NAN, 0.5, 0.2])],
+        }];
+        let svg = svg_panels(&x, "t [s]", &panels);
+        assert_eq!(svg.matches("<polyline").count(), 2);
+        assert!(!svg.contains("NaN"));
     }
 }
 

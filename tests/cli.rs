@@ -330,3 +330,102 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         text(&bad.stderr)
     );
 }
+
+#[test]
+fn evaluate_writes_the_report_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // A short task keeps the test quick; the regression test runs the full scenario.
+    let eval = dir.path().join("eval.toml");
+    let cell = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/default.toml");
+    std::fs::write(
+        &eval,
+        format!(
+            "cell = {:?}\ntask_s = 2.0\nhuman_speed_scale = 0.5\n",
+            cell.display().to_string()
+        ),
+    )
+    .expect("write");
+    let out_dir = dir.path().join("report");
+    let args = |filter: &str| {
+        vec![
+            "evaluate".to_string(),
+            eval.display().to_string(),
+            "--episodes".into(),
+            "2".into(),
+            "--filter".into(),
+            filter.into(),
+            "--out".into(),
+            out_dir.display().to_string(),
+        ]
+    };
+    let run = |a: Vec<String>| workcell(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let out = run(args("qp"));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("2 episodes, filter qp"),
+        "{}",
+        text(&out.stdout)
+    );
+    for f in [
+        "summary.md",
+        "metrics.csv",
+        "evaluation.toml",
+        "separation.png",
+        "speed_scaling.png",
+    ] {
+        assert!(out_dir.join(f).is_file(), "{f} missing");
+    }
+    let csv = std::fs::read_to_string(out_dir.join("metrics.csv")).expect("csv");
+    assert_eq!(csv.lines().count(), 3, "header and one row per episode");
+    let summary = std::fs::read_to_string(out_dir.join("summary.md")).expect("summary");
+    assert!(summary.contains("## Verdict") && summary.contains("![separation](separation.png)"));
+    // A second run into the same folder keeps the first report unless --force.
+    let again = run(args("ssm"));
+    assert!(!again.status.success());
+    assert!(
+        text(&again.stderr).contains("--force"),
+        "{}",
+        text(&again.stderr)
+    );
+
+    // Bad input: clear errors naming the problem.
+    let bad = |content: &str, expected: &str| {
+        let path = dir.path().join("bad.toml");
+        std::fs::write(&path, content).expect("write");
+        let out = workcell(&[
+            "evaluate",
+            &path.display().to_string(),
+            "--out",
+            &dir.path().join("x").display().to_string(),
+        ]);
+        assert!(!out.status.success(), "{content}");
+        let err = text(&out.stderr);
+        assert!(err.contains(expected), "{content}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    };
+    let cell_line = format!("cell = {:?}\n", cell.display().to_string());
+    bad(
+        &format!("{cell_line}[safety]\nd_min_m = 50.0\n"),
+        "larger than the whole cell",
+    );
+    bad(
+        &format!("{cell_line}[safety]\ngamma_per_s = -1.0\n"),
+        "safety.gamma_per_s",
+    );
+    bad(
+        &format!("{cell_line}control_period_s = 0.0025\n"),
+        "not a multiple",
+    );
+    bad(
+        &format!("{cell_line}[perception]\ndropout = 1.5\n"),
+        "perception.dropout",
+    );
+    bad(&format!("{cell_line}speed = 3\n"), "unknown field");
+    bad("cell = \"missing.toml\"\n", "missing.toml");
+    let out = workcell(&["evaluate", &eval.display().to_string(), "--episodes", "0"]);
+    assert!(
+        text(&out.stderr).contains("--episodes"),
+        "{}",
+        text(&out.stderr)
+    );
+}

@@ -9,6 +9,34 @@ use crate::error::{Result, SafetyError};
 use crate::geometry::{Capsule, SignedDistancePair, capsule_capsule, shape_capsule};
 use crate::human::HumanEstimate;
 
+/// A segment-end row joins a pair's rows when it is within this of the pair's distance, m.
+const END_ROW_MARGIN_M: f64 = 0.02;
+/// ... and its robot witness point is at least this far from the pair's, m.
+const END_ROW_SEPARATION_M: f64 = 0.01;
+
+/// The pairs of each segment end of A against B and of each end of B against A (balls at the
+/// ends against the other capsule: each is at least the capsule distance, and smooth).
+fn end_pairs(
+    link: LinkId,
+    a: &Capsule,
+    part: crate::human::HumanPart,
+    b: &Capsule,
+) -> [SignedDistancePair; 4] {
+    let ball = |p: workcell_robots::math::Vector, r: f64| Capsule::new(p, p, r);
+    let from_b = |end: workcell_robots::math::Vector, t: f64| {
+        let mut pair = capsule_capsule(link, a, part, &ball(end, b.radius_m));
+        pair.t_B = t;
+        pair
+    };
+    let (b0, b1) = (from_b(b.a_W, 0.0), from_b(b.b_W, 1.0));
+    [
+        capsule_capsule(link, &ball(a.a_W, a.radius_m), part, b),
+        capsule_capsule(link, &ball(a.b_W, a.radius_m), part, b),
+        b0,
+        b1,
+    ]
+}
+
 /// Most joints a guarded robot may have (rows are fixed-size arrays to keep the tick free of
 /// allocation).
 pub const MAX_DOF: usize = 16;
@@ -20,8 +48,9 @@ pub struct PairConstraint {
     /// `nhat_BA_W^T J_A(q)`: how fast each joint moves the robot witness point away from the
     /// human part (m/s per rad/s). Entries past the robot's dof are zero.
     pub normal_jacobian: [f64; MAX_DOF],
-    /// `nhat_BA_W^T v_B`: the human part's velocity at its witness point along the normal;
-    /// positive when the part moves toward the robot (the normal points from human to robot).
+    /// `max(0, nhat_BA_W^T v_B)`: the human part's approach speed at its witness point along
+    /// the normal (the normal points from human to robot); a withdrawing part counts as
+    /// standing.
     pub human_normal_speed_m_s: f64,
     /// Speed of the robot witness point under the last nominal command, m/s (filled by the
     /// filters that need it).
@@ -142,19 +171,40 @@ impl RobotGeometry {
                 if pair.distance_m > detection_m {
                     continue;
                 }
-                robot.point_jacobian(kinematics, g.capsule.link, pair.p_WA, &mut self.jacobian);
-                let mut normal_jacobian = [0.0; MAX_DOF];
-                for (j, col) in self.jacobian.columns().iter().enumerate() {
-                    normal_jacobian[j] = pair.nhat_BA_W.x * col[0]
-                        + pair.nhat_BA_W.y * col[1]
-                        + pair.nhat_BA_W.z * col[2];
+                let mut push = |p: SignedDistancePair| {
+                    robot.point_jacobian(kinematics, g.capsule.link, p.p_WA, &mut self.jacobian);
+                    let mut normal_jacobian = [0.0; MAX_DOF];
+                    for (j, col) in self.jacobian.columns().iter().enumerate() {
+                        normal_jacobian[j] = p.nhat_BA_W.x * col[0]
+                            + p.nhat_BA_W.y * col[1]
+                            + p.nhat_BA_W.z * col[2];
+                    }
+                    out.push(PairConstraint {
+                        pair: p,
+                        normal_jacobian,
+                        // Only the approach counts: a withdrawing human is treated as standing,
+                        // so that the arm cannot chase a hand that may turn back within the
+                        // perception latency.
+                        human_normal_speed_m_s: p
+                            .nhat_BA_W
+                            .dot(estimate.velocity_at(p.t_B))
+                            .max(0.0),
+                        robot_speed_m_s: 0.0,
+                    });
+                };
+                push(pair);
+                // Where the axes are (nearly) parallel the closest points are not unique and
+                // the distance has a kink: turning either way brings one end closer. A single
+                // row's gradient then points across the kink and the QP chatters over it,
+                // losing distance every tick. Rows for the segment ends close to the minimum
+                // cover both sides.
+                for end in end_pairs(g.capsule.link, &link_capsule, estimate.part, &capsule) {
+                    if end.distance_m <= pair.distance_m + END_ROW_MARGIN_M
+                        && (end.p_WA - pair.p_WA).length() > END_ROW_SEPARATION_M
+                    {
+                        push(end);
+                    }
                 }
-                out.push(PairConstraint {
-                    pair,
-                    normal_jacobian,
-                    human_normal_speed_m_s: pair.nhat_BA_W.dot(estimate.velocity_at(pair.t_B)),
-                    robot_speed_m_s: 0.0,
-                });
             }
         }
     }

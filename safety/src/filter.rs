@@ -44,11 +44,21 @@ pub struct FilterConfig {
     /// Barrier rate gamma of the QP rows, 1/s: the gap to d_min may close at most at
     /// gamma (d - d_min). Default 4.
     pub gamma_per_s: f64,
-    /// Rows reserved for pairs in the QP (the closest pairs win). Default 24.
+    /// Rows reserved for pairs in the QP (the closest pairs win). Default 32.
     pub max_pairs: usize,
-    /// Joint acceleration bound where the URDF gives none, rad/s^2; also the braking rate of
-    /// the fail-safe stop. Default 8.
+    /// Joint acceleration bound where the URDF gives none, rad/s^2: the braking rate of the
+    /// fail-safe stop, and a bound of the filtered command when `bound_acceleration`.
+    /// Default 8.
     pub acceleration_rad_s2: f64,
+    /// Bound the change of the command per tick by the acceleration limits. Default false:
+    /// as hard rows they make the QP infeasible whenever the human's approach speed jumps
+    /// (a new camera frame), and the robot then brakes instead of evading; the servos ramp
+    /// the command within their own acceleration limits.
+    pub bound_acceleration: bool,
+    /// When no command keeps every pair row (the human approaches faster than the arm can
+    /// retreat), the filter takes the command that breaks them least if it breaks them by at
+    /// most this much, m/s ([`FilterStatus::Relaxed`]); beyond, it brakes. Default 1.
+    pub max_relaxation_m_s: f64,
     /// Joint position limits become velocity bounds `gain (q_max - q)`, 1/s. Default 10.
     pub position_gain_per_s: f64,
     /// Speed and separation monitoring.
@@ -61,8 +71,10 @@ impl Default for FilterConfig {
             d_min_m: 0.10,
             detection_m: 0.6,
             gamma_per_s: 4.0,
-            max_pairs: 24,
+            max_pairs: 32,
             acceleration_rad_s2: 8.0,
+            bound_acceleration: false,
+            max_relaxation_m_s: 1.0,
             position_gain_per_s: 10.0,
             ssm: SsmConfig::default(),
         }
@@ -92,6 +104,12 @@ impl FilterConfig {
         positive("safety.gamma_per_s", self.gamma_per_s)?;
         positive("safety.acceleration_rad_s2", self.acceleration_rad_s2)?;
         positive("safety.position_gain_per_s", self.position_gain_per_s)?;
+        if !(self.max_relaxation_m_s.is_finite() && self.max_relaxation_m_s >= 0.0) {
+            return Err(invalid(
+                "safety.max_relaxation_m_s",
+                format!("must be finite and >= 0, got {}", self.max_relaxation_m_s),
+            ));
+        }
         if self.max_pairs == 0 || self.max_pairs > 256 {
             return Err(invalid(
                 "safety.max_pairs",
@@ -112,8 +130,11 @@ pub enum BrakeReason {
     InvalidHumanEstimate,
     /// Perception reports no human at all: nothing can be guaranteed.
     NoHumanEstimate,
-    /// The QP solver did not return a usable solution (infeasible rows, iteration limit...).
+    /// The QP solver did not return a usable solution (iteration limit, numerical trouble).
     Solver(QpFailure),
+    /// Keeping the separation needs more than `max_relaxation_m_s` beyond what the joints
+    /// can do (e.g. a d_min larger than the cell).
+    Infeasible,
     /// The joint bounds contradict each other (e.g. outside a position limit and unable to
     /// return within the acceleration bound).
     ConflictingBounds,
@@ -128,6 +149,7 @@ impl std::fmt::Display for BrakeReason {
             BrakeReason::InvalidHumanEstimate => f.write_str("invalid human estimate"),
             BrakeReason::NoHumanEstimate => f.write_str("no human estimate"),
             BrakeReason::Solver(e) => write!(f, "QP failed: {e}"),
+            BrakeReason::Infeasible => f.write_str("separation cannot be kept"),
             BrakeReason::ConflictingBounds => f.write_str("conflicting joint bounds"),
             BrakeReason::ProtectiveStop => f.write_str("protective stop"),
         }
@@ -141,6 +163,9 @@ pub enum FilterStatus {
     Pass,
     /// The command was changed to keep the separation (or the joint bounds).
     Modified,
+    /// No command keeps every pair row: the one that breaks them least (by `slack_m_s` of
+    /// [`FilterOutput`]) moves the arm away as fast as its limits allow.
+    Relaxed,
     /// Fail-safe: braking toward standstill within the acceleration bound.
     Braking(BrakeReason),
 }
@@ -152,6 +177,7 @@ impl FilterStatus {
         match self {
             FilterStatus::Pass => "pass".into(),
             FilterStatus::Modified => "modified".into(),
+            FilterStatus::Relaxed => "relaxed".into(),
             FilterStatus::Braking(r) => format!("brake: {r}"),
         }
     }
@@ -168,6 +194,8 @@ pub struct FilterOutput {
     pub min_distance_m: f64,
     /// SSM: the factor applied to the nominal command; QP: 1 (see the command itself).
     pub scale: f64,
+    /// QP: by how much the worst pair row is broken, m/s (0 unless [`FilterStatus::Relaxed`]).
+    pub slack_m_s: f64,
 }
 
 /// The safety filter of one robot. Build once, call [`SafetyFilter::tick`] every control
@@ -282,6 +310,12 @@ impl SafetyFilter {
         &self.pairs
     }
 
+    /// The QP of the last tick that needed one (QP mode only).
+    #[must_use]
+    pub fn qp(&self) -> Option<&QpFilter> {
+        self.qp.as_ref()
+    }
+
     /// The command of the last tick.
     #[must_use]
     pub fn command(&self) -> &[f64] {
@@ -313,6 +347,7 @@ impl SafetyFilter {
             active_pairs: 0,
             min_distance_m: f64::INFINITY,
             scale: 1.0,
+            slack_m_s: 0.0,
         };
         let robot_ok = q.len() == dof
             && qdot_nom.len() == dof
@@ -347,9 +382,10 @@ impl SafetyFilter {
         if human.parts.is_empty() {
             return self.brake(out, BrakeReason::NoHumanEstimate, dt_s);
         }
-        if !(human.uncertainty_m.is_finite() && human.uncertainty_m >= 0.0)
-            || !human.parts.iter().all(|p| p.is_valid())
-        {
+        let human_ok = human.uncertainty_m.is_finite()
+            && human.uncertainty_m >= 0.0
+            && human.parts.iter().all(|p| p.is_valid());
+        if !human_ok {
             return self.brake(out, BrakeReason::InvalidHumanEstimate, dt_s);
         }
         if robot.forward_kinematics(q, &mut self.kinematics).is_err() {
@@ -371,21 +407,25 @@ impl SafetyFilter {
 
         // Joint bounds: velocity limit, acceleration from the last command, position limit.
         let gain = self.config.position_gain_per_s;
-        for j in 0..dof {
+        for (j, &q_j) in q.iter().enumerate() {
             let [lo, hi] = self.position_limits[j];
-            let dv = self.acceleration_limit[j] * dt_s;
+            let dv = if self.config.bound_acceleration {
+                self.acceleration_limit[j] * dt_s
+            } else {
+                f64::INFINITY
+            };
             let v = self.velocity_limit[j];
             let ub = v.min(self.qdot_prev[j] + dv).min(if hi.is_finite() {
-                gain * (hi - q[j])
+                gain * (hi - q_j)
             } else {
                 f64::INFINITY
             });
             let lb = (-v).max(self.qdot_prev[j] - dv).max(if lo.is_finite() {
-                gain * (lo - q[j])
+                gain * (lo - q_j)
             } else {
                 f64::NEG_INFINITY
             });
-            if !(lb <= ub) {
+            if lb.is_nan() || ub.is_nan() || lb > ub {
                 return self.brake(out, BrakeReason::ConflictingBounds, dt_s);
             }
             self.lb[j] = lb;
@@ -430,8 +470,17 @@ impl SafetyFilter {
             d_min,
             &mut self.qdot,
         ) {
-            Ok(()) => {
-                out.status = FilterStatus::Modified;
+            Ok(slack) if slack > self.config.max_relaxation_m_s => {
+                out.slack_m_s = slack;
+                self.brake(out, BrakeReason::Infeasible, dt_s)
+            }
+            Ok(slack) => {
+                out.slack_m_s = slack;
+                out.status = if slack > 0.0 {
+                    FilterStatus::Relaxed
+                } else {
+                    FilterStatus::Modified
+                };
                 out
             }
             Err(e) => self.brake(out, BrakeReason::Solver(e), dt_s),
@@ -465,8 +514,8 @@ impl SafetyFilter {
             return self.brake(out, BrakeReason::ProtectiveStop, dt_s);
         }
         let mut changed = scale < 1.0;
-        for j in 0..qdot_nom.len() {
-            let v = qdot_nom[j] * scale;
+        for (j, nominal) in qdot_nom.iter().enumerate() {
+            let v = nominal * scale;
             let clamped = v.clamp(self.lb[j], self.ub[j]);
             changed |= clamped != v;
             self.qdot[j] = clamped;

@@ -177,8 +177,8 @@ pub fn capsule_capsule(
 
 /// Signed distance between any convex parry shape A at `X_WA` (a robot link's exact collision
 /// shape) and human capsule B, by parry's `query::contact` (GJK, EPA when penetrating).
-/// Returns `None` when the pair is farther apart than `max_distance_m` or parry does not
-/// support the shape.
+/// Returns `None` when the pair is farther apart than `max_distance_m` (a negative bound
+/// counts as 0), an input is not finite, or parry does not support the shape.
 #[must_use]
 pub fn shape_capsule(
     link: LinkId,
@@ -190,8 +190,19 @@ pub fn shape_capsule(
 ) -> Option<SignedDistancePair> {
     // parry's capsule: a segment in its own frame; place it at the identity.
     let capsule_B = parry3d_f64::shape::Capsule::new(b.a_W, b.b_W, b.radius_m);
-    let contact =
-        query::contact(X_WA, shape_A, &Pose::IDENTITY, &capsule_B, max_distance_m).ok()??;
+    // parry panics on a negative (or NaN) prediction margin.
+    let margin = if max_distance_m > 0.0 {
+        max_distance_m
+    } else {
+        0.0
+    };
+    if !b.is_valid() || !X_WA.translation.is_finite() || !X_WA.rotation.is_finite() {
+        return None;
+    }
+    let contact = query::contact(X_WA, shape_A, &Pose::IDENTITY, &capsule_B, margin).ok()??;
+    if contact.dist > margin {
+        return None;
+    }
     // normal1 points from A toward B.
     let nhat_BA_W = -contact.normal1;
     let axis = b.b_W - b.a_W;

@@ -109,7 +109,7 @@ impl SsmConfig {
             self.braking_m_s2,
         );
         let slack = separation_m - self.intrusion_m - z_d_m - self.robot_uncertainty_m;
-        if !(slack > v_h * t_r) {
+        if slack.is_nan() || slack <= v_h * t_r {
             return 0.0; // also for NaN
         }
         let root = (a * a * t_r * t_r + v_h * v_h + 2.0 * a * slack).sqrt();

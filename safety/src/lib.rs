@@ -33,4 +33,4 @@ pub use filter::{BrakeReason, FilterConfig, FilterMode, FilterOutput, FilterStat
 pub use geometry::{Capsule, SignedDistancePair};
 pub use human::{HumanEstimate, HumanGeometry, HumanPart, PartEstimate};
 pub use iso::{BodyRegion, SsmConfig};
-pub use qp::{QpFailure, QpFilter};
+pub use qp::{QpFailure, QpFilter, QpProblem};

@@ -10,6 +10,13 @@
 //! With `qdot` as the variable, gamma is a rate (1/s); the v_B term is the human's own
 //! approach speed, which filters that assume a static obstacle leave out.
 //!
+//! A human can approach faster than the arm can retreat; then no command satisfies every
+//! row. The pair rows therefore share one slack `s >= 0` (in m/s) with an exact penalty
+//! `rho s` in the cost: whenever the hard problem is feasible its solution is returned
+//! unchanged (`s = 0`), and otherwise the command that breaks the rows least, which moves
+//! the arm away as fast as its limits allow instead of freezing it in the human's path. The
+//! caller decides what slack is acceptable ([`crate::FilterConfig::max_relaxation_m_s`]).
+//!
 //! clarabel's form is `A x + s = b, s >= 0`, so every row is written as `a^T qdot <= b`.
 //! The matrix `A` has, column by column, `max_pairs` pair entries (explicit zeros on unused
 //! rows) and the two bound entries: its pattern never changes, so the solver is built once
@@ -29,9 +36,25 @@ pub struct QpFilter {
     dof: usize,
     max_pairs: usize,
     solver: DefaultSolver<f64>,
+    colptr: Vec<usize>,
+    rowval: Vec<usize>,
+    p_diagonal: Vec<f64>,
     a_values: Vec<f64>,
     b: Vec<f64>,
     q: Vec<f64>,
+}
+
+/// The data of the last QP in clarabel's form, `min 1/2 x^T P x + q^T x  s.t.  A x <= b`
+/// (A in compressed sparse columns, P diagonal), to hand the same problem to another solver.
+#[derive(Debug, Clone, PartialEq)]
+pub struct QpProblem {
+    pub p_diagonal: Vec<f64>,
+    pub q: Vec<f64>,
+    pub a_rows: usize,
+    pub a_colptr: Vec<usize>,
+    pub a_rowval: Vec<usize>,
+    pub a_values: Vec<f64>,
+    pub b: Vec<f64>,
 }
 
 impl std::fmt::Debug for QpFilter {
@@ -64,6 +87,11 @@ impl std::fmt::Display for QpFailure {
 
 /// Tolerance on a row of the returned solution, in the row's units (m/s or rad/s).
 const ROW_TOLERANCE: f64 = 1e-5;
+/// Cost of one m/s of slack: far above any multiplier of a row at these scales (the exact
+/// penalty then reproduces the hard solution whenever one exists).
+const SLACK_WEIGHT: f64 = 1e4;
+/// Small quadratic weight on the slack, keeping the cost strictly convex.
+const SLACK_CURVATURE: f64 = 1e-6;
 
 impl QpFilter {
     /// A filter for `dof` joints with room for `max_pairs` pair rows.
@@ -71,33 +99,42 @@ impl QpFilter {
     /// # Errors
     /// [`SafetyError::Solver`] if clarabel refuses the setup (a bug).
     pub fn new(dof: usize, max_pairs: usize) -> Result<Self> {
-        let m = max_pairs + 2 * dof;
-        // P = I (upper triangle: the diagonal).
+        // Variables: qdot (dof), then the slack s. Rows: the pairs, qdot <= ub, -qdot <= -lb,
+        // -s <= 0.
+        let n = dof + 1;
+        let m = max_pairs + 2 * dof + 1;
+        let mut p_diagonal = vec![1.0; n];
+        p_diagonal[dof] = SLACK_CURVATURE;
         let p = CscMatrix::new(
-            dof,
-            dof,
-            (0..=dof).collect(),
-            (0..dof).collect(),
-            vec![1.0; dof],
+            n,
+            n,
+            (0..=n).collect(),
+            (0..n).collect(),
+            p_diagonal.clone(),
         );
         let per_column = max_pairs + 2;
-        let mut colptr = Vec::with_capacity(dof + 1);
-        let mut rowval = Vec::with_capacity(dof * per_column);
+        let mut colptr = Vec::with_capacity(n + 1);
+        let mut rowval = Vec::with_capacity(dof * per_column + max_pairs + 1);
+        let mut a_values = Vec::with_capacity(rowval.capacity());
         for j in 0..dof {
             colptr.push(j * per_column);
             rowval.extend(0..max_pairs);
+            a_values.extend(std::iter::repeat_n(0.0, max_pairs));
             rowval.push(max_pairs + j); // qdot_j <= ub_j
+            a_values.push(1.0);
             rowval.push(max_pairs + dof + j); // -qdot_j <= -lb_j
+            a_values.push(-1.0);
         }
         colptr.push(dof * per_column);
-        let mut a_values = vec![0.0; dof * per_column];
-        for j in 0..dof {
-            a_values[j * per_column + max_pairs] = 1.0;
-            a_values[j * per_column + max_pairs + 1] = -1.0;
-        }
-        let a = CscMatrix::new(m, dof, colptr, rowval, a_values.clone());
+        rowval.extend(0..max_pairs); // every pair row: ... - s <= b_i
+        a_values.extend(std::iter::repeat_n(-1.0, max_pairs));
+        rowval.push(max_pairs + 2 * dof); // -s <= 0
+        a_values.push(-1.0);
+        colptr.push(rowval.len());
+        let a = CscMatrix::new(m, n, colptr.clone(), rowval.clone(), a_values.clone());
         let b = vec![1.0; m];
-        let q = vec![0.0; dof];
+        let mut q = vec![0.0; n];
+        q[dof] = SLACK_WEIGHT;
         let settings = DefaultSettingsBuilder::default()
             .verbose(false)
             .presolve_enable(false)
@@ -108,20 +145,37 @@ impl QpFilter {
             .map_err(|e| SafetyError::Solver {
                 message: e.to_string(),
             })?;
-        let solver =
-            DefaultSolver::new(&p, &q, &a, &b, &[NonnegativeConeT(m)], settings).map_err(|e| {
-                SafetyError::Solver {
-                    message: e.to_string(),
-                }
+        let mut b_init = b.clone();
+        b_init[m - 1] = 0.0;
+        let solver = DefaultSolver::new(&p, &q, &a, &b_init, &[NonnegativeConeT(m)], settings)
+            .map_err(|e| SafetyError::Solver {
+                message: e.to_string(),
             })?;
         Ok(Self {
             dof,
             max_pairs,
             solver,
+            colptr,
+            rowval,
+            p_diagonal,
             a_values,
-            b,
+            b: b_init,
             q,
         })
+    }
+
+    /// The problem of the last [`QpFilter::solve`] call.
+    #[must_use]
+    pub fn problem(&self) -> QpProblem {
+        QpProblem {
+            p_diagonal: self.p_diagonal.clone(),
+            q: self.q.clone(),
+            a_rows: self.b.len(),
+            a_colptr: self.colptr.clone(),
+            a_rowval: self.rowval.clone(),
+            a_values: self.a_values.clone(),
+            b: self.b.clone(),
+        }
     }
 
     /// Pair rows the QP has room for.
@@ -133,7 +187,8 @@ impl QpFilter {
     /// Solves for the command closest to `qdot_nom` within `lb..=ub` that keeps every pair
     /// of `pairs` from closing faster than `gamma_per_s (d - d_min_m)`. When there are more
     /// pairs than rows, the closest ones are kept (`pairs` is reordered). Writes the command
-    /// into `qdot`.
+    /// into `qdot` and returns the slack: 0 when every row holds, otherwise by how much (m/s)
+    /// the least-violating command breaks the worst row.
     ///
     /// # Errors
     /// [`QpFailure`] when the solver does not return a solution that satisfies every row:
@@ -148,7 +203,7 @@ impl QpFilter {
         gamma_per_s: f64,
         d_min_m: f64,
         qdot: &mut [f64],
-    ) -> std::result::Result<(), QpFailure> {
+    ) -> std::result::Result<f64, QpFailure> {
         let (n, rows) = (self.dof, self.max_pairs);
         let per_column = rows + 2;
         if pairs.len() > rows {
@@ -192,12 +247,13 @@ impl QpFilter {
         if x.iter().any(|v| !v.is_finite()) {
             return Err(QpFailure::BadSolution);
         }
+        let slack = x[n].max(0.0);
         // Check every row ourselves: a safety command is never taken on trust.
         for i in 0..used {
             let lhs: f64 = (0..n)
                 .map(|j| self.a_values[j * per_column + i] * x[j])
                 .sum();
-            if lhs > self.b[i] + ROW_TOLERANCE {
+            if lhs > self.b[i] + slack + ROW_TOLERANCE {
                 return Err(QpFailure::BadSolution);
             }
         }
@@ -208,6 +264,7 @@ impl QpFilter {
             // Clarabel's interior point stops within its tolerance of the boundary.
             qdot[j] = x[j].clamp(lb[j], ub[j]);
         }
-        Ok(())
+        // Below the solver's tolerance the slack is zero.
+        Ok(if slack > ROW_TOLERANCE { slack } else { 0.0 })
     }
 }

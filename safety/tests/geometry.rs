@@ -269,7 +269,19 @@ fn normal_jacobian_rows_are_distance_gradients() {
         .distance_m
     };
     let h = 1e-6;
+    let mut main_rows = 0;
     for p in &pairs {
+        let d = distance(&q, p.pair.link);
+        // Rows at segment ends (added where the closest points are nearly ambiguous) are
+        // never closer than the capsule pair itself; the pair's own row is its gradient.
+        assert!(
+            p.pair.distance_m >= d - 1e-12,
+            "an end row below the pair distance"
+        );
+        if (p.pair.distance_m - d).abs() > 1e-12 {
+            continue;
+        }
+        main_rows += 1;
         for j in 0..robot.dof() {
             let (mut plus, mut minus) = (q, q);
             plus[j] += h;
@@ -278,5 +290,41 @@ fn normal_jacobian_rows_are_distance_gradients() {
                 (distance(&plus, p.pair.link) - distance(&minus, p.pair.link)) / (2.0 * h);
             assert_abs_diff_eq!(p.normal_jacobian[j], numeric, epsilon = 1e-6);
         }
+    }
+    assert!(main_rows >= 5, "one row per movable link at least");
+}
+
+/// Parallel axes: the distance has a kink (turning either way brings an end closer), and the
+/// rows must cover both sides: one row per segment end near the minimum.
+#[test]
+fn parallel_capsules_get_a_row_at_each_end() {
+    let robot = RobotModel::from_catalogue("iiwa14_kinematics").expect("catalogue robot");
+    let mut geometry = RobotGeometry::new(&robot).expect("geometry");
+    let q = [0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+    let mut kinematics = KinematicState::new(&robot);
+    robot.forward_kinematics(&q, &mut kinematics).expect("fk");
+    // A human capsule parallel to link 4's capsule, 0.3 m beside it.
+    let (link, c) = geometry
+        .capsules(&kinematics)
+        .find(|(l, _)| *l == 4)
+        .expect("link 4");
+    let axis = c.b_W - c.a_W;
+    let side = axis.cross(Vector::Z).normalize();
+    let offset = side * (0.3 + c.radius_m + 0.04);
+    let human = HumanEstimate {
+        parts: vec![PartEstimate {
+            part: HumanPart::Forearm,
+            capsule: Capsule::new(c.a_W + offset, c.b_W + offset, 0.04),
+            v_a_W: Vector::ZERO,
+            v_b_W: Vector::ZERO,
+        }],
+        uncertainty_m: 0.0,
+    };
+    let mut pairs = Vec::new();
+    geometry.pair_constraints(&robot, &kinematics, &human, 0.5, &mut pairs);
+    let rows: Vec<_> = pairs.iter().filter(|p| p.pair.link == link).collect();
+    assert!(rows.len() >= 2, "{} rows for the parallel pair", rows.len());
+    for r in &rows {
+        assert_abs_diff_eq!(r.pair.distance_m, 0.3, epsilon = 1e-9);
     }
 }

@@ -135,7 +135,8 @@ impl CellModel {
             scenario.human.shuffle,
             &human.position_limits(),
             scenario.seed,
-        );
+        )
+        .with_speed(scenario.human.speed_scale);
         tracing::info!(
             robot = robot.name(),
             human = human.name(),

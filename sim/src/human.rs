@@ -31,6 +31,8 @@ pub struct HumanMotion {
     phases: Vec<Phase>,
     period_s: f64,
     dof: usize,
+    /// Playback speed: 1 as generated, 0.5 half as fast.
+    speed: f64,
 }
 
 impl HumanMotion {
@@ -123,7 +125,19 @@ impl HumanMotion {
             phases,
             period_s: t,
             dof,
+            speed: 1.0,
         }
+    }
+
+    /// The same motion played `speed` times as fast (positions along the same path, joint
+    /// velocities scaled by `speed`). Non-positive or non-finite values are ignored.
+    #[must_use]
+    pub fn with_speed(mut self, speed: f64) -> Self {
+        if speed.is_finite() && speed > 0.0 {
+            self.period_s *= self.speed / speed;
+            self.speed = speed;
+        }
+        self
     }
 
     /// Time after which the motion repeats, s.
@@ -135,11 +149,12 @@ impl HumanMotion {
     /// The primitive being performed at `t_s`.
     #[must_use]
     pub fn kind_at(&self, t_s: f64) -> HumanMotionKind {
-        self.phase(t_s).kind
+        self.phase(t_s * self.speed).kind
     }
 
+    /// The phase at generated time `t_s` (before the speed is applied).
     fn phase(&self, t_s: f64) -> &Phase {
-        let t = t_s.rem_euclid(self.period_s);
+        let t = t_s.rem_euclid(self.period_s * self.speed);
         let i = self
             .phases
             .partition_point(|p| p.t0_s <= t)
@@ -149,7 +164,14 @@ impl HumanMotion {
 
     /// Joint positions and velocities at `t_s` (slices of the arm's dof).
     pub fn sample(&self, t_s: f64, q: &mut [f64], qd: &mut [f64]) {
-        let t = t_s.rem_euclid(self.period_s);
+        self.sample_generated(t_s * self.speed, q, qd);
+        for v in qd.iter_mut() {
+            *v *= self.speed;
+        }
+    }
+
+    fn sample_generated(&self, t_s: f64, q: &mut [f64], qd: &mut [f64]) {
+        let t = t_s.rem_euclid(self.period_s * self.speed);
         let p = self.phase(t);
         let local = t - p.t0_s;
         let tau = (local / p.transition_s).clamp(0.0, 1.0);
@@ -202,6 +224,29 @@ mod tests {
         let c = HumanMotion::generate(&kinds, true, &limits(), 6);
         assert_eq!(a, b);
         assert_ne!(a, c);
+    }
+
+    #[test]
+    fn a_slower_motion_follows_the_same_path_with_scaled_velocities() {
+        let kinds = [
+            HumanMotionKind::Reach,
+            HumanMotionKind::Wave,
+            HumanMotionKind::Withdraw,
+        ];
+        let m = HumanMotion::generate(&kinds, true, &limits(), 2);
+        let slow = m.clone().with_speed(0.5);
+        assert!((slow.period_s() - 2.0 * m.period_s()).abs() < 1e-9);
+        let (mut q, mut qd, mut q2, mut qd2) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
+        for k in 0..200 {
+            let t = 0.037 * k as f64;
+            m.sample(t, &mut q, &mut qd);
+            slow.sample(2.0 * t, &mut q2, &mut qd2);
+            for j in 0..3 {
+                assert!((q[j] - q2[j]).abs() < 1e-12);
+                assert!((0.5 * qd[j] - qd2[j]).abs() < 1e-12);
+            }
+            assert_eq!(m.kind_at(t), slow.kind_at(2.0 * t));
+        }
     }
 
     #[test]

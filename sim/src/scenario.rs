@@ -209,6 +209,9 @@ pub struct HumanConfig {
     pub motions: Vec<HumanMotionKind>,
     /// Shuffle the order of `motions` with the seed. Default false.
     pub shuffle: bool,
+    /// Playback speed of the motions: 1 as generated (reaches peak at about 3 m/s at the
+    /// hand), 0.5 half as fast. Default 1.
+    pub speed_scale: f64,
 }
 
 impl Default for HumanConfig {
@@ -223,6 +226,7 @@ impl Default for HumanConfig {
                 HumanMotionKind::Wave,
             ],
             shuffle: false,
+            speed_scale: 1.0,
         }
     }
 }
@@ -373,6 +377,10 @@ impl Scenario {
         finite("robot.initial_q", &self.robot.initial_q)?;
         finite("human.base.xyz", &self.human.base.xyz)?;
         finite("human.base.rpy", &self.human.base.rpy)?;
+        let s = self.human.speed_scale;
+        if !(s > 0.0 && s <= 4.0) {
+            return Err(bad("human.speed_scale", format!("{s} must be in (0, 4]")));
+        }
         let a = self.robot.servo_acceleration_rad_s2;
         if !(a > 0.0 && a.is_finite()) {
             return Err(bad(

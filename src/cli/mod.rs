@@ -1,6 +1,29 @@
 //! Subcommands of the `workcell` binary.
 
 pub mod dataset;
+pub mod evaluate;
 pub mod perception;
 pub mod robot;
 pub mod simulate;
+
+/// Creates `out`; unless `force`, refuses when it already holds any of `outputs`, so that a
+/// run never overwrites an earlier one by accident.
+pub fn prepare_out(out: &std::path::Path, force: bool, outputs: &[&str]) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    if !force {
+        let existing: Vec<&str> = outputs
+            .iter()
+            .copied()
+            .filter(|f| out.join(f).exists())
+            .collect();
+        if !existing.is_empty() {
+            anyhow::bail!(
+                "{} already holds {}; pass --force to overwrite or choose another --out",
+                out.display(),
+                existing.join(", ")
+            );
+        }
+    }
+    Ok(())
+}

@@ -83,7 +83,7 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
         scenario.seed = seed;
     }
     let model = CellModel::new(&scenario, path)?;
-    prepare_out(&args.out, args.force)?;
+    super::prepare_out(&args.out, args.force, &OUTPUTS)?;
 
     let dt = model.time_step_s();
     let steps = (args.seconds / dt).round() as u64;
@@ -148,21 +148,6 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
 }
 
 /// Creates `out`; refuses to overwrite earlier outputs unless `force`.
-fn prepare_out(out: &Path, force: bool) -> Result<()> {
-    fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    if !force {
-        let existing: Vec<_> = OUTPUTS.iter().filter(|f| out.join(f).exists()).collect();
-        if !existing.is_empty() {
-            bail!(
-                "{} already holds {:?}; pass --force to overwrite or choose another --out",
-                out.display(),
-                existing
-            );
-        }
-    }
-    Ok(())
-}
-
 /// Samples kept in memory, written at the end.
 struct Log {
     /// The scenario file, for titles.

@@ -1,0 +1,214 @@
+//! `workcell evaluate`: closed-loop safety episodes of a cell, with a report.
+
+use std::fs;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Mutex;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use workcell::evaluate::report::{
+    Aggregate, SummaryContext, metrics_csv, summary_markdown, write_plots,
+};
+use workcell::evaluate::{Evaluation, EvaluationConfig, PerceptionKind, run_episode};
+use workcell::safety::iso::effective_robot_mass_kg;
+use workcell::safety::{BodyRegion, FilterMode, HumanPart};
+
+/// Files `evaluate` writes into `--out`.
+pub const OUTPUTS: [&str; 7] = [
+    "summary.md",
+    "metrics.csv",
+    "evaluation.toml",
+    "separation.png",
+    "separation.svg",
+    "speed_scaling.png",
+    "speed_scaling.svg",
+];
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FilterArg {
+    /// No filter: the nominal command goes to the robot.
+    None,
+    /// The QP safety filter.
+    Qp,
+    /// Speed and separation monitoring (speed scaling).
+    Ssm,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PerceptionArg {
+    /// Exact human poses every tick.
+    GroundTruth,
+    /// A 30 Hz camera with noise, dropouts and latency (settings in the file).
+    Noisy,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct EvaluateArgs {
+    /// Evaluation file (TOML), e.g. configs/evaluate.toml.
+    pub evaluation: Option<PathBuf>,
+    /// Number of episodes (seeds SEED, SEED+1, ...).
+    #[arg(long, default_value_t = 10)]
+    pub episodes: usize,
+    /// Seed of the first episode.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The safety filter.
+    #[arg(long, value_enum, default_value_t = FilterArg::Qp)]
+    pub filter: FilterArg,
+    /// Override the file's perception kind.
+    #[arg(long, value_enum)]
+    pub perception: Option<PerceptionArg>,
+    /// Output folder (created; existing outputs are kept unless --force).
+    #[arg(long, default_value = "out/evaluate")]
+    pub out: PathBuf,
+    /// Overwrite existing output files.
+    #[arg(long)]
+    pub force: bool,
+    /// Exit with status 2 when any episode violates d_min (for scripts and CI).
+    #[arg(long)]
+    pub fail_on_violation: bool,
+    /// Print the evaluation file with every default filled in, then exit.
+    #[arg(long)]
+    pub print_defaults: bool,
+}
+
+pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
+    if args.print_defaults {
+        let config = match &args.evaluation {
+            Some(path) => Evaluation::from_file(path)?.config,
+            None => EvaluationConfig::default(),
+        };
+        print!(
+            "{}",
+            toml::to_string_pretty(&config).context("serialising the configuration")?
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
+    let Some(path) = &args.evaluation else {
+        bail!("give an evaluation file, e.g. `workcell evaluate configs/evaluate.toml`");
+    };
+    if args.episodes == 0 {
+        bail!("--episodes must be at least 1");
+    }
+    let mut evaluation = Evaluation::from_file(path)?;
+    if let Some(p) = args.perception {
+        evaluation.config.perception.kind = match p {
+            PerceptionArg::GroundTruth => PerceptionKind::GroundTruth,
+            PerceptionArg::Noisy => PerceptionKind::Noisy,
+        };
+    }
+    let mode = match args.filter {
+        FilterArg::None => FilterMode::None,
+        FilterArg::Qp => FilterMode::Qp,
+        FilterArg::Ssm => FilterMode::Ssm,
+    };
+    super::prepare_out(&args.out, args.force, &OUTPUTS)?;
+
+    let bar = ProgressBar::new((args.episodes * 100) as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {percent}% (eta {eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_message(format!("{} episodes, filter {mode}", args.episodes));
+    let first_error: Mutex<Option<anyhow::Error>> = Mutex::new(None);
+    let mut results: Vec<_> = (0..args.episodes)
+        .into_par_iter()
+        .filter_map(|episode| {
+            let seed = args.seed.wrapping_add(episode as u64);
+            let mut shown = 0u64;
+            let result = run_episode(&evaluation, mode, episode, seed, None, |fraction| {
+                let now = (fraction * 100.0) as u64;
+                if now > shown {
+                    bar.inc(now - shown);
+                    shown = now;
+                }
+            });
+            match result {
+                Ok(r) => Some(r),
+                Err(e) => {
+                    if let Ok(mut slot) = first_error.lock() {
+                        slot.get_or_insert(e.context(format!("episode {episode} (seed {seed})")));
+                    }
+                    None
+                }
+            }
+        })
+        .collect();
+    bar.finish_and_clear();
+    if let Some(e) = first_error.into_inner().ok().flatten() {
+        return Err(e);
+    }
+    results.sort_by_key(|(m, _)| m.episode);
+    let (episodes, traces): (Vec<_>, Vec<_>) = results.into_iter().unzip();
+
+    // The report.
+    let robot = workcell::robots::RobotModel::load(
+        &workcell::sim::Scenario::resolve_model_path(
+            &evaluation.scenario.robot.model,
+            &evaluation.scenario_path,
+        ),
+        &workcell::robots::PackageMap::from_env(),
+    )?;
+    let m_r = effective_robot_mass_kg(robot.mass_kg(), 0.0);
+    let limits: Vec<(String, f64)> = if m_r > 0.0 {
+        HumanPart::ALL
+            .iter()
+            .map(|&p| {
+                (
+                    p.to_string(),
+                    BodyRegion::of(p).max_contact_speed_m_s(m_r, true),
+                )
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let perception = evaluation.config.perception.build(args.seed).name();
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let context = SummaryContext {
+        evaluation_file: &path.display().to_string(),
+        robot: robot.name(),
+        filter: &mode.to_string(),
+        perception: &perception,
+        d_min_m: evaluation.config.safety.d_min_m,
+        near_m: evaluation.config.near_m,
+        contact_speed_limits: &limits,
+        command: &command,
+    };
+    let write = |name: &str, text: &str| {
+        let p = args.out.join(name);
+        fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
+    };
+    write("summary.md", &summary_markdown(&context, &episodes))?;
+    write("metrics.csv", &metrics_csv(&episodes))?;
+    write(
+        "evaluation.toml",
+        &toml::to_string_pretty(&evaluation.config).context("serialising the configuration")?,
+    )?;
+    write_plots(
+        &args.out,
+        &episodes,
+        &traces,
+        evaluation.config.safety.d_min_m,
+    )
+    .map_err(anyhow::Error::msg)?;
+
+    let a = Aggregate::of(&episodes);
+    println!(
+        "{} episodes, filter {mode}, perception {perception}: {}",
+        a.episodes,
+        a.headline(evaluation.config.safety.d_min_m)
+    );
+    println!(
+        "closed loop at {:.1}x real time per core; report: {}",
+        a.real_time_factor,
+        args.out.join("summary.md").display()
+    );
+    if args.fail_on_violation && a.violations > 0 {
+        return Ok(ExitCode::from(2));
+    }
+    Ok(ExitCode::SUCCESS)
+}

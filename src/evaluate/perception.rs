@@ -1,0 +1,241 @@
+//! Perception in the closed loop: what the safety filter is told about the human, tick by
+//! tick. Ground truth, and ground truth seen through a camera with noise, dropped frames and
+//! latency. ProcNet plugs in through the same trait.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use workcell_safety::{HumanEstimate, PartEstimate};
+use workcell_sim::{CellModel, CellState};
+
+use crate::robots::math::Vector;
+
+/// What a perception implementation gets every control tick.
+#[derive(Debug, Clone, Copy)]
+pub struct PerceptionInput<'a> {
+    pub t_s: f64,
+    pub model: &'a CellModel,
+    pub state: &'a CellState,
+    /// The true human parts (exact capsules and velocities) at `t_s`.
+    pub truth: &'a HumanEstimate,
+}
+
+/// A source of human estimates for the safety filter.
+pub trait HumanPerception {
+    /// A short name for reports.
+    fn name(&self) -> String;
+    /// The estimate available to the controller at `input.t_s`, into `out`.
+    fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate);
+}
+
+/// Settings of the perception model (the `[perception]` table of an evaluation file).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PerceptionConfig {
+    /// `ground_truth` (exact, every tick) or `noisy` (a camera: the settings below).
+    pub kind: PerceptionKind,
+    /// Camera frame rate, Hz. Default 30.
+    pub rate_hz: f64,
+    /// Standard deviation of the position error of each part end point, per axis, m.
+    /// Default 0.01.
+    pub position_noise_m: f64,
+    /// Standard deviation of the velocity error, per axis, m/s. Default 0.05.
+    pub velocity_noise_m_s: f64,
+    /// Probability that a frame yields no estimate. Default 0.1.
+    pub dropout: f64,
+    /// Time from exposure to the estimate being available, s. Default 0.05.
+    pub latency_s: f64,
+    /// Bound on the human's acceleration used to grow the uncertainty of an ageing estimate,
+    /// m/s^2. Default 10.
+    pub human_acceleration_m_s2: f64,
+    /// The reported uncertainty covers this many standard deviations. Default 4.
+    pub confidence_sigmas: f64,
+}
+
+/// Which perception model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PerceptionKind {
+    GroundTruth,
+    Noisy,
+}
+
+impl Default for PerceptionConfig {
+    fn default() -> Self {
+        Self {
+            kind: PerceptionKind::Noisy,
+            rate_hz: 30.0,
+            position_noise_m: 0.01,
+            velocity_noise_m_s: 0.05,
+            dropout: 0.1,
+            latency_s: 0.05,
+            human_acceleration_m_s2: 10.0,
+            confidence_sigmas: 4.0,
+        }
+    }
+}
+
+impl PerceptionConfig {
+    /// Checks ranges; the error names the key.
+    ///
+    /// # Errors
+    /// A message `perception.<key>: ...`.
+    pub fn validate(&self) -> Result<(), String> {
+        let check = |key: &str, v: f64, ok: bool| {
+            if v.is_finite() && ok {
+                Ok(())
+            } else {
+                Err(format!("perception.{key}: out of range: {v}"))
+            }
+        };
+        check("rate_hz", self.rate_hz, self.rate_hz > 0.0)?;
+        check(
+            "position_noise_m",
+            self.position_noise_m,
+            self.position_noise_m >= 0.0,
+        )?;
+        check(
+            "velocity_noise_m_s",
+            self.velocity_noise_m_s,
+            self.velocity_noise_m_s >= 0.0,
+        )?;
+        check("dropout", self.dropout, (0.0..1.0).contains(&self.dropout))?;
+        check("latency_s", self.latency_s, self.latency_s >= 0.0)?;
+        check(
+            "human_acceleration_m_s2",
+            self.human_acceleration_m_s2,
+            self.human_acceleration_m_s2 >= 0.0,
+        )?;
+        check(
+            "confidence_sigmas",
+            self.confidence_sigmas,
+            self.confidence_sigmas >= 0.0,
+        )?;
+        Ok(())
+    }
+
+    /// The perception this configuration describes, seeded.
+    #[must_use]
+    pub fn build(&self, seed: u64) -> Box<dyn HumanPerception> {
+        match self.kind {
+            PerceptionKind::GroundTruth => Box::new(GroundTruth),
+            PerceptionKind::Noisy => Box::new(NoisyCamera::new(self.clone(), seed)),
+        }
+    }
+}
+
+/// The exact human, every tick, with zero uncertainty.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GroundTruth;
+
+impl HumanPerception for GroundTruth {
+    fn name(&self) -> String {
+        "ground truth".into()
+    }
+    fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
+        out.clone_from(input.truth);
+    }
+}
+
+/// A camera at `rate_hz` whose frames are lost with probability `dropout` and whose
+/// estimates (true pose plus Gaussian noise) arrive `latency_s` after exposure. Between
+/// frames the last estimate is extrapolated with its velocity, and its uncertainty grows with
+/// age: `k sigma_p + k sigma_v age + a_max age^2 / 2` (k = `confidence_sigmas`, per axis
+/// sigmas scaled by sqrt 3 for the 3-D norm).
+#[derive(Debug, Clone)]
+pub struct NoisyCamera {
+    config: PerceptionConfig,
+    rng: ChaCha8Rng,
+    next_frame_s: f64,
+    /// Measurements taken but not yet delivered: (exposure time, estimate).
+    in_flight: std::collections::VecDeque<(f64, HumanEstimate)>,
+    /// The newest delivered measurement and its exposure time.
+    latest: Option<(f64, HumanEstimate)>,
+}
+
+impl NoisyCamera {
+    /// A camera with `config`, its noise and dropouts drawn from `seed`.
+    #[must_use]
+    pub fn new(config: PerceptionConfig, seed: u64) -> Self {
+        Self {
+            config,
+            rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5045_5243_4550_5400), // "PERCEPT"
+            next_frame_s: 0.0,
+            in_flight: std::collections::VecDeque::new(),
+            latest: None,
+        }
+    }
+
+    fn gaussian3(&mut self, sigma: f64) -> Vector {
+        Vector::new(
+            gaussian(&mut self.rng),
+            gaussian(&mut self.rng),
+            gaussian(&mut self.rng),
+        ) * sigma
+    }
+}
+
+/// A standard normal sample (Box-Muller).
+fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+impl HumanPerception for NoisyCamera {
+    fn name(&self) -> String {
+        format!(
+            "camera {:.0} Hz, noise {:.0} mm, dropout {:.0} %, latency {:.0} ms",
+            self.config.rate_hz,
+            self.config.position_noise_m * 1e3,
+            self.config.dropout * 100.0,
+            self.config.latency_s * 1e3
+        )
+    }
+
+    fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
+        let t = input.t_s;
+        // Expose a frame when one is due.
+        if t + 1e-9 >= self.next_frame_s {
+            self.next_frame_s += 1.0 / self.config.rate_hz;
+            if self.rng.random::<f64>() >= self.config.dropout {
+                let (sp, sv) = (self.config.position_noise_m, self.config.velocity_noise_m_s);
+                let mut measured = input.truth.clone();
+                for p in &mut measured.parts {
+                    p.capsule.a_W += self.gaussian3(sp);
+                    p.capsule.b_W += self.gaussian3(sp);
+                    p.v_a_W += self.gaussian3(sv);
+                    p.v_b_W += self.gaussian3(sv);
+                }
+                self.in_flight.push_back((t, measured));
+            }
+        }
+        // Deliver what has arrived.
+        while self
+            .in_flight
+            .front()
+            .is_some_and(|(t0, _)| t0 + self.config.latency_s <= t + 1e-9)
+        {
+            self.latest = self.in_flight.pop_front();
+        }
+        out.parts.clear();
+        let Some((t0, measured)) = &self.latest else {
+            out.uncertainty_m = 0.0;
+            return; // nothing yet: the filter brakes
+        };
+        let age = (t - t0).max(0.0);
+        let k = self.config.confidence_sigmas * 3f64.sqrt();
+        out.uncertainty_m = k * self.config.position_noise_m
+            + k * self.config.velocity_noise_m_s * age
+            + 0.5 * self.config.human_acceleration_m_s2 * age * age;
+        out.parts
+            .extend(measured.parts.iter().map(|p| PartEstimate {
+                capsule: workcell_safety::Capsule::new(
+                    p.capsule.a_W + p.v_a_W * age,
+                    p.capsule.b_W + p.v_b_W * age,
+                    p.capsule.radius_m,
+                ),
+                ..*p
+            }));
+    }
+}

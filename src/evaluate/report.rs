@@ -1,0 +1,351 @@
+//! The evaluation report: `summary.md`, `metrics.csv`, and plots of separation and speed
+//! scaling over time.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::{EpisodeMetrics, EpisodeTrace};
+use crate::plot::{Panel, svg_panels, svg_to_png};
+
+/// Aggregates over episodes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Aggregate {
+    pub episodes: usize,
+    pub min_separation_m: f64,
+    pub episodes_with_violation: usize,
+    pub violations: usize,
+    pub violation_s: f64,
+    pub violation_moving_s: f64,
+    pub finished: usize,
+    /// Mean of task time / nominal task time over finished episodes.
+    pub mean_task_ratio: f64,
+    pub peak_speed_near_human_m_s: f64,
+    pub peak_approach_speed_m_s: f64,
+    pub peak_human_speed_m_s: f64,
+    pub ticks_pass: usize,
+    pub ticks_modified: usize,
+    pub ticks_relaxed: usize,
+    pub ticks_braking: usize,
+    /// Simulated time over wall time, summed over episodes (each episode runs on one core).
+    pub real_time_factor: f64,
+}
+
+impl Aggregate {
+    /// Sums and extremes of `episodes`.
+    #[must_use]
+    pub fn of(episodes: &[EpisodeMetrics]) -> Self {
+        let finished: Vec<f64> = episodes
+            .iter()
+            .filter_map(|e| e.task_time_s.map(|t| t / e.nominal_task_s))
+            .collect();
+        Self {
+            episodes: episodes.len(),
+            min_separation_m: episodes
+                .iter()
+                .map(|e| e.min_separation_m)
+                .fold(f64::INFINITY, f64::min),
+            episodes_with_violation: episodes.iter().filter(|e| e.violations > 0).count(),
+            violations: episodes.iter().map(|e| e.violations).sum(),
+            violation_s: episodes.iter().map(|e| e.violation_s).sum(),
+            violation_moving_s: episodes.iter().map(|e| e.violation_moving_s).sum(),
+            finished: finished.len(),
+            mean_task_ratio: if finished.is_empty() {
+                f64::NAN
+            } else {
+                finished.iter().sum::<f64>() / finished.len() as f64
+            },
+            peak_speed_near_human_m_s: episodes
+                .iter()
+                .map(|e| e.peak_speed_near_human_m_s)
+                .fold(0.0, f64::max),
+            peak_approach_speed_m_s: episodes
+                .iter()
+                .map(|e| e.peak_approach_speed_m_s)
+                .fold(0.0, f64::max),
+            peak_human_speed_m_s: episodes
+                .iter()
+                .map(|e| e.peak_human_speed_m_s)
+                .fold(0.0, f64::max),
+            ticks_pass: episodes.iter().map(|e| e.ticks_pass).sum(),
+            ticks_modified: episodes.iter().map(|e| e.ticks_modified).sum(),
+            ticks_relaxed: episodes.iter().map(|e| e.ticks_relaxed).sum(),
+            ticks_braking: episodes.iter().map(|e| e.ticks_braking).sum(),
+            real_time_factor: episodes.iter().map(|e| e.simulated_s).sum::<f64>()
+                / episodes.iter().map(|e| e.wall_s).sum::<f64>(),
+        }
+    }
+}
+
+impl Aggregate {
+    /// One line for the terminal.
+    #[must_use]
+    pub fn headline(&self, d_min_m: f64) -> String {
+        format!(
+            "min separation {:.4} m (d_min {d_min_m:.3}), {} violations in {} episodes ({:.3} s below d_min, {:.3} s of it moving), {}/{} finished, task time x{:.3} of unfiltered, peak speed near the human {:.3} m/s (approach {:.3} m/s)",
+            self.min_separation_m,
+            self.violations,
+            self.episodes_with_violation,
+            self.violation_s,
+            self.violation_moving_s,
+            self.finished,
+            self.episodes,
+            self.mean_task_ratio,
+            self.peak_speed_near_human_m_s,
+            self.peak_approach_speed_m_s
+        )
+    }
+}
+
+/// Header of `metrics.csv`.
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,simulated_s,wall_s";
+
+/// `metrics.csv`: one row per episode.
+#[must_use]
+pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
+    let mut csv = String::from(CSV_HEADER);
+    csv.push('\n');
+    for e in episodes {
+        let reasons: Vec<String> = e
+            .braking_reasons
+            .iter()
+            .map(|(r, n)| format!("{r}: {n}"))
+            .collect();
+        let _ = writeln!(
+            csv,
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{},{},{},{},\"{}\",{:.5},{:.3},{:.3}",
+            e.episode,
+            e.seed,
+            e.filter,
+            e.min_separation_m,
+            e.closest,
+            e.violations,
+            e.violation_s,
+            e.violation_moving_s,
+            e.task_time_s.map_or(String::new(), |t| format!("{t:.3}")),
+            e.nominal_task_s,
+            e.task_time_s
+                .map_or(String::new(), |t| format!("{:.4}", t / e.nominal_task_s)),
+            e.peak_speed_near_human_m_s,
+            e.peak_approach_speed_m_s,
+            e.peak_human_speed_m_s,
+            e.ticks_pass,
+            e.ticks_modified,
+            e.ticks_relaxed,
+            e.ticks_braking,
+            reasons.join("; "),
+            e.perception_error_m,
+            e.simulated_s,
+            e.wall_s
+        );
+    }
+    csv
+}
+
+/// What the summary needs besides the episodes.
+#[derive(Debug, Clone)]
+pub struct SummaryContext<'a> {
+    pub evaluation_file: &'a str,
+    pub robot: &'a str,
+    pub filter: &'a str,
+    pub perception: &'a str,
+    pub d_min_m: f64,
+    pub near_m: f64,
+    /// ISO/TS 15066 transient contact speed limits per body region, m/s, for the robot.
+    pub contact_speed_limits: &'a [(String, f64)],
+    pub command: &'a str,
+}
+
+/// `summary.md`.
+#[must_use]
+pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics]) -> String {
+    let a = Aggregate::of(episodes);
+    let mut md = String::new();
+    let _ = writeln!(md, "# Closed-loop safety evaluation\n");
+    let _ = writeln!(md, "- evaluation: `{}`", context.evaluation_file);
+    let _ = writeln!(md, "- command: `{}`", context.command);
+    let _ = writeln!(
+        md,
+        "- robot: {}; filter: **{}**; perception: {}",
+        context.robot, context.filter, context.perception
+    );
+    let _ = writeln!(
+        md,
+        "- d_min: {:.3} m (true separation: exact robot shapes against the true human)\n",
+        context.d_min_m
+    );
+    let verdict = if a.violations == 0 {
+        "no violation"
+    } else {
+        "VIOLATIONS"
+    };
+    let _ = writeln!(md, "## Verdict: {verdict}\n");
+    let _ = writeln!(
+        md,
+        "| episodes | min separation (m) | episodes with violation | violations | time below d_min (s) | of it with the robot moving (s) | finished | task time / unfiltered | peak speed near human (m/s) | peak approach speed (m/s) |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        md,
+        "| {} | {:.4} | {} | {} | {:.3} | {:.3} | {}/{} | {:.3} | {:.3} | {:.3} |\n",
+        a.episodes,
+        a.min_separation_m,
+        a.episodes_with_violation,
+        a.violations,
+        a.violation_s,
+        a.violation_moving_s,
+        a.finished,
+        a.episodes,
+        a.mean_task_ratio,
+        a.peak_speed_near_human_m_s,
+        a.peak_approach_speed_m_s
+    );
+    let ticks = (a.ticks_pass + a.ticks_modified + a.ticks_relaxed + a.ticks_braking).max(1) as f64;
+    let _ = writeln!(
+        md,
+        "Fastest human part point: {:.2} m/s (ISO 13855 assumes 1.6 to 2.0 m/s).\n",
+        a.peak_human_speed_m_s
+    );
+    let _ = writeln!(
+        md,
+        "Filter status over all ticks: pass {:.1} %, modified {:.1} %, relaxed (evading a human faster than the arm can retreat) {:.1} %, braking {:.1} %.\n",
+        100.0 * a.ticks_pass as f64 / ticks,
+        100.0 * a.ticks_modified as f64 / ticks,
+        100.0 * a.ticks_relaxed as f64 / ticks,
+        100.0 * a.ticks_braking as f64 / ticks
+    );
+    if !context.contact_speed_limits.is_empty() {
+        let limits: Vec<String> = context
+            .contact_speed_limits
+            .iter()
+            .map(|(r, v)| format!("{r} {v:.2} m/s"))
+            .collect();
+        let _ = writeln!(
+            md,
+            "Peak speeds count the robot's closest surface point while the true separation is below {:.2} m (approach: its speed toward the human). ISO/TS 15066 transient contact limits for this robot: {}.\n",
+            context.near_m,
+            limits.join(", ")
+        );
+    }
+    let _ = writeln!(
+        md,
+        "Closed-loop speed: {:.1}x real time per core (physics, perception model, filter and metrics).\n",
+        a.real_time_factor
+    );
+    let _ = writeln!(md, "## Episodes\n");
+    let _ = writeln!(
+        md,
+        "| episode | seed | min separation (m) | closest (link / part) | violations | below d_min (s) | task time (s) | peak speed near human (m/s) | pass / modified / relaxed / braking ticks | braking reasons | perception error (mm) |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
+    for e in episodes {
+        let reasons: Vec<String> = e
+            .braking_reasons
+            .iter()
+            .map(|(r, n)| format!("{r} ({n})"))
+            .collect();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.4} | {} | {} | {:.3} | {} | {:.3} | {} / {} / {} / {} | {} | {:.1} |",
+            e.episode,
+            e.seed,
+            e.min_separation_m,
+            e.closest,
+            e.violations,
+            e.violation_s,
+            e.task_time_s
+                .map_or("unfinished".to_string(), |t| format!("{t:.2}")),
+            e.peak_speed_near_human_m_s,
+            e.ticks_pass,
+            e.ticks_modified,
+            e.ticks_relaxed,
+            e.ticks_braking,
+            if reasons.is_empty() {
+                "-".into()
+            } else {
+                reasons.join(", ")
+            },
+            e.perception_error_m * 1e3
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\n![separation](separation.png)\n\n![speed scaling](speed_scaling.png)"
+    );
+    md
+}
+
+/// Writes `separation.{svg,png}` and `speed_scaling.{svg,png}` for the episodes with the
+/// smallest separation (at most five), resampled onto one time axis.
+///
+/// # Errors
+/// When a file cannot be written.
+pub fn write_plots(
+    out: &Path,
+    episodes: &[EpisodeMetrics],
+    traces: &[EpisodeTrace],
+    d_min_m: f64,
+) -> Result<Vec<String>, String> {
+    let mut order: Vec<usize> = (0..episodes.len()).collect();
+    order.sort_by(|&a, &b| {
+        episodes[a]
+            .min_separation_m
+            .total_cmp(&episodes[b].min_separation_m)
+    });
+    order.truncate(5);
+    let t_end = order
+        .iter()
+        .filter_map(|&i| traces[i].t_s.last().copied())
+        .fold(0.0, f64::max);
+    let n = 1000usize;
+    let x: Vec<f64> = (0..=n).map(|k| t_end * k as f64 / n as f64).collect();
+    let resample = |t: &[f64], v: &[f64]| -> Vec<f64> {
+        x.iter()
+            .map(|&xi| {
+                if t.is_empty() || xi > t[t.len() - 1] + 1e-9 {
+                    return f64::NAN;
+                }
+                let i = t.partition_point(|&ti| ti <= xi).saturating_sub(1);
+                v.get(i).copied().unwrap_or(f64::NAN)
+            })
+            .collect()
+    };
+    let mut separation = Panel {
+        title: "True minimum separation (worst episodes) and d_min".into(),
+        y_label: "separation [m]".into(),
+        series: Vec::new(),
+    };
+    let mut scaling = Panel {
+        title: "Speed scaling |qdot| / |qdot_nom| (1 = nominal, 0 = stopped, above 1 = evading)"
+            .into(),
+        y_label: "scale".into(),
+        series: Vec::new(),
+    };
+    for &i in &order {
+        let name = format!(
+            "ep {}: min {:.3} m",
+            episodes[i].episode, episodes[i].min_separation_m
+        );
+        separation.series.push((
+            name.clone(),
+            resample(&traces[i].t_s, &traces[i].separation_m),
+        ));
+        scaling.series.push((
+            format!("ep {}", episodes[i].episode),
+            resample(&traces[i].t_s, &traces[i].speed_scale),
+        ));
+    }
+    separation
+        .series
+        .push(("d_min".into(), vec![d_min_m; x.len()]));
+    let mut written = Vec::new();
+    for (name, panel) in [("separation", separation), ("speed_scaling", scaling)] {
+        let svg = svg_panels(&x, "time [s]", &[panel]);
+        let svg_path = out.join(format!("{name}.svg"));
+        std::fs::write(&svg_path, &svg).map_err(|e| format!("{}: {e}", svg_path.display()))?;
+        let png_path = out.join(format!("{name}.png"));
+        svg_to_png(&svg, &png_path)?;
+        written.push(format!("{name}.svg"));
+        written.push(format!("{name}.png"));
+    }
+    Ok(written)
+}

@@ -1,0 +1,122 @@
+//! Regression tests of minimum-distance violations: closed-loop episodes of the scenarios in
+//! tests/scenarios/, checked against the bounds in tests/scenarios/expectations.toml.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use workcell::evaluate::report::Aggregate;
+use workcell::evaluate::{Evaluation, run_episode};
+use workcell::safety::FilterMode;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Expectations {
+    case: Vec<Case>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Case {
+    name: String,
+    scenario: PathBuf,
+    filter: FilterMode,
+    episodes: usize,
+    seed: u64,
+    max_violations: Option<usize>,
+    min_violations: Option<usize>,
+    min_separation_m: Option<f64>,
+    min_finished: Option<usize>,
+    max_task_ratio: Option<f64>,
+}
+
+fn scenarios() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenarios")
+}
+
+fn run(case: &Case) -> Aggregate {
+    let evaluation =
+        Evaluation::from_file(&scenarios().join(&case.scenario)).expect("scenario loads");
+    let metrics: Vec<_> = (0..case.episodes)
+        .map(|e| {
+            run_episode(
+                &evaluation,
+                case.filter,
+                e,
+                case.seed + e as u64,
+                None,
+                |_| {},
+            )
+            .expect("episode runs")
+            .0
+        })
+        .collect();
+    Aggregate::of(&metrics)
+}
+
+#[test]
+fn closed_loop_scenarios_stay_within_their_bounds() {
+    let text =
+        std::fs::read_to_string(scenarios().join("expectations.toml")).expect("expectations");
+    let expectations: Expectations = toml::from_str(&text).expect("expectations parse");
+    assert!(expectations.case.len() >= 2);
+    let mut failures = Vec::new();
+    for case in &expectations.case {
+        let a = run(case);
+        let mut check = |ok: bool, what: String| {
+            if !ok {
+                failures.push(format!("{}: {what}", case.name));
+            }
+        };
+        if let Some(max) = case.max_violations {
+            check(
+                a.violations <= max,
+                format!("{} violations > {max}", a.violations),
+            );
+        }
+        if let Some(min) = case.min_violations {
+            check(
+                a.violations >= min,
+                format!("{} violations < {min}", a.violations),
+            );
+        }
+        if let Some(min) = case.min_separation_m {
+            check(
+                a.min_separation_m >= min,
+                format!("min separation {:.4} m < {min}", a.min_separation_m),
+            );
+        }
+        if let Some(min) = case.min_finished {
+            check(
+                a.finished >= min,
+                format!("{} finished < {min}", a.finished),
+            );
+        }
+        if let Some(max) = case.max_task_ratio {
+            check(
+                a.mean_task_ratio <= max,
+                format!("task ratio {:.3} > {max}", a.mean_task_ratio),
+            );
+        }
+        eprintln!(
+            "{}: min separation {:.4} m, {} violations, {}/{} finished, task ratio {:.3}",
+            case.name, a.min_separation_m, a.violations, a.finished, a.episodes, a.mean_task_ratio
+        );
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// The same seed gives the same episode, bit for bit.
+#[test]
+fn episodes_are_deterministic() {
+    let evaluation = Evaluation::from_file(&scenarios().join("shared_space_noisy.toml"))
+        .expect("scenario loads");
+    let mut short = evaluation.clone();
+    short.config.task_s = 2.0;
+    let a = run_episode(&short, FilterMode::Qp, 0, 3, None, |_| {}).expect("episode");
+    let b = run_episode(&short, FilterMode::Qp, 0, 3, None, |_| {}).expect("episode");
+    assert_eq!(a.1, b.1);
+    assert_eq!(
+        a.0.min_separation_m.to_bits(),
+        b.0.min_separation_m.to_bits()
+    );
+}
