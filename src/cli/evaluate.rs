@@ -1,6 +1,7 @@
 //! `workcell evaluate`: closed-loop safety episodes of a cell, with a report.
 
 use std::fs;
+use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Mutex;
@@ -197,12 +198,16 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     .map_err(anyhow::Error::msg)?;
 
     let a = Aggregate::of(&episodes);
-    println!(
+    // A closed pipe (`| head`) is not an error: the report is already written.
+    let mut stdout = std::io::stdout().lock();
+    let _ = writeln!(
+        stdout,
         "{} episodes, filter {mode}, perception {perception}: {}",
         a.episodes,
         a.headline(evaluation.config.safety.d_min_m)
     );
-    println!(
+    let _ = writeln!(
+        stdout,
         "closed loop at {:.1}x real time per core; report: {}",
         a.real_time_factor,
         args.out.join("summary.md").display()

@@ -337,6 +337,10 @@ pub fn write_plots(
     separation
         .series
         .push(("d_min".into(), vec![d_min_m; x.len()]));
+    // Contact, which also keeps d_min off the frame's bottom edge.
+    separation
+        .series
+        .push(("contact".into(), vec![0.0; x.len()]));
     let mut written = Vec::new();
     for (name, panel) in [("separation", separation), ("speed_scaling", scaling)] {
         let svg = svg_panels(&x, "time [s]", &[panel]);
