@@ -525,3 +525,46 @@ fn ssm_slows_the_approach_as_the_human_gets_closer() {
         "{scales:?}"
     );
 }
+
+/// With `bound_acceleration`, the command changes by at most the acceleration limit per tick,
+/// even when a human appears close by and the barrier wants a fast retreat.
+#[test]
+fn bounded_acceleration_limits_the_change_per_tick() {
+    let robot = iiwa();
+    let config = FilterConfig {
+        bound_acceleration: true,
+        acceleration_rad_s2: 5.0,
+        ..FilterConfig::default()
+    };
+    let mut filter =
+        SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config).expect("filter");
+    let q = [0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+    let nominal = [0.0, 0.4, 0.0, 0.3, 0.0, 0.0, 0.0];
+    let dt = 0.004;
+    let far = forearm(
+        Vector::new(5.0, -0.3, 0.6),
+        Vector::new(5.0, 0.3, 0.6),
+        Vector::ZERO,
+    );
+    let near = forearm(
+        Vector::new(0.75, -0.3, 0.6),
+        Vector::new(0.75, 0.3, 0.6),
+        Vector::new(-1.0, 0.0, 0.0),
+    );
+    let mut previous = filter.command().to_vec();
+    let mut changed = false;
+    for k in 0..200 {
+        let human = if k < 100 { &far } else { &near };
+        let out = filter.tick(&robot, &q, &nominal, human, dt);
+        for (v, v0) in filter.command().iter().zip(&previous) {
+            assert!(
+                (v - v0).abs() <= 5.0 * dt + 1e-6,
+                "tick {k} ({:?}): {v0} -> {v}",
+                out.status
+            );
+        }
+        changed |= k >= 100 && out.status != FilterStatus::Pass;
+        previous = filter.command().to_vec();
+    }
+    assert!(changed, "the near human changed the command");
+}
