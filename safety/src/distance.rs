@@ -52,9 +52,6 @@ pub struct PairConstraint {
     /// the normal (the normal points from human to robot); a withdrawing part counts as
     /// standing.
     pub human_normal_speed_m_s: f64,
-    /// Speed of the robot witness point under the last nominal command, m/s (filled by the
-    /// filters that need it).
-    pub robot_speed_m_s: f64,
 }
 
 /// The robot's geometry for distance queries: a bounding capsule per link (used by the
@@ -189,7 +186,6 @@ impl RobotGeometry {
                             .nhat_BA_W
                             .dot(estimate.velocity_at(p.t_B))
                             .max(0.0),
-                        robot_speed_m_s: 0.0,
                     });
                 };
                 push(pair);

@@ -363,19 +363,7 @@ impl SafetyFilter {
             if human.parts.iter().all(|p| p.is_valid())
                 && robot.forward_kinematics(q, &mut self.kinematics).is_ok()
             {
-                self.geometry.pair_constraints(
-                    robot,
-                    &self.kinematics,
-                    human,
-                    self.config.detection_m,
-                    &mut self.pairs,
-                );
-                out.active_pairs = self.pairs.len();
-                out.min_distance_m = self
-                    .pairs
-                    .iter()
-                    .map(|p| p.pair.distance_m)
-                    .fold(f64::INFINITY, f64::min);
+                self.measure_pairs(robot, human, &mut out);
             }
             return out;
         }
@@ -391,19 +379,7 @@ impl SafetyFilter {
         if robot.forward_kinematics(q, &mut self.kinematics).is_err() {
             return self.brake(out, BrakeReason::InvalidRobotInput, dt_s);
         }
-        self.geometry.pair_constraints(
-            robot,
-            &self.kinematics,
-            human,
-            self.config.detection_m,
-            &mut self.pairs,
-        );
-        out.active_pairs = self.pairs.len();
-        out.min_distance_m = self
-            .pairs
-            .iter()
-            .map(|p| p.pair.distance_m)
-            .fold(f64::INFINITY, f64::min);
+        self.measure_pairs(robot, human, &mut out);
 
         // Joint bounds: velocity limit, acceleration from the last command, position limit.
         let gain = self.config.position_gain_per_s;
@@ -437,6 +413,24 @@ impl SafetyFilter {
             FilterMode::Qp => self.tick_qp(qdot_nom, out, dt_s),
             FilterMode::Ssm => self.tick_ssm(qdot_nom, out, dt_s),
         }
+    }
+
+    /// The pairs within the detection distance at the configuration in `self.kinematics`,
+    /// counted and their smallest distance recorded in `out`.
+    fn measure_pairs(&mut self, robot: &RobotModel, human: &HumanEstimate, out: &mut FilterOutput) {
+        self.geometry.pair_constraints(
+            robot,
+            &self.kinematics,
+            human,
+            self.config.detection_m,
+            &mut self.pairs,
+        );
+        out.active_pairs = self.pairs.len();
+        out.min_distance_m = self
+            .pairs
+            .iter()
+            .map(|p| p.pair.distance_m)
+            .fold(f64::INFINITY, f64::min);
     }
 
     fn tick_qp(&mut self, qdot_nom: &[f64], mut out: FilterOutput, dt_s: f64) -> FilterOutput {
@@ -491,7 +485,7 @@ impl SafetyFilter {
         // The capsule distance already subtracts the sensing uncertainty (the human capsules
         // are inflated by it), so Z_d is 0 here.
         let mut scale: f64 = 1.0;
-        for c in &mut self.pairs {
+        for c in &self.pairs {
             let rate: f64 = c
                 .normal_jacobian
                 .iter()
@@ -499,7 +493,6 @@ impl SafetyFilter {
                 .map(|(a, v)| a * v)
                 .sum();
             let approach = (-rate).max(0.0);
-            c.robot_speed_m_s = approach;
             if approach <= 0.0 {
                 continue;
             }

@@ -213,7 +213,7 @@ impl QpFilter {
         }
         let used = pairs.len().min(rows);
         for i in 0..rows {
-            if let Some(c) = pairs.get(i).filter(|_| i < used) {
+            if let Some(c) = pairs.get(i) {
                 for j in 0..n {
                     self.a_values[j * per_column + i] = -c.normal_jacobian[j];
                 }

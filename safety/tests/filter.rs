@@ -27,7 +27,6 @@ fn row(normal_jacobian: &[f64], distance_m: f64, human_normal_speed_m_s: f64) ->
         },
         normal_jacobian: nj,
         human_normal_speed_m_s,
-        robot_speed_m_s: 0.0,
     }
 }
 

@@ -212,7 +212,6 @@ pub struct EpisodeTrace {
     pub separation_m: Vec<f64>,
     /// |qdot| / |qdot_nom| (1 when the nominal command is 0).
     pub speed_scale: Vec<f64>,
-    pub progress_s: Vec<f64>,
 }
 
 /// One closed-loop episode of `evaluation` with `filter` and the perception of the
@@ -285,6 +284,9 @@ pub fn run_episode(
     };
     let mut trace = EpisodeTrace::default();
     let mut below = false;
+    // Formatted once at the end: no allocation per tick.
+    let mut closest: Option<(workcell_robots::LinkId, workcell_safety::HumanPart, f64)> = None;
+    let mut braking: Vec<(workcell_safety::BrakeReason, usize)> = Vec::new();
     let (mut error_sum, mut error_ticks) = (0.0, 0usize);
 
     loop {
@@ -318,11 +320,7 @@ pub fn run_episode(
             let d = pair.distance_m;
             if d < metrics.min_separation_m {
                 metrics.min_separation_m = d;
-                metrics.closest = format!(
-                    "{} / {} at {t:.2} s",
-                    robot.links()[pair.link].name,
-                    pair.part
-                );
+                closest = Some((pair.link, pair.part, t));
             }
             let mut speed = 0.0;
             if d < c.near_m.max(d_min) {
@@ -416,14 +414,9 @@ pub fn run_episode(
             FilterStatus::Relaxed => metrics.ticks_relaxed += 1,
             FilterStatus::Braking(reason) => {
                 metrics.ticks_braking += 1;
-                let label = reason.to_string();
-                match metrics
-                    .braking_reasons
-                    .iter_mut()
-                    .find(|(l, _)| *l == label)
-                {
+                match braking.iter_mut().find(|(r, _)| *r == reason) {
                     Some((_, n)) => *n += 1,
-                    None => metrics.braking_reasons.push((label, 1)),
+                    None => braking.push((reason, 1)),
                 }
             }
         }
@@ -435,7 +428,6 @@ pub fn run_episode(
         } else {
             1.0
         });
-        trace.progress_s.push(progress);
 
         // The robot is position-controlled with velocity feed-forward, as industrial arms
         // are: the filtered velocity is integrated into the joint position command.
@@ -456,6 +448,13 @@ pub fn run_episode(
         on_tick((t / c.task_s).min(1.0));
     }
     trace.separation_m.truncate(trace.t_s.len());
+    if let Some((link, part, t)) = closest {
+        metrics.closest = format!("{} / {part} at {t:.2} s", robot.links()[link].name);
+    }
+    metrics.braking_reasons = braking
+        .into_iter()
+        .map(|(r, n)| (r.to_string(), n))
+        .collect();
     metrics.perception_error_m = if error_ticks > 0 {
         error_sum / error_ticks as f64
     } else {
