@@ -28,6 +28,9 @@ enum Command {
         #[command(subcommand)]
         command: RobotCommand,
     },
+    /// Compare a robot's rapier model with MuJoCo: kinematics, mass matrix, gravity,
+    /// trajectories (needs the `mujoco` feature).
+    Crosscheck(cli::crosscheck::CrosscheckArgs),
     /// Closed-loop safety evaluation: episodes of a cell with a safety filter and a report.
     Evaluate(cli::evaluate::EvaluateArgs),
     /// Run a scenario and write joint trajectories and human part poses (CSV) and a plot.
@@ -98,6 +101,7 @@ fn main() -> ExitCode {
             command: RobotCommand::List,
         } => cli::robot::list(),
         Command::Evaluate(a) => cli::evaluate::run(&a),
+        Command::Crosscheck(a) => cli::crosscheck::run(&a),
         Command::Simulate(a) => cli::simulate::run(&a),
         Command::Dataset {
             command: DatasetCommand::Generate(a),

@@ -35,7 +35,9 @@ pub enum RobotError {
         message: String,
     },
     /// A name was asked for that the catalogue does not have.
-    #[error("no robot named '{name}' in the catalogue (available: {available})")]
+    #[error(
+        "no robot named '{name}' in the catalogue or the robot library (available: {available})"
+    )]
     UnknownRobot { name: String, available: String },
     /// A query was given arguments that do not fit the model (wrong number of joints, NaN).
     #[error("{message}")]

@@ -20,6 +20,7 @@
 //! # Ok::<(), workcell_robots::RobotError>(())
 //! ```
 
+pub mod assets;
 mod catalogue;
 pub mod collision;
 mod error;
@@ -30,7 +31,9 @@ mod model;
 mod package;
 mod urdf;
 
-pub use catalogue::{CATALOGUE, CatalogueEntry};
+pub use catalogue::{
+    CATALOGUE, CatalogueEntry, ROBOT_PATH_VAR, RobotSource, added_robots, robot_library,
+};
 pub use error::{Result, RobotError};
 pub use kinematics::{Jacobian, KinematicState};
 pub use mesh::{DECODER_CRATE, TriMesh};

@@ -17,7 +17,7 @@ use workcell_robots::{KinematicState, LinkId, PackageMap, RobotModel};
 use crate::clutter::{ClutterBox, clutter_boxes};
 use crate::error::{Result, SimError};
 use crate::human::HumanMotion;
-use crate::multibody::{CoordinateHandle, LinkBody, build_robot};
+use crate::multibody::{CoordinateHandle, LinkBody, RobotBodies, build_robot};
 use crate::planning::plan_robot_motion;
 use crate::scenario::Scenario;
 use crate::trajectory::JointTrajectory;
@@ -224,7 +224,11 @@ impl CellState {
             world.insert_collider(ColliderBuilder::cuboid(hx, hy, hz).position(c.X_WC), None);
         }
 
-        let (robot_links, coordinates) = build_robot(
+        let RobotBodies {
+            links: robot_links,
+            coordinates,
+            ..
+        } = build_robot(
             &mut world,
             &model.robot,
             model.X_WR,

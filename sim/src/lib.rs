@@ -19,6 +19,8 @@
 
 mod cell;
 mod clutter;
+#[cfg(feature = "mujoco")]
+pub mod crosscheck;
 pub mod dataset;
 mod error;
 pub mod human;

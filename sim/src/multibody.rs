@@ -4,7 +4,7 @@
 
 use rapier3d_f64::prelude::*;
 use workcell_robots::collision::geometry_shape;
-use workcell_robots::math::{Pose, Vector};
+use workcell_robots::math::{Pose, Rotation, Vector};
 use workcell_robots::{Coordinate, JointKind, LinkId, RobotModel};
 
 use crate::error::{Result, SimError};
@@ -26,15 +26,27 @@ pub(crate) struct CoordinateHandle {
     pub(crate) coord: usize,
 }
 
-/// Inserts the robot as a multibody; returns the body of every link and the rapier handle of
-/// every coordinate.
+/// The robot in a rapier world.
+#[derive(Debug, Clone)]
+pub(crate) struct RobotBodies {
+    /// The body of every link.
+    pub(crate) links: Vec<LinkBody>,
+    /// The multibody coordinate of every configuration coordinate (actuated joint).
+    pub(crate) coordinates: Vec<CoordinateHandle>,
+    /// The multibody coordinate of every joint (`None` for fixed joints), mimic joints included.
+    pub(crate) joints: Vec<Option<CoordinateHandle>>,
+}
+
+/// Inserts the robot as a multibody: the body of every link, the rapier handle of every
+/// coordinate. URDF joint damping and friction become the multibody's per-DoF damping and
+/// dry friction (MuJoCo's `damping` and `frictionloss`).
 pub(crate) fn build_robot(
     world: &mut PhysicsWorld,
     robot: &RobotModel,
     X_WR: Pose,
     initial_q: &[f64],
     gravity_compensation: bool,
-) -> Result<(Vec<LinkBody>, Vec<CoordinateHandle>)> {
+) -> Result<RobotBodies> {
     let fk = robot.fk(X_WR, initial_q).map_err(|e| SimError::Physics {
         message: e.to_string(),
     })?;
@@ -61,21 +73,18 @@ pub(crate) fn build_robot(
                 RigidBodyBuilder::dynamic()
             };
             // Mass of the body: the inertials of every link merged into it.
-            let mut mass = MassProperties::default();
-            for (m, link) in robot.links().iter().enumerate() {
-                if body_link[m] != b {
-                    continue;
-                }
-                if let Some(i) = link.inertial {
-                    let [ixx, ixy, ixz, iyy, iyz, izz] = i.inertia_kgm2;
-                    let inertia = parry3d_f64::math::Matrix::from_cols_array(&[
-                        ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz,
-                    ]);
+            let parts: Vec<(f64, Pose, [f64; 6])> = robot
+                .links()
+                .iter()
+                .enumerate()
+                .filter(|&(m, _)| body_link[m] == b)
+                .filter_map(|(m, link)| {
+                    let i = link.inertial?;
                     let X_BI = X_WBody.inverse() * *fk.link_pose(m) * i.X_LI;
-                    mass += MassProperties::with_inertia_matrix(Vector::ZERO, i.mass_kg, inertia)
-                        .transform_by(&X_BI);
-                }
-            }
+                    Some((i.mass_kg, X_BI, i.inertia_kgm2))
+                })
+                .collect();
+            let mut mass = merged_mass_properties(&parts);
             if mass.mass() <= 0.0 && b != robot.root() {
                 // A moving link without inertial: a small mass keeps the solver well posed.
                 mass = MassProperties::new(Vector::ZERO, 0.01, Vector::splat(1e-5));
@@ -94,10 +103,14 @@ pub(crate) fn build_robot(
         let X_BL = X_WBody.inverse() * *fk.link_pose(l);
         for g in &robot.links()[l].collisions {
             if let Some((X_LS, shape)) = geometry_shape(g) {
+                // Massless, and placed through a one-part compound so that the collider sits
+                // at the body origin: its mass properties are then exactly zero and rapier
+                // keeps the body's own (an offset zero-mass collider makes rapier re-diagonalise
+                // the body inertia with a 3x3 eigensolver that, below about 1e-5 kg m^2,
+                // returns wrong principal axes).
                 world.insert_collider(
-                    ColliderBuilder::new(shape)
-                        .position(X_BL * X_LS)
-                        .density(0.0),
+                    ColliderBuilder::new(SharedShape::compound(vec![(X_BL * X_LS, shape)]))
+                        .mass_properties(MassProperties::default()),
                     Some(body),
                 );
             }
@@ -140,23 +153,32 @@ pub(crate) fn build_robot(
         joint_handles[j] = Some((handle, axis, coord));
     }
 
+    let joints: Vec<Option<CoordinateHandle>> = joint_handles
+        .iter()
+        .map(|h| h.map(|(joint, axis, coord)| CoordinateHandle { joint, axis, coord }))
+        .collect();
     let mut coordinates = Vec::with_capacity(robot.dof());
     for &j in robot.actuated_joints() {
-        let (joint, axis, coord) =
-            joint_handles[j].ok_or_else(|| refused(&robot.joints()[j].name))?;
-        coordinates.push(CoordinateHandle { joint, axis, coord });
+        coordinates.push(joints[j].ok_or_else(|| refused(&robot.joints()[j].name))?);
     }
 
     // Initial configuration, mimic couplings, no self-contacts. A robot without movable
     // joints is rigid bodies only (fixed root, fixed-jointed links merged into it).
+    let bodies_of = |links, coordinates, joints| RobotBodies {
+        links,
+        coordinates,
+        joints,
+    };
     let Some(&(first, _, _)) = joint_handles.iter().flatten().next() else {
-        return Ok((links, coordinates));
+        return Ok(bodies_of(links, coordinates, joints));
     };
     let Some((multibody, _)) = world.multibody_joints.get_mut(first) else {
         return Err(refused("first joint"));
     };
     multibody.set_self_contacts_enabled(false);
     let mut displacement = vec![0.0; multibody.ndofs()];
+    let mut damping = vec![0.0; multibody.ndofs()];
+    let mut friction = vec![0.0; multibody.ndofs()];
     let mut couplings = Vec::new();
     for (j, joint) in robot.joints().iter().enumerate() {
         let Some((handle, _, coord)) = joint_handles[j] else {
@@ -169,6 +191,8 @@ pub(crate) fn build_robot(
             continue;
         };
         displacement[link.assembly_id()] = joint.position(initial_q);
+        damping[link.assembly_id()] = joint.damping;
+        friction[link.assembly_id()] = joint.friction;
         if let Coordinate::Mimic {
             index,
             multiplier,
@@ -203,10 +227,76 @@ pub(crate) fn build_robot(
             multibody.add_dof_coupling(c);
         }
         multibody.apply_displacements(&displacement);
+        multibody.damping_mut().copy_from_slice(&damping);
+        multibody.frictions_mut().copy_from_slice(&friction);
         multibody.forward_kinematics(bodies, true);
         multibody.update_rigid_bodies(bodies, true);
     }
-    Ok((links, coordinates))
+    Ok(bodies_of(links, coordinates, joints))
+}
+
+/// Mass properties of links merged into one body: each part is `(mass, pose of its centre-of-
+/// mass frame in the body, inertia tensor about its centre of mass [ixx, ixy, ixz, iyy, iyz,
+/// izz])`. The tensors are summed about the common centre of mass (parallel-axis theorem) and
+/// the sum is diagonalised once, by an iterative symmetric eigensolver.
+///
+/// parry's `MassProperties::with_inertia_matrix` (also behind its `+`) uses a closed-form 3x3
+/// eigensolver (glamx 0.3) that loses digits when principal moments nearly coincide and, for
+/// tensors below about 1e-5 kg m^2, can return axes that do not match the moments (an absolute
+/// 1e-20 threshold on squared cross products). The MuJoCo cross-check measured joint-space
+/// mass matrices off by up to 2e-4 (relative) on vendor arms that way.
+fn merged_mass_properties(parts: &[(f64, Pose, [f64; 6])]) -> MassProperties {
+    use rapier3d_f64::na::{Matrix3, SymmetricEigen, Vector3};
+    let total: f64 = parts.iter().map(|p| p.0).sum();
+    if total <= 0.0 {
+        return MassProperties::default();
+    }
+    let v3 = |v: Vector| Vector3::new(v.x, v.y, v.z);
+    let com = parts
+        .iter()
+        .fold(Vector3::zeros(), |c, (m, X, _)| c + *m * v3(X.translation))
+        / total;
+    let mut tensor = Matrix3::zeros();
+    for (m, X, [ixx, ixy, ixz, iyy, iyz, izz]) in parts {
+        let R = Matrix3::from_fn(|r, c| {
+            let col = X.rotation * [Vector::X, Vector::Y, Vector::Z][c];
+            col.to_array()[r]
+        });
+        let I = Matrix3::new(*ixx, *ixy, *ixz, *ixy, *iyy, *iyz, *ixz, *iyz, *izz);
+        let d = v3(X.translation) - com;
+        tensor +=
+            R * I * R.transpose() + *m * (Matrix3::identity() * d.dot(&d) - d * d.transpose());
+    }
+    let eigen = SymmetricEigen::new(tensor);
+    let mut axes = eigen.eigenvectors;
+    let mut moments = eigen.eigenvalues;
+    if axes.determinant() < 0.0 {
+        axes.swap_columns(1, 2);
+        moments.swap_rows(1, 2);
+    }
+    let frame = Rotation::from_mat3(&parry3d_f64::math::Matrix::from_cols_array(&[
+        axes[(0, 0)],
+        axes[(1, 0)],
+        axes[(2, 0)],
+        axes[(0, 1)],
+        axes[(1, 1)],
+        axes[(2, 1)],
+        axes[(0, 2)],
+        axes[(1, 2)],
+        axes[(2, 2)],
+    ]))
+    .normalize();
+    let principal = Vector::new(
+        moments[0].max(0.0),
+        moments[1].max(0.0),
+        moments[2].max(0.0),
+    );
+    MassProperties::with_principal_inertia_frame(
+        Vector::new(com.x, com.y, com.z),
+        total,
+        principal,
+        frame,
+    )
 }
 
 /// What [`check_in_rapier`] found.
@@ -239,7 +329,9 @@ pub fn check_in_rapier(robot: &RobotModel, q: &[f64]) -> Result<RapierCheck> {
     world.integration_parameters.dt = 0.001;
     // Without gravity compensation: the hold error then shows how well the servos and effort
     // limits carry the robot's own weight.
-    let (links, coordinates) = build_robot(&mut world, robot, Pose::IDENTITY, q, false)?;
+    let RobotBodies {
+        links, coordinates, ..
+    } = build_robot(&mut world, robot, Pose::IDENTITY, q, false)?;
     let fk = robot
         .fk(Pose::IDENTITY, q)
         .map_err(|e| SimError::InvalidCommand {
@@ -286,4 +378,56 @@ pub fn check_in_rapier(robot: &RobotModel, q: &[f64]) -> Result<RapierCheck> {
         fk_mismatch_m,
         hold_error,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn merged_mass_properties_reproduce_the_summed_tensor() {
+        // Two links 0.3 m apart, one with a full tensor, one rotated: the result, rebuilt from
+        // its principal frame, must equal the tensor summed by hand about the common centre.
+        let a = (
+            2.0,
+            Pose::from_translation(Vector::new(0.1, 0.0, 0.0)),
+            [
+                0.012516, -0.000428, -0.001196, 0.010027, -0.000741, 0.004815,
+            ],
+        );
+        let rot = Rotation::from_axis_angle(Vector::new(1.0, 2.0, 3.0).normalize(), 0.7);
+        let b = (
+            0.5,
+            Pose::from_parts(Vector::new(0.1, 0.3, 0.0), rot),
+            [0.003, 0.0, 0.0, 0.002, 0.0, 0.001],
+        );
+        let mp = merged_mass_properties(&[a, b]);
+        assert!((mp.mass() - 2.5).abs() < 1e-15);
+        let com = mp.local_com;
+        assert!((com - Vector::new(0.1, 0.06, 0.0)).length() < 1e-15);
+        let got = mp.reconstruct_inertia_matrix();
+        // By hand: b's tensor rotated, plus both parallel-axis terms about (0.1, 0.06, 0).
+        let Rb = parry3d_f64::math::Matrix::from_quat(rot);
+        let Ib = Rb
+            * parry3d_f64::math::Matrix::from_diagonal(Vector::new(0.003, 0.002, 0.001))
+            * Rb.transpose();
+        let Ia = parry3d_f64::math::Matrix::from_cols_array(&[
+            0.012516, -0.000428, -0.001196, -0.000428, 0.010027, -0.000741, -0.001196, -0.000741,
+            0.004815,
+        ]);
+        let shift = |m: f64, d: Vector| {
+            m * (parry3d_f64::math::Matrix::IDENTITY * d.dot(d)
+                - parry3d_f64::math::Matrix::from_cols(d * d.x, d * d.y, d * d.z))
+        };
+        let want = Ia
+            + Ib
+            + shift(2.0, Vector::new(0.0, -0.06, 0.0))
+            + shift(0.5, Vector::new(0.0, 0.24, 0.0));
+        let err = (got - want)
+            .abs()
+            .to_cols_array()
+            .iter()
+            .fold(0.0_f64, |m, x| m.max(*x));
+        assert!(err < 1e-16, "inertia off by {err:e}");
+    }
 }

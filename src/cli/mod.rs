@@ -1,5 +1,6 @@
 //! Subcommands of the `workcell` binary.
 
+pub mod crosscheck;
 pub mod dataset;
 pub mod evaluate;
 pub mod perception;
