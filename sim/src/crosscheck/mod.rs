@@ -9,8 +9,9 @@
 //! - the joint-space mass matrix (rapier's articulated assembly against `mj_fullM`);
 //! - the gravity torques (from rapier's free acceleration at rest against `qfrc_bias`);
 //!
-//! and joint trajectories under the same PD torque law, applied as explicit joint torques in
-//! both simulators, with MuJoCo's four integrators (the divergence against time is reported).
+//! and joint trajectories under the same PD torque law (without gravity, so that no joint sags
+//! into a limit), applied as explicit joint torques in both simulators, with MuJoCo's four
+//! integrators (the divergence against time is reported).
 //! Contacts are off in both: rapier's multibody has self-contacts disabled, and MuJoCo's
 //! contact flag is cleared, since the comparison is of the articulated dynamics.
 
@@ -150,8 +151,8 @@ impl Worst {
 pub struct TrajectoryComparison {
     /// MuJoCo's integrator (`Euler`, `implicitfast`, `implicit`, `RK4`).
     pub integrator: String,
-    /// With the URDF's dry joint friction (both engines model it as a constraint, differently);
-    /// the other runs remove it from both.
+    /// MuJoCo with the URDF's dry joint friction (`frictionloss`), which the rapier model
+    /// leaves out; the other runs have none in either engine.
     pub friction: bool,
     /// `(t, largest joint difference at t)` at a few times, s and rad (or m).
     pub divergence: Vec<(f64, f64)>,
@@ -255,8 +256,8 @@ pub fn crosscheck(
         }
         let scale = tau_r.iter().fold(0.0_f64, |a, x| a.max(x.abs()));
         gravity_scale = gravity_scale.max(scale);
-        for i in 0..n {
-            let d = (tau_r[i] - statics.gravity[i]).abs() / (scale + 1e-9);
+        for (i, (a, b)) in tau_r.iter().zip(&statics.gravity).enumerate() {
+            let d = (a - b).abs() / (scale + 1e-9);
             gravity_relative.update(d, || {
                 format!(
                     "joint '{}', sample {sample}",
@@ -267,8 +268,7 @@ pub fn crosscheck(
     }
 
     let q_start = random_configuration(robot, &mut rng);
-    let (trajectories, trajectory_excursion) =
-        compare_trajectories(robot, &mj, config, g, &q_start)?;
+    let (trajectories, trajectory_excursion) = compare_trajectories(robot, &mj, config, &q_start)?;
 
     let t = config.tolerances;
     let euler = trajectories
@@ -354,8 +354,9 @@ const REPORT_TIMES: [f64; 5] = [0.1, 0.5, 1.0, 2.0, 3.0];
 
 /// The PD torque law shared by both simulators: the configuration reference
 /// `q0 + a (1 - cos(2 pi f t)) / 2` is mapped to every movable joint (mimic joints follow
-/// their leader), which tracks it with gains set from the diagonal of the mass matrix at the
-/// start for a 20 rad/s critically damped response; torques are clipped to the URDF effort.
+/// their leader), which tracks it with gains set from the effective joint inertia at the start
+/// for a 20 rad/s critically damped response. Torques are not clipped to
+/// the URDF effort: a saturating law makes both runs hypersensitive to the smallest difference.
 struct PdLaw {
     /// Configuration coordinates: start and amplitude of the reference.
     q0: Vec<f64>,
@@ -364,7 +365,6 @@ struct PdLaw {
     map: Vec<(usize, f64, f64)>,
     kp: Vec<f64>,
     kd: Vec<f64>,
-    effort: Vec<f64>,
 }
 
 const PD_OMEGA: f64 = 20.0;
@@ -377,34 +377,40 @@ impl PdLaw {
             let (c, multiplier, offset) = self.map[i];
             let reference = multiplier * (self.q0[c] + self.amplitude[c] * s) + offset;
             let tau = self.kp[i] * (reference - q[i]) - self.kd[i] * v[i];
-            out[i] = tau.clamp(-self.effort[i], self.effort[i]);
+            out[i] = tau;
         }
     }
 }
 
-/// From rest at `q_start`, the PD law moves every joint towards its farther limit by up to a
-/// quarter of its range (at most 0.5 rad) and back, in rapier and in MuJoCo with each integrator, without dry friction;
-/// then once more with the URDF's friction, against MuJoCo's Euler. Returns the comparisons
-/// and the largest excursion of a joint from its start in rapier's run.
-fn compare_trajectories(
+/// The [`PdLaw`] of a trajectory starting at rest at `q_start`: every joint moves towards its
+/// farther limit by up to a quarter of its range (at most 0.5 rad) and back.
+fn pd_law(
     robot: &RobotModel,
-    mj: &mujoco::MujocoRobot,
-    config: &CrosscheckConfig,
-    g: [f64; 3],
     q_start: &[f64],
-) -> Result<(Vec<TrajectoryComparison>, f64), CrosscheckError> {
-    let q_start = q_start.to_vec();
-    let (m, _) =
-        rapier::RapierRobot::new(robot, &q_start, g, config.time_step_s)?.mass_matrix_and_gravity();
-    let rp = rapier::RapierRobot::new(robot, &q_start, g, config.time_step_s)?;
-    let n = rp.joints.len();
-    let joints: Vec<_> = rp.joints.iter().map(|&j| &robot.joints()[j]).collect();
+    g: [f64; 3],
+    dt: f64,
+) -> Result<PdLaw, CrosscheckError> {
+    let (m, _) = rapier::RapierRobot::new(robot, q_start, g, dt)?.mass_matrix_and_gravity();
+    let joints: Vec<_> = robot
+        .joints()
+        .iter()
+        .filter(|j| j.kind.is_movable())
+        .collect();
+    let n = joints.len();
+    // The inertia each joint sees with the others free, 1 / (M^-1)_ii: gains on the diagonal
+    // of M itself can be far too stiff for a joint that the chain couples strongly.
+    let inverse = rapier3d_f64::na::DMatrix::from_row_slice(n, n, &m)
+        .try_inverse()
+        .ok_or_else(|| SimError::Physics {
+            message: "the mass matrix is singular".into(),
+        })?;
+    let inertia: Vec<f64> = (0..n).map(|i| 1.0 / inverse[(i, i)]).collect();
     // Towards the farther limit, by a quarter of the range, at most 0.5 rad and at most 80 %
     // of the room: the limits stay idle (both engines enforce them, differently).
     let amplitude: Vec<f64> = robot
         .position_limits()
         .iter()
-        .zip(&q_start)
+        .zip(q_start)
         .map(|(&[lo, hi], &q)| {
             let (lo, hi) = finite_range(lo, hi);
             let (up, down) = (hi - q, q - lo);
@@ -424,27 +430,36 @@ fn compare_trajectories(
             Coordinate::None => (0, 0.0, 0.0),
         })
         .collect();
-    let law = PdLaw {
-        q0: q_start.clone(),
+    Ok(PdLaw {
+        q0: q_start.to_vec(),
         amplitude,
         map,
-        kp: (0..n).map(|i| m[i * n + i] * PD_OMEGA * PD_OMEGA).collect(),
-        kd: (0..n).map(|i| 2.0 * m[i * n + i] * PD_OMEGA).collect(),
-        effort: joints
-            .iter()
-            .map(|j| {
-                if j.limits.effort > 0.0 {
-                    j.limits.effort
-                } else {
-                    f64::INFINITY
-                }
-            })
-            .collect(),
-    };
+        kp: inertia.iter().map(|i| i * PD_OMEGA * PD_OMEGA).collect(),
+        kd: inertia.iter().map(|i| 2.0 * i * PD_OMEGA).collect(),
+    })
+}
+
+/// From rest at `q_start`, the PD law moves every joint towards its farther limit by up to a
+/// quarter of its range (at most 0.5 rad) and back, in rapier and in MuJoCo with each
+/// integrator, without dry friction; then once more with MuJoCo's Euler given the URDF's dry
+/// friction, which rapier leaves out. Returns the comparisons and the largest excursion of a
+/// joint from its start in rapier's run.
+fn compare_trajectories(
+    robot: &RobotModel,
+    mj: &mujoco::MujocoRobot,
+    config: &CrosscheckConfig,
+    q_start: &[f64],
+) -> Result<(Vec<TrajectoryComparison>, f64), CrosscheckError> {
+    let q_start = q_start.to_vec();
+    // Without gravity: the static check covers the gravity torques, and here the PD law would
+    // otherwise sag joints into their limits, where the engines differ by design (rapier's
+    // limits are hard constraints, MuJoCo's soft).
+    let g = [0.0; 3];
+    let law = pd_law(robot, &q_start, g, config.time_step_s)?;
+    let rp = rapier::RapierRobot::new(robot, &q_start, g, config.time_step_s)?;
+    let joints: Vec<_> = rp.joints.iter().map(|&j| &robot.joints()[j]).collect();
     let steps = (config.duration_s / config.time_step_s).round() as usize;
-    let rapier_path = rp.run(&law, steps, false)?;
-    let rapier_friction =
-        rapier::RapierRobot::new(robot, &q_start, g, config.time_step_s)?.run(&law, steps, true)?;
+    let rapier_path = rp.run(&law, steps)?;
     let joint_start: Vec<f64> = joints.iter().map(|j| j.position(&q_start)).collect();
     let excursion = rapier_path
         .iter()
@@ -454,13 +469,9 @@ fn compare_trajectories(
     let mut out = Vec::new();
     let runs = mujoco::Integrator::ALL
         .iter()
-        .map(|&i| (i, false, &rapier_path))
-        .chain(std::iter::once((
-            mujoco::Integrator::Euler,
-            true,
-            &rapier_friction,
-        )));
-    for (integrator, friction, rapier_path) in runs {
+        .map(|&i| (i, false))
+        .chain(std::iter::once((mujoco::Integrator::Euler, true)));
+    for (integrator, friction) in runs {
         let mj_path = mj.run(
             &law,
             &q_start,
@@ -529,7 +540,7 @@ pub fn format_report(r: &CrosscheckReport) -> String {
     );
     let _ = writeln!(
         s,
-        "  trajectories: PD torques, {:.1} s at {} ms, joints move up to {:.3}; largest joint difference from rapier:",
+        "  trajectories: PD torques without gravity, {:.1} s at {} ms, joints move up to {:.3}; largest joint difference from rapier:",
         r.config.duration_s,
         r.config.time_step_s * 1e3,
         r.trajectory_excursion
@@ -576,4 +587,54 @@ pub fn format_report(r: &CrosscheckReport) -> String {
         );
     }
     s
+}
+
+/// Simulation speed of both engines on the same task.
+#[derive(Debug, Clone, Serialize)]
+pub struct StepRates {
+    pub robot: String,
+    pub steps: usize,
+    pub time_step_s: f64,
+    /// Steps per second (best of the repeats), the robot alone with the PD torque law.
+    pub rapier_steps_per_s: f64,
+    pub mujoco_steps_per_s: f64,
+}
+
+/// Times `steps` steps of the trajectory task (the PD torque law of [`crosscheck`], no dry
+/// friction, MuJoCo's Euler integrator, contacts off in MuJoCo and no self-contacts in rapier)
+/// in each engine, `repeats` times, on the calling thread; keeps the best run of each.
+///
+/// # Errors
+/// As [`crosscheck`].
+pub fn step_rates(
+    robot: &RobotModel,
+    assets: &UrdfAssets,
+    workdir: &Path,
+    steps: usize,
+    repeats: usize,
+) -> Result<StepRates, CrosscheckError> {
+    let config = CrosscheckConfig::default();
+    let dt = config.time_step_s;
+    let g = [0.0; 3];
+    let mj = mujoco::MujocoRobot::load(robot, assets, workdir)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let q_start = random_configuration(robot, &mut rng);
+    let law = pd_law(robot, &q_start, g, dt)?;
+    let (mut rapier_best, mut mujoco_best) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..repeats.max(1) {
+        let rp = rapier::RapierRobot::new(robot, &q_start, g, dt)?;
+        let t = std::time::Instant::now();
+        rp.run(&law, steps)?;
+        rapier_best = rapier_best.min(t.elapsed().as_secs_f64());
+        let t = std::time::Instant::now();
+        mj.run(&law, &q_start, steps, dt, mujoco::Integrator::Euler, false);
+        mujoco_best = mujoco_best.min(t.elapsed().as_secs_f64());
+    }
+    Ok(StepRates {
+        robot: robot.name().to_string(),
+        steps,
+        time_step_s: dt,
+        rapier_steps_per_s: steps as f64 / rapier_best,
+        mujoco_steps_per_s: steps as f64 / mujoco_best,
+    })
 }

@@ -19,19 +19,26 @@ pub const MUJOCO_VERSION: &str = "3.17.0";
 #[must_use]
 pub fn linked_mujoco_version() -> String {
     // SAFETY: mj_version reads a constant of the loaded library.
-    let v = unsafe { mj_version() };
+    version_string(unsafe { mj_version() })
+}
+
+/// MuJoCo's version number (`3017000`) as `3.17.0`.
+fn version_string(v: i32) -> String {
     format!("{}.{}.{}", v / 1_000_000, (v / 1000) % 1000, v % 1000)
 }
 
 /// mujoco-rs panics on a version mismatch; checked first, so that it is an error instead.
 fn check_version() -> Result<(), CrosscheckError> {
     // SAFETY: as above.
-    let v = unsafe { mj_version() };
+    check_version_number(unsafe { mj_version() })
+}
+
+fn check_version_number(v: i32) -> Result<(), CrosscheckError> {
     if u32::try_from(v).ok() == Some(mjVERSION_HEADER) {
         Ok(())
     } else {
         Err(CrosscheckError::MujocoVersion {
-            found: linked_mujoco_version(),
+            found: version_string(v),
             expected: MUJOCO_VERSION.to_string(),
         })
     }
@@ -253,6 +260,8 @@ impl<'a> MujocoRobot<'a> {
         friction: bool,
     ) -> Vec<Vec<f64>> {
         let mut data = self.data(dt, integrator, friction);
+        // Gravity off, as in the rapier run (see `compare_trajectories`).
+        data.model_opt_mut().gravity = [0.0; 3];
         self.set_configuration(&mut data, q_start);
         let n = self.joints.len();
         let (mut q, mut v, mut tau) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
@@ -274,5 +283,24 @@ impl<'a> MujocoRobot<'a> {
             path.push(q.clone());
         }
         path
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_library_version_is_checked() {
+        assert_eq!(version_string(3_017_000), MUJOCO_VERSION);
+        assert!(check_version_number(3_017_000).is_ok());
+        // The library this build links is the one the bindings were made for.
+        assert!(check_version().is_ok(), "{}", linked_mujoco_version());
+        let e = check_version_number(3_016_002).expect_err("another release");
+        let text = e.to_string();
+        assert!(
+            text.contains("3.16.2") && text.contains("3.17.0") && text.contains("fetch-mujoco"),
+            "{text}"
+        );
     }
 }

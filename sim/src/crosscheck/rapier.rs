@@ -150,28 +150,8 @@ impl<'a> RapierRobot<'a> {
     }
 
     /// Runs `steps` steps under `law`, applied as explicit joint torques (equal and opposite
-    /// on the two bodies of each joint); the joint positions after every step. Without
-    /// `friction`, the joints' dry friction (from the URDF) is removed first.
-    pub(super) fn run(
-        mut self,
-        law: &PdLaw,
-        steps: usize,
-        friction: bool,
-    ) -> Result<Vec<Vec<f64>>> {
-        if !friction {
-            let handles: Vec<_> = self
-                .bodies
-                .joints
-                .iter()
-                .flatten()
-                .map(|c| c.joint)
-                .collect();
-            for h in handles {
-                if let Some((mb, _)) = self.world.multibody_joints.get_mut(h) {
-                    mb.frictions_mut().fill(0.0);
-                }
-            }
-        }
+    /// on the two bodies of each joint); the joint positions after every step.
+    pub(super) fn run(mut self, law: &PdLaw, steps: usize) -> Result<Vec<Vec<f64>>> {
         let n = self.joints.len();
         let dt = self.world.integration_parameters.dt;
         let (mut q, mut v, mut tau) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
