@@ -69,8 +69,11 @@ enum DatasetCommand {
 enum RobotCommand {
     /// Parse a URDF (or catalogue name), resolve its meshes, load it into rapier, report.
     Check(cli::robot::CheckArgs),
-    /// List the built-in robots.
+    /// List the built-in robots and those added to the robot library.
     List,
+    /// Add a vendor URDF to the robot library: copy it with its meshes, render a preview,
+    /// check it (and cross-check it with MuJoCo when built with the `mujoco` feature).
+    Add(cli::robot::AddArgs),
 }
 
 fn main() -> ExitCode {
@@ -100,6 +103,9 @@ fn main() -> ExitCode {
         Command::Robot {
             command: RobotCommand::List,
         } => cli::robot::list(),
+        Command::Robot {
+            command: RobotCommand::Add(a),
+        } => cli::robot::add(&a),
         Command::Evaluate(a) => cli::evaluate::run(&a),
         Command::Crosscheck(a) => cli::crosscheck::run(&a),
         Command::Simulate(a) => cli::simulate::run(&a),

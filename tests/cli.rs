@@ -429,3 +429,138 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         text(&out.stderr)
     );
 }
+
+#[path = "../robots/tests/support/example_robot_data.rs"]
+mod example_robot_data;
+
+#[test]
+fn robot_add_copies_a_vendor_arm_that_scenarios_can_name() {
+    let Some(data) = example_robot_data::data_dir() else {
+        return;
+    };
+    let vendor = data.join("robots/ur_description/urdf/ur5_robot.urdf");
+    let dir = tempfile::tempdir().expect("temp");
+    let library = dir.path().join("library");
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_workcell"))
+            .args(args)
+            .env("WORKCELL_ROBOT_PATH", &library)
+            .current_dir(dir.path())
+            .output()
+            .expect("run workcell")
+    };
+    let vendor_arg = vendor.to_string_lossy();
+    let library_arg = library.to_string_lossy();
+    let add = [
+        "robot",
+        "add",
+        &vendor_arg,
+        "--name",
+        "my_ur5",
+        "--into",
+        &library_arg,
+    ];
+    let out = run(&add);
+    assert!(
+        out.status.success(),
+        "{}{}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("problems none found"), "{stdout}");
+    assert!(stdout.contains("model = \"my_ur5\""), "{stdout}");
+
+    // The copy stands alone: relative mesh paths that resolve inside its folder.
+    let folder = library.join("my_ur5");
+    let urdf = std::fs::read_to_string(folder.join("my_ur5.urdf")).expect("urdf");
+    assert!(!urdf.contains("package://"), "package URIs left");
+    let original = std::fs::read_to_string(&vendor).expect("vendor urdf");
+    assert_eq!(
+        urdf.matches("<mesh").count(),
+        original.matches("<mesh").count()
+    );
+    let source = std::fs::read_to_string(folder.join("source.toml")).expect("source.toml");
+    assert!(source.contains("ur5_robot.urdf"), "{source}");
+    let preview = std::fs::read(folder.join("preview.png")).expect("preview");
+    assert!(preview.starts_with(b"\x89PNG"));
+    let model = workcell::robots::RobotModel::from_urdf_file(
+        folder.join("my_ur5.urdf"),
+        &workcell::robots::PackageMap::new(),
+    )
+    .expect("the copy loads");
+    let vendor_model =
+        workcell::robots::RobotModel::from_urdf_file(&vendor, &workcell::robots::PackageMap::new())
+            .expect("vendor loads");
+    assert_eq!(model.dof(), vendor_model.dof());
+    let q = [0.3, -1.1, 1.4, -0.5, 0.7, 0.2];
+    let a = model.fk(Default::default(), &q).expect("fk");
+    let b = vendor_model.fk(Default::default(), &q).expect("fk");
+    assert_eq!(a.link_poses(), b.link_poses());
+
+    // Listed, named in a scenario, simulated.
+    let list = run(&["robot", "list"]);
+    assert!(
+        text(&list.stdout).contains("my_ur5"),
+        "{}",
+        text(&list.stdout)
+    );
+    let scenario = "[robot]\nmodel = \"my_ur5\"\ninitial_q = [0.0, -1.2, 1.5, -1.9, -1.57, 0.0]\n\
+                    tool_link = \"tool0\"\n[robot.motion]\nkind = \"hold\"\n";
+    std::fs::write(dir.path().join("cell.toml"), scenario).expect("scenario");
+    let out = run(&["simulate", "cell.toml", "--seconds", "0.2", "--out", "sim"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(dir.path().join("sim/robot_joints.csv").is_file());
+
+    // A second add under the same name is refused; bad names too; nothing is panicked.
+    for (args, expected) in [
+        (add.to_vec(), "already exists"),
+        (
+            [
+                "robot",
+                "add",
+                &vendor_arg,
+                "--name",
+                "a b",
+                "--into",
+                &library_arg,
+            ]
+            .to_vec(),
+            "letters, digits",
+        ),
+        (
+            [
+                "robot",
+                "add",
+                &vendor_arg,
+                "--name",
+                "human_arm",
+                "--into",
+                &library_arg,
+            ]
+            .to_vec(),
+            "built-in",
+        ),
+        (
+            [
+                "robot",
+                "add",
+                "missing.urdf",
+                "--name",
+                "x",
+                "--into",
+                &library_arg,
+            ]
+            .to_vec(),
+            "cannot read",
+        ),
+    ] {
+        let out = run(&args);
+        let stderr = text(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(expected),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}

@@ -47,9 +47,9 @@ impl UrdfAssets {
     /// root, [`RobotError::Mesh`] for a mesh that does not resolve to an existing file.
     pub fn read(path: impl AsRef<Path>, packages: &PackageMap) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| RobotError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| RobotError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         Self::from_text(text, path, packages)
     }
@@ -186,6 +186,131 @@ pub fn write_binary_stl(mesh: &TriMesh, path: &Path) -> std::io::Result<()> {
     let mut file = std::fs::File::create(path)?;
     file.write_all(&bytes)?;
     file.sync_all()
+}
+
+/// A robot copied into a library folder by [`add_robot`].
+#[derive(Debug, Clone)]
+pub struct AddedRobot {
+    /// `<library>/<name>/<name>.urdf`.
+    pub urdf: PathBuf,
+    /// The distinct mesh files copied, as paths relative to the robot's folder.
+    pub meshes: Vec<PathBuf>,
+}
+
+/// Copies the URDF at `source` and every mesh it references into `<library>/<name>/`: the URDF
+/// becomes `<name>.urdf` with its mesh paths made relative (`meshes/<package>/<path>` for
+/// `package://` URIs, `meshes/<file>` otherwise), and `source.toml` records where it came
+/// from. The folder is assembled beside its final place and renamed when complete; an
+/// existing robot of that name is replaced only with `replace`.
+///
+/// # Errors
+/// [`RobotError::InvalidArgument`] for a name that is not `[A-Za-z0-9_-]+` or that exists,
+/// the errors of [`UrdfAssets::read`], [`RobotError::Io`] for a file that cannot be copied.
+pub fn add_robot(
+    source: &Path,
+    packages: &PackageMap,
+    name: &str,
+    library: &Path,
+    replace: bool,
+) -> Result<AddedRobot> {
+    let invalid = |message: String| RobotError::InvalidArgument { message };
+    if name.is_empty()
+        || !name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        return Err(invalid(format!(
+            "robot name '{name}' must be letters, digits, '_' or '-'"
+        )));
+    }
+    let assets = UrdfAssets::read(source, packages)?;
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |error| RobotError::Io { path, error }
+    };
+    let target = library.join(name);
+    if target.exists() && !replace {
+        return Err(invalid(format!(
+            "{} already exists (pass --force to replace it)",
+            target.display()
+        )));
+    }
+    let partial = library.join(format!(".{name}.partial"));
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).map_err(io(&partial))?;
+    }
+    std::fs::create_dir_all(&partial).map_err(io(&partial))?;
+
+    // One relative path per distinct source file.
+    let mut copied: Vec<(PathBuf, PathBuf)> = Vec::new();
+    let mut uris = Vec::with_capacity(assets.meshes.len());
+    for m in &assets.meshes {
+        let relative = match copied.iter().find(|(from, _)| *from == m.path) {
+            Some((_, to)) => to.clone(),
+            None => {
+                let mut to = mesh_destination(&m.uri, &m.path);
+                let stem = to.clone();
+                let mut k = 1;
+                while copied.iter().any(|(_, t)| *t == to) {
+                    to = stem.with_file_name(format!(
+                        "{}_{k}.{}",
+                        stem.file_stem().unwrap_or_default().to_string_lossy(),
+                        stem.extension().unwrap_or_default().to_string_lossy()
+                    ));
+                    k += 1;
+                }
+                let dest = partial.join(&to);
+                if let Some(dir) = dest.parent() {
+                    std::fs::create_dir_all(dir).map_err(io(dir))?;
+                }
+                std::fs::copy(&m.path, &dest).map_err(io(&m.path))?;
+                copied.push((m.path.clone(), to.clone()));
+                to
+            }
+        };
+        uris.push(relative.to_string_lossy().replace('\\', "/"));
+    }
+    let text = assets.rewrite(&uris, "")?;
+    let urdf_name = format!("{name}.urdf");
+    let urdf = partial.join(&urdf_name);
+    std::fs::write(&urdf, text).map_err(io(&urdf))?;
+    let absolute = source.canonicalize().map_err(io(source))?;
+    let record = format!(
+        "# Written by `workcell robot add`: where this robot came from.\n\
+         source = {:?}\n\
+         meshes = {}\n\
+         workcell = {:?}\n",
+        absolute.to_string_lossy(),
+        copied.len(),
+        env!("CARGO_PKG_VERSION"),
+    );
+    let record_path = partial.join("source.toml");
+    std::fs::write(&record_path, record).map_err(io(&record_path))?;
+    if target.exists() {
+        std::fs::remove_dir_all(&target).map_err(io(&target))?;
+    }
+    std::fs::rename(&partial, &target).map_err(io(&target))?;
+    Ok(AddedRobot {
+        urdf: target.join(urdf_name),
+        meshes: copied.into_iter().map(|(_, to)| to).collect(),
+    })
+}
+
+/// `meshes/<package>/<path>` for `package://<package>/<path>`, else `meshes/<file name>`.
+fn mesh_destination(uri: &str, path: &Path) -> PathBuf {
+    let mut out = PathBuf::from("meshes");
+    if let Some(rest) = uri.strip_prefix("package://") {
+        for part in rest.trim_start_matches('/').split('/') {
+            if !part.is_empty() && part != "." && part != ".." {
+                out.push(part);
+            }
+        }
+        if out.components().count() > 1 {
+            return out;
+        }
+    }
+    out.push(path.file_name().unwrap_or_default());
+    out
 }
 
 /// `<mesh>` inside `<geometry>` (URDF extensions may use the tag elsewhere).

@@ -10,11 +10,11 @@ use std::path::PathBuf;
 #[non_exhaustive]
 pub enum RobotError {
     /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read: {error}")]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        // Not a `source`: the message already says it, and error chains would repeat it.
+        error: std::io::Error,
     },
     /// The XML is not a URDF that can be parsed (syntax, unknown joint type, missing attribute).
     #[error("{path}: not a valid URDF: {message}")]

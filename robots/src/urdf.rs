@@ -25,9 +25,9 @@ impl RobotModel {
     /// [`RobotError`] naming the file and the element that is wrong.
     pub fn from_urdf_file(path: impl AsRef<Path>, packages: &PackageMap) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| RobotError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| RobotError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         Self::from_urdf_str(&text, path, packages)
     }

@@ -34,6 +34,7 @@ pub(crate) struct RobotBodies {
     /// The multibody coordinate of every configuration coordinate (actuated joint).
     pub(crate) coordinates: Vec<CoordinateHandle>,
     /// The multibody coordinate of every joint (`None` for fixed joints), mimic joints included.
+    #[cfg_attr(not(feature = "mujoco"), allow(dead_code))]
     pub(crate) joints: Vec<Option<CoordinateHandle>>,
 }
 

@@ -6,9 +6,13 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
+use workcell::robots::assets::add_robot;
 use workcell::robots::collision::{link_bounding_capsule, link_collision_shape};
 use workcell::robots::math::{Pose, pose_to_xyz_rpy};
-use workcell::robots::{CATALOGUE, Coordinate, JointKind, PackageMap, RobotModel, Shape};
+use workcell::robots::{
+    CATALOGUE, Coordinate, JointKind, PackageMap, ROBOT_PATH_VAR, RobotModel, Shape, added_robots,
+    robot_library,
+};
 
 #[derive(Debug, clap::Args)]
 pub struct CheckArgs {
@@ -67,7 +71,144 @@ pub fn list() -> Result<ExitCode> {
     for entry in CATALOGUE {
         println!("{:<20} {}", entry.name, entry.summary);
     }
+    for (name, urdf) in added_robots() {
+        println!("{name:<20} added: {}", urdf.display());
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+#[derive(Debug, clap::Args)]
+pub struct AddArgs {
+    /// The vendor's URDF file.
+    pub urdf: PathBuf,
+    /// The robot's name in workcell (letters, digits, '_' and '-'): scenarios use it as
+    /// `[robot] model = "NAME"`.
+    #[arg(long)]
+    pub name: String,
+    /// Robot library folder to add it to [default: the first folder of WORKCELL_ROBOT_PATH,
+    /// else this source tree's robots/urdf].
+    #[arg(long)]
+    pub into: Option<PathBuf>,
+    /// Map a ROS package to its folder, NAME=FOLDER (repeatable).
+    #[arg(long = "package", value_parser = crate::parse_package)]
+    pub packages: Vec<(String, PathBuf)>,
+    /// Replace a robot of the same name.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// `workcell robot add`: copy, preview, check, cross-check.
+pub fn add(args: &AddArgs) -> Result<ExitCode> {
+    use rand::{Rng, SeedableRng};
+
+    if CATALOGUE.iter().any(|e| e.name == args.name) {
+        bail!(
+            "'{}' is a built-in robot's name; choose another --name",
+            args.name
+        );
+    }
+    let library = match &args.into {
+        Some(dir) => dir.clone(),
+        None => robot_library()
+            .into_iter()
+            .next()
+            .context("no robot library folder: pass --into DIR or set WORKCELL_ROBOT_PATH")?,
+    };
+    let mut packages = PackageMap::from_env();
+    for (name, dir) in &args.packages {
+        packages.insert(name.clone(), dir.clone());
+    }
+    // The vendor file must load before anything is copied.
+    RobotModel::from_urdf_file(&args.urdf, &packages)?;
+    std::fs::create_dir_all(&library).with_context(|| format!("creating {}", library.display()))?;
+    let added = add_robot(&args.urdf, &packages, &args.name, &library, args.force)?;
+    println!(
+        "added '{}': {} with {} mesh files",
+        args.name,
+        added.urdf.display(),
+        added.meshes.len()
+    );
+    // The copy must load on its own (relative mesh paths, no package map).
+    let robot = RobotModel::from_urdf_file(&added.urdf, &PackageMap::new())
+        .context("the copied robot does not load")?;
+
+    // Preview: the zero configuration (clamped into the limits) and three random ones.
+    let limits = robot.position_limits();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let mut configurations = vec![
+        limits
+            .iter()
+            .map(|[lo, hi]| 0.0_f64.clamp(*lo, *hi))
+            .collect::<Vec<_>>(),
+    ];
+    for _ in 0..3 {
+        configurations.push(
+            limits
+                .iter()
+                .map(|&[lo, hi]| {
+                    let (lo, hi) = if lo.is_finite() && hi.is_finite() {
+                        (lo, hi)
+                    } else {
+                        (-std::f64::consts::PI, std::f64::consts::PI)
+                    };
+                    rng.random_range(lo..=hi)
+                })
+                .collect(),
+        );
+    }
+    let (width, height, rgb) = workcell::sim::render::robot_preview(&robot, &configurations, 320)?;
+    let preview = added.urdf.with_file_name("preview.png");
+    workcell::sim::image::write_png(
+        &preview,
+        width,
+        height,
+        workcell::sim::image::PixelKind::Rgb,
+        &rgb,
+    )?;
+    println!(
+        "preview (zero and three random configurations): {}",
+        preview.display()
+    );
+    println!();
+
+    let urdf = added.urdf.to_string_lossy().into_owned();
+    check(&CheckArgs {
+        robot: urdf.clone(),
+        packages: Vec::new(),
+        fk: None,
+        json: false,
+    })?;
+    println!();
+    let verdict = if cfg!(feature = "mujoco") {
+        crate::cli::crosscheck::run(&crate::cli::crosscheck::CrosscheckArgs {
+            robot: urdf,
+            packages: Vec::new(),
+            samples: 100,
+            seconds: 3.0,
+            seed: 1,
+            keep: None,
+            json: false,
+        })?
+    } else {
+        println!("cross-check skipped: this build has no MuJoCo (feature `mujoco`)");
+        ExitCode::SUCCESS
+    };
+    let findable = robot_library()
+        .iter()
+        .any(|dir| dir.canonicalize().ok() == library.canonicalize().ok());
+    if findable {
+        println!(
+            "\nuse it in a scenario as [robot] model = \"{}\"",
+            args.name
+        );
+    } else {
+        println!(
+            "\n{} is not a robot library folder: add it to {ROBOT_PATH_VAR} to name the robot \"{}\" in scenarios",
+            library.display(),
+            args.name
+        );
+    }
+    Ok(verdict)
 }
 
 pub fn check(args: &CheckArgs) -> Result<ExitCode> {

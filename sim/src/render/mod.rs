@@ -22,6 +22,7 @@ pub(crate) mod cpu;
 #[cfg(feature = "gpu")]
 mod gpu;
 mod mesh;
+mod preview;
 mod scene;
 
 pub use camera::Camera;
@@ -29,6 +30,7 @@ pub use cpu::CpuRenderer;
 #[cfg(feature = "gpu")]
 pub use gpu::GpuRenderer;
 pub use mesh::RenderMesh;
+pub use preview::robot_preview;
 pub use scene::{CellScene, Class, Scene, SceneObject};
 
 use workcell_robots::math::Pose;

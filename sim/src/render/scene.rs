@@ -268,7 +268,7 @@ fn human_classes(human: &RobotModel) -> Vec<Class> {
 }
 
 /// One object per link with visuals, its meshes merged in the link frame.
-fn link_objects(
+pub(crate) fn link_objects(
     scene: &mut Scene,
     model: &RobotModel,
     prefix: &str,
