@@ -14,8 +14,10 @@ mod cli;
     about = "Safety of human-robot collaboration: simulated work-cells, robots from URDF"
 )]
 struct Args {
-    /// Log filter (e.g. `info`, `workcell_sim=debug`); also read from RUST_LOG.
-    #[arg(long, global = true, default_value = "warn")]
+    /// Log filter (e.g. `info`, `workcell_sim=debug`); also read from RUST_LOG. MuJoCo's own
+    /// warnings (target `mujoco`) are shown from `mujoco=warn`: the cross-check reports an
+    /// unstable integrator in its table.
+    #[arg(long, global = true, default_value = "warn,mujoco=error")]
     log: String,
     #[command(subcommand)]
     command: Command,

@@ -470,6 +470,15 @@ fn robot_add_copies_a_vendor_arm_that_scenarios_can_name() {
     let stdout = text(&out.stdout);
     assert!(stdout.contains("problems none found"), "{stdout}");
     assert!(stdout.contains("model = \"my_ur5\""), "{stdout}");
+    if cfg!(feature = "mujoco") {
+        // Built with MuJoCo: the cross-check ran on the copy and every check held.
+        assert!(
+            stdout.contains("verdict:") && !stdout.contains("FAIL"),
+            "{stdout}"
+        );
+    } else {
+        assert!(stdout.contains("cross-check skipped"), "{stdout}");
+    }
 
     // The copy stands alone: relative mesh paths that resolve inside its folder.
     let folder = library.join("my_ur5");

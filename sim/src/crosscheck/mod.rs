@@ -562,9 +562,11 @@ pub fn format_report(r: &CrosscheckReport) -> String {
             .iter()
             .map(|(_, d)| format!("{d:>11.2e}"))
             .collect();
+        // An explicit integrator with stiff joint damping can blow up: say so.
+        let unstable = !(c.max_divergence.value < 1.0);
         let _ = writeln!(
             s,
-            "    {:<13}{} {:>10.2e}  at {}",
+            "    {:<13}{} {:>10.2e}  at {}{}",
             if c.friction {
                 format!("{} +fric", c.integrator)
             } else {
@@ -572,7 +574,8 @@ pub fn format_report(r: &CrosscheckReport) -> String {
             },
             row.join(""),
             c.max_divergence.value,
-            c.max_divergence.at
+            c.max_divergence.at,
+            if unstable { " (MuJoCo unstable)" } else { "" }
         );
     }
     let _ = writeln!(s, "  verdict:");
