@@ -563,7 +563,7 @@ pub fn format_report(r: &CrosscheckReport) -> String {
             .map(|(_, d)| format!("{d:>11.2e}"))
             .collect();
         // An explicit integrator with stiff joint damping can blow up: say so.
-        let unstable = !(c.max_divergence.value < 1.0);
+        let unstable = c.max_divergence.value.is_nan() || c.max_divergence.value >= 1.0;
         let _ = writeln!(
             s,
             "    {:<13}{} {:>10.2e}  at {}{}",
