@@ -49,7 +49,10 @@ impl TriMesh {
         } else {
             bytes
         };
-        let loader = mesh_loader::Loader::default().merge_meshes(true);
+        // Sub-meshes are merged below, not by the decoder: mesh-loader 0.1.13's
+        // `merge_meshes(true)` does not offset the face indices of later sub-meshes, so their
+        // triangles pointed at the first one's vertices (a UR5 upper arm lost its tube).
+        let loader = mesh_loader::Loader::default();
         // OBJ files may name material libraries; those are not needed for geometry. The
         // decoder panics on some corrupted files (seen on COLLADA with dangling references):
         // a broken file must be an error, so the panic is caught here.

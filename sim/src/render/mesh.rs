@@ -183,9 +183,10 @@ impl RenderMesh {
         out
     }
 
-    /// A loaded mesh. Its orientation is unknown: if its signed volume is clearly negative
-    /// the triangles are flipped; if it is near zero (an open or inconsistent surface) back
-    /// faces are kept.
+    /// A loaded mesh. Its orientation is unknown: back faces are culled only for closed,
+    /// consistently wound surfaces, each connected part turned outside out if its signed
+    /// volume is negative (see `orient_closed_parts`); open or inconsistent surfaces keep
+    /// both faces. A part wound inside out would otherwise disappear.
     #[must_use]
     pub fn from_trimesh(mesh: &Arc<TriMesh>, color: [f32; 3]) -> Self {
         let positions: Vec<[f32; 3]> = mesh
@@ -200,18 +201,7 @@ impl RenderMesh {
             .copied()
             .filter(|t| t.iter().all(|&i| i < n))
             .collect();
-        let (mut volume, mut scale) = (0.0_f64, 0.0_f64);
-        for t in &triangles {
-            let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
-            volume += a.dot(b.cross(c)) / 6.0;
-            scale += (a.length() * b.length() * c.length()) / 6.0;
-        }
-        let closed = volume.abs() > 0.05 * scale;
-        if closed && volume < 0.0 {
-            for t in &mut triangles {
-                t.swap(1, 2);
-            }
-        }
+        let closed = orient_closed_parts(&mesh.vertices, &mut triangles);
         let colors = vec![color; triangles.len()];
         Self {
             positions,
@@ -219,5 +209,124 @@ impl RenderMesh {
             colors,
             closed,
         }
+    }
+}
+
+/// Orients a mesh of unknown winding for back-face culling. With coincident vertices welded
+/// (to 1e-7 m), the surface is closed and consistently wound when every directed edge appears
+/// once and its reverse once; then each connected part whose signed volume is negative is
+/// turned outside out (COLLADA exports hold parts wound either way). Returns whether back
+/// faces may be culled.
+fn orient_closed_parts(
+    vertices: &[workcell_robots::math::Vector],
+    triangles: &mut [[u32; 3]],
+) -> bool {
+    use std::collections::HashMap;
+    let mut ids: HashMap<[i64; 3], u32> = HashMap::with_capacity(vertices.len());
+    let welded: Vec<u32> = vertices
+        .iter()
+        .map(|v| {
+            let key = [v.x, v.y, v.z].map(|c| (c * 1e7).round() as i64);
+            let next = ids.len() as u32;
+            *ids.entry(key).or_insert(next)
+        })
+        .collect();
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(3 * triangles.len());
+    // Connected parts: union-find over welded vertices.
+    let mut parent: Vec<u32> = (0..ids.len() as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
+        }
+        x
+    }
+    for t in triangles.iter() {
+        let w = t.map(|i| welded[i as usize]);
+        if w[0] == w[1] || w[1] == w[2] || w[2] == w[0] {
+            continue; // degenerate after welding: covers nothing
+        }
+        for k in 0..3 {
+            *edges.entry((w[k], w[(k + 1) % 3])).or_insert(0) += 1;
+            let (a, b) = (find(&mut parent, w[k]), find(&mut parent, w[(k + 1) % 3]));
+            parent[a as usize] = b;
+        }
+    }
+    let closed = edges
+        .iter()
+        .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1));
+    if !closed {
+        return false;
+    }
+    let mut volume: HashMap<u32, f64> = HashMap::new();
+    let part = |parent: &mut Vec<u32>, t: &[u32; 3]| find(parent, welded[t[0] as usize]);
+    for t in triangles.iter() {
+        let [a, b, c] = t.map(|i| vertices[i as usize]);
+        let p = part(&mut parent, t);
+        *volume.entry(p).or_insert(0.0) += a.dot(b.cross(c)) / 6.0;
+    }
+    for t in triangles.iter_mut() {
+        if volume.get(&part(&mut parent, t)).is_some_and(|v| *v < 0.0) {
+            t.swap(1, 2);
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod orientation_tests {
+    use super::*;
+    use workcell_robots::math::Vector;
+
+    fn tetrahedron(offset: f64, inside_out: bool) -> (Vec<Vector>, Vec<[u32; 3]>) {
+        let v = vec![
+            Vector::new(offset, 0.0, 0.0),
+            Vector::new(offset + 1.0, 0.0, 0.0),
+            Vector::new(offset, 1.0, 0.0),
+            Vector::new(offset, 0.0, 1.0),
+        ];
+        let mut t = vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+        if inside_out {
+            t.iter_mut().for_each(|t| t.swap(1, 2));
+        }
+        (v, t)
+    }
+
+    fn volume(v: &[Vector], t: &[[u32; 3]]) -> f64 {
+        t.iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| v[i as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
+    #[test]
+    fn each_closed_part_is_turned_outside_out_and_open_surfaces_keep_back_faces() {
+        // Two tetrahedra of 1/6 m^3, the second wound inside out (as parts of one COLLADA
+        // file can be): after orientation both enclose +1/6.
+        let (mut v, mut t) = tetrahedron(0.0, false);
+        let (v2, t2) = tetrahedron(5.0, true);
+        t.extend(t2.iter().map(|f| f.map(|i| i + 4)));
+        v.extend(v2);
+        assert!(volume(&v, &t).abs() < 1e-12, "the parts cancel before");
+        assert!(orient_closed_parts(&v, &mut t));
+        assert!((volume(&v, &t[..4]) - 1.0 / 6.0).abs() < 1e-12);
+        assert!((volume(&v, &t[4..]) - 1.0 / 6.0).abs() < 1e-12);
+        // Unwelded vertices (one copy per triangle, as STL stores them) are welded first.
+        let (v, t) = tetrahedron(0.0, true);
+        let mut soup_v = Vec::new();
+        let mut soup_t = Vec::new();
+        for f in &t {
+            let base = soup_v.len() as u32;
+            soup_v.extend(f.map(|i| v[i as usize]));
+            soup_t.push([base, base + 1, base + 2]);
+        }
+        assert!(orient_closed_parts(&soup_v, &mut soup_t));
+        assert!((volume(&soup_v, &soup_t) - 1.0 / 6.0).abs() < 1e-12);
+        // A missing face opens the surface: both faces are drawn.
+        let (v, mut t) = tetrahedron(0.0, false);
+        t.pop();
+        assert!(!orient_closed_parts(&v, &mut t));
     }
 }
