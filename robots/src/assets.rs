@@ -156,6 +156,21 @@ impl UrdfAssets {
     }
 }
 
+impl crate::catalogue::RobotSource {
+    /// The URDF text and meshes of the robot (the embedded text for a built-in robot).
+    ///
+    /// # Errors
+    /// As [`UrdfAssets::read`].
+    pub fn assets(&self, packages: &PackageMap) -> Result<UrdfAssets> {
+        match self {
+            Self::Catalogue(entry) => {
+                UrdfAssets::from_text(entry.urdf.to_string(), &self.path(), packages)
+            }
+            Self::File(path) => UrdfAssets::read(path, packages),
+        }
+    }
+}
+
 /// Writes `mesh` as a binary STL (facet normals from the vertex order).
 ///
 /// # Errors

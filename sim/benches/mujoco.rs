@@ -5,45 +5,32 @@
 //! `scripts/fetch-mujoco.sh && cargo bench -p workcell-sim --features mujoco --bench mujoco`
 //! (vendor arms need `scripts/fetch-example-robot-data.sh`; they are skipped without it).
 
-use std::path::PathBuf;
-
 use workcell_robots::assets::UrdfAssets;
-use workcell_robots::{CATALOGUE, PackageMap, RobotModel};
+use workcell_robots::{CATALOGUE, PackageMap, RobotModel, RobotSource};
 use workcell_sim::crosscheck::step_rates;
+
+#[path = "../../robots/tests/support/example_robot_data.rs"]
+mod example_robot_data;
 
 fn main() {
     // `cargo bench` passes `--bench`; a filter argument selects robots by name.
     let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with("--"));
     let mut robots: Vec<(RobotModel, UrdfAssets)> = Vec::new();
-    for entry in CATALOGUE {
-        let path = PathBuf::from(format!("catalogue/{0}/{0}.urdf", entry.name));
+    for entry in CATALOGUE.iter() {
         let model = RobotModel::from_catalogue(entry.name).expect("catalogue robot");
-        let assets = UrdfAssets::from_text(entry.urdf.into(), &path, &PackageMap::new())
+        let assets = RobotSource::Catalogue(entry)
+            .assets(&PackageMap::new())
             .expect("catalogue URDF");
         robots.push((model, assets));
     }
-    let data = std::env::var_os("WORKCELL_EXAMPLE_ROBOT_DATA")
-        .map(PathBuf::from)
-        .or_else(|| {
-            let home = std::env::var_os("HOME")?;
-            let dir = PathBuf::from(home).join(
-                ".cache/workcell/example-robot-data-6.0.0/cmeel.prefix/share/example-robot-data",
-            );
-            dir.is_dir().then_some(dir)
-        });
-    match &data {
-        Some(dir) => {
-            for relative in [
-                "robots/ur_description/urdf/ur5_robot.urdf",
-                "robots/panda_description/urdf/panda.urdf",
-            ] {
-                let path = dir.join(relative);
-                let model = RobotModel::from_urdf_file(&path, &PackageMap::new()).expect("loads");
-                let assets = UrdfAssets::read(&path, &PackageMap::new()).expect("reads");
-                robots.push((model, assets));
-            }
+    // The UR5 and the Panda from example-robot-data (data_dir says so when it is missing).
+    if let Some(dir) = example_robot_data::data_dir() {
+        for relative in &example_robot_data::VENDOR_ARMS[..2] {
+            let path = dir.join(relative);
+            let model = RobotModel::from_urdf_file(&path, &PackageMap::new()).expect("loads");
+            let assets = UrdfAssets::read(&path, &PackageMap::new()).expect("reads");
+            robots.push((model, assets));
         }
-        None => eprintln!("example-robot-data not found: vendor arms skipped"),
     }
     println!(
         "{:<22} {:>5} {:>16} {:>16} {:>16}",

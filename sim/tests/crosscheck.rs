@@ -3,17 +3,17 @@
 //! documented tolerances, a model that differs from its file is caught, and what MuJoCo
 //! rejects is an error that says why.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use workcell_robots::assets::UrdfAssets;
-use workcell_robots::{CATALOGUE, PackageMap, RobotModel};
+use workcell_robots::{CATALOGUE, PackageMap, RobotModel, RobotSource};
 use workcell_sim::crosscheck::{
     CrosscheckConfig, CrosscheckError, CrosscheckReport, crosscheck, format_report,
 };
 
 #[path = "../../robots/tests/support/example_robot_data.rs"]
 mod example_robot_data;
-use example_robot_data::data_dir;
+use example_robot_data::{VENDOR_ARMS, data_dir};
 
 /// Fewer samples and a shorter run than the command's defaults: tests stay quick.
 fn config() -> CrosscheckConfig {
@@ -45,11 +45,11 @@ fn assert_agrees(report: &CrosscheckReport) {
 
 #[test]
 fn catalogue_robots_agree_with_mujoco() {
-    for entry in CATALOGUE {
-        let path = PathBuf::from(format!("catalogue/{0}/{0}.urdf", entry.name));
+    for entry in CATALOGUE.iter() {
         let robot = RobotModel::from_catalogue(entry.name).expect("catalogue");
-        let assets =
-            UrdfAssets::from_text(entry.urdf.into(), &path, &PackageMap::new()).expect("text");
+        let assets = RobotSource::Catalogue(entry)
+            .assets(&PackageMap::new())
+            .expect("text");
         let dir = tempfile::tempdir().expect("temp");
         let report = crosscheck(&robot, &assets, dir.path(), &config()).expect("runs");
         assert_agrees(&report);
@@ -59,13 +59,7 @@ fn catalogue_robots_agree_with_mujoco() {
 #[test]
 fn vendor_arms_agree_with_mujoco() {
     let Some(data) = data_dir() else { return };
-    for relative in [
-        "robots/ur_description/urdf/ur5_robot.urdf",
-        "robots/panda_description/urdf/panda.urdf",
-        "robots/z1_description/urdf/z1.urdf",
-        "robots/kinova_description/robots/kinova.urdf",
-        "robots/xarm_description/urdf/xarm7.urdf",
-    ] {
+    for relative in VENDOR_ARMS {
         let report = check_file(&data.join(relative));
         assert_agrees(&report);
         // DAE and STL meshes went through the converter: every link was found in MuJoCo.
@@ -87,8 +81,9 @@ fn a_model_that_differs_from_its_file_is_caught() {
         .iter()
         .find(|e| e.name == "ur5e_kinematics")
         .expect("catalogue");
-    let path = PathBuf::from("catalogue/ur5e_kinematics/ur5e_kinematics.urdf");
-    let assets = UrdfAssets::from_text(entry.urdf.into(), &path, &PackageMap::new()).expect("text");
+    let source = RobotSource::Catalogue(entry);
+    let path = source.path();
+    let assets = source.assets(&PackageMap::new()).expect("text");
     let marker = "<mass value=\"";
     let at = entry.urdf.rfind(marker).expect("a mass") + marker.len();
     let end = at + entry.urdf[at..].find('"').expect("closing quote");

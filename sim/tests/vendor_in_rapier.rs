@@ -7,18 +7,12 @@ use workcell_robots::{PackageMap, RobotModel};
 
 #[path = "../../robots/tests/support/example_robot_data.rs"]
 mod example_robot_data;
-use example_robot_data::data_dir;
+use example_robot_data::{VENDOR_ARMS, data_dir};
 
 #[test]
 fn vendor_arms_match_forward_kinematics_in_rapier() {
     let Some(dir) = data_dir() else { return };
-    for relative in [
-        "robots/ur_description/urdf/ur5_robot.urdf",
-        "robots/panda_description/urdf/panda.urdf",
-        "robots/z1_description/urdf/z1.urdf",
-        "robots/kinova_description/robots/kinova.urdf",
-        "robots/xarm_description/urdf/xarm7.urdf",
-    ] {
+    for relative in VENDOR_ARMS {
         let path = dir.join(relative);
         if !path.is_file() {
             panic!("{relative} is not in example-robot-data any more");

@@ -40,7 +40,6 @@ pub fn run(_args: &CrosscheckArgs) -> Result<ExitCode> {
 #[cfg(feature = "mujoco")]
 pub fn run(args: &CrosscheckArgs) -> Result<ExitCode> {
     use anyhow::{Context, bail};
-    use workcell::robots::assets::UrdfAssets;
     use workcell::robots::{PackageMap, RobotModel, RobotSource};
     use workcell::sim::crosscheck::{CrosscheckConfig, crosscheck, format_report};
 
@@ -54,17 +53,8 @@ pub fn run(args: &CrosscheckArgs) -> Result<ExitCode> {
     for (name, dir) in &args.packages {
         packages.insert(name.clone(), dir.clone());
     }
-    let source = RobotSource::locate(&args.robot)?;
-    let (robot, assets) = match &source {
-        RobotSource::Catalogue(entry) => (
-            RobotModel::from_catalogue(entry.name)?,
-            UrdfAssets::from_text(entry.urdf.to_string(), &source.path(), &packages)?,
-        ),
-        RobotSource::File(path) => (
-            RobotModel::from_urdf_file(path, &packages)?,
-            UrdfAssets::read(path, &packages)?,
-        ),
-    };
+    let robot = RobotModel::load(&args.robot, &packages)?;
+    let assets = RobotSource::locate(&args.robot)?.assets(&packages)?;
     let temp;
     let workdir = match &args.keep {
         Some(dir) => dir.clone(),

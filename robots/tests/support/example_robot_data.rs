@@ -2,6 +2,16 @@
 
 use std::path::PathBuf;
 
+/// The vendor arms the simulator tests run (relative to the data folder).
+#[allow(dead_code)] // not every test binary that includes this file uses it
+pub const VENDOR_ARMS: [&str; 5] = [
+    "robots/ur_description/urdf/ur5_robot.urdf",
+    "robots/panda_description/urdf/panda.urdf",
+    "robots/z1_description/urdf/z1.urdf",
+    "robots/kinova_description/robots/kinova.urdf",
+    "robots/xarm_description/urdf/xarm7.urdf",
+];
+
 /// `WORKCELL_EXAMPLE_ROBOT_DATA`, else the cache that `scripts/fetch-example-robot-data.sh`
 /// fills. `None` (with a note) when absent; a panic under CI, where it must be present.
 pub fn data_dir() -> Option<PathBuf> {

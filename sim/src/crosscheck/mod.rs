@@ -384,13 +384,8 @@ impl PdLaw {
 
 /// The [`PdLaw`] of a trajectory starting at rest at `q_start`: every joint moves towards its
 /// farther limit by up to a quarter of its range (at most 0.5 rad) and back.
-fn pd_law(
-    robot: &RobotModel,
-    q_start: &[f64],
-    g: [f64; 3],
-    dt: f64,
-) -> Result<PdLaw, CrosscheckError> {
-    let (m, _) = rapier::RapierRobot::new(robot, q_start, g, dt)?.mass_matrix_and_gravity();
+fn pd_law(robot: &RobotModel, q_start: &[f64], dt: f64) -> Result<PdLaw, CrosscheckError> {
+    let (m, _) = rapier::RapierRobot::new(robot, q_start, [0.0; 3], dt)?.mass_matrix_and_gravity();
     let joints: Vec<_> = robot
         .joints()
         .iter()
@@ -455,7 +450,7 @@ fn compare_trajectories(
     // otherwise sag joints into their limits, where the engines differ by design (rapier's
     // limits are hard constraints, MuJoCo's soft).
     let g = [0.0; 3];
-    let law = pd_law(robot, &q_start, g, config.time_step_s)?;
+    let law = pd_law(robot, &q_start, config.time_step_s)?;
     let rp = rapier::RapierRobot::new(robot, &q_start, g, config.time_step_s)?;
     let joints: Vec<_> = rp.joints.iter().map(|&j| &robot.joints()[j]).collect();
     let steps = (config.duration_s / config.time_step_s).round() as usize;
@@ -622,7 +617,7 @@ pub fn step_rates(
     let mj = mujoco::MujocoRobot::load(robot, assets, workdir)?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let q_start = random_configuration(robot, &mut rng);
-    let law = pd_law(robot, &q_start, g, dt)?;
+    let law = pd_law(robot, &q_start, dt)?;
     let (mut rapier_best, mut mujoco_best) = (f64::INFINITY, f64::INFINITY);
     for _ in 0..repeats.max(1) {
         let rp = rapier::RapierRobot::new(robot, &q_start, g, dt)?;

@@ -32,7 +32,7 @@ pub fn robot_preview(
             })?;
         poses.push(fk.link_poses().to_vec());
     }
-    // The points to frame: link origins, plus the ends of their visual meshes' bounds.
+    // The points to frame: the link origins (a margin covers the links' own extent).
     let mut lo = Vector::splat(f64::INFINITY);
     let mut hi = Vector::splat(f64::NEG_INFINITY);
     for pose in poses.iter().flatten() {
