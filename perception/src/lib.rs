@@ -16,6 +16,7 @@ mod infer;
 pub mod loss;
 pub mod model;
 pub mod nn;
+pub mod ops;
 pub mod train;
 pub mod weights;
 

@@ -6,11 +6,13 @@
 
 use burn::module::{Module, Param, ParamId};
 use burn::tensor::activation;
-use burn::tensor::module::{conv_transpose2d, conv2d, layer_norm};
+use burn::tensor::module::{conv_transpose2d, conv2d};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+
+use crate::ops::group_norm;
 
 /// Draws initial weights; one generator per model, consumed in construction order.
 ///
@@ -153,9 +155,6 @@ pub struct Norm {
     pub groups: usize,
 }
 
-/// PyTorch's default epsilon.
-const NORM_EPS: f64 = 1e-5;
-
 impl Norm {
     pub(crate) fn new(init: &mut Init, channels: usize, groups: usize, weight: f32) -> Self {
         Self {
@@ -168,14 +167,7 @@ impl Norm {
     /// # Shapes
     /// `[b, c, h, w] -> [b, c, h, w]`
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let [b, c, h, w] = x.dims();
-        let g = self.groups;
-        // [b, g, c/g * h * w]: statistics per sample and group (biased variance), by the
-        // backend's fused layer normalisation over the last axis.
-        let n = c / g * h * w;
-        let ones = Tensor::<1>::ones([n], &x.device());
-        let x = layer_norm(x.reshape([b, g, n]), ones, None, NORM_EPS).reshape([b, c, h, w]);
-        x * self.weight.val().reshape([1, c, 1, 1]) + self.bias.val().reshape([1, c, 1, 1])
+        group_norm(x, self.weight.val(), self.bias.val(), self.groups)
     }
 }
 
