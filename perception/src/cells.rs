@@ -7,6 +7,7 @@ use burn::tensor::activation::{sigmoid, tanh};
 
 use crate::config::CellKind;
 use crate::nn::{Conv, Init, Norm, per_channel, relu};
+use crate::ops::conv_same;
 
 /// The state a cell carries from one frame to the next.
 #[derive(Debug, Clone)]
@@ -76,10 +77,7 @@ impl Hgru {
         };
         let w_inh = Self::symmetric(&self.w_inh);
         let w_exc = Self::symmetric(&self.w_exc);
-        let k = w_inh.dims()[2];
-        let options = burn::tensor::ops::ConvOptions::new([1, 1], [k / 2, k / 2], [1, 1], 1);
-        let conv =
-            |x: Tensor<4>, w: Tensor<4>| burn::tensor::module::conv2d(x, w, None, options.clone());
+        let conv = conv_same;
 
         // Inhibition: gated by g1, scaled by alpha h + mu.
         let g1 = sigmoid(self.n0.forward(self.u1.forward(h.clone())));

@@ -6,13 +6,13 @@
 
 use burn::module::{Module, Param, ParamId};
 use burn::tensor::activation;
-use burn::tensor::module::{conv_transpose2d, conv2d};
-use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+use burn::tensor::module::conv_transpose2d;
+use burn::tensor::ops::ConvTransposeOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::ops::group_norm;
+use crate::ops::{conv_same, group_norm};
 
 /// Draws initial weights; one generator per model, consumed in construction order.
 ///
@@ -106,13 +106,27 @@ impl Conv {
     /// # Shapes
     /// `[b, in, h, w] -> [b, out, h, w]`
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let k = self.weight.dims()[2];
-        conv2d(
-            x,
-            self.weight.val(),
-            self.bias.as_ref().map(Param::val),
-            ConvOptions::new([1, 1], [k / 2, k / 2], [1, 1], 1),
-        )
+        let [c_out, c_in, k, _] = self.weight.dims();
+        if k == 1 {
+            // A pointwise convolution is a matrix product over the pixels; as one, its
+            // gradients are two more matrix products.
+            let [b, _, h, w] = x.dims();
+            let y = self
+                .weight
+                .val()
+                .reshape([1, c_out, c_in])
+                .matmul(x.reshape([b, c_in, h * w]));
+            let y = match &self.bias {
+                Some(bias) => y + bias.val().reshape([1, c_out, 1]),
+                None => y,
+            };
+            return y.reshape([b, c_out, h, w]);
+        }
+        let y = conv_same(x, self.weight.val());
+        match &self.bias {
+            Some(bias) => y + bias.val().reshape([1, c_out, 1, 1]),
+            None => y,
+        }
     }
 }
 

@@ -19,10 +19,6 @@
 //!
 //! The tests below check values and gradients against the composed normalisation.
 
-// burn 0.22 marks LibTorch deprecated in favour of its CubeCL backends; it is still the fastest
-// CPU training backend here (backend.rs), and the extension macro names it in generated code.
-#![allow(deprecated)]
-
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
