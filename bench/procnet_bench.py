@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
 """ProcNet speed, side by side: the Rust backends (flex, tch) and PyTorch, one run, same config.
 
-    python3 bench/procnet_bench.py [--preset cpu] [--threads 2] [--iters 5] [--binary PATH]
+    python3 bench/procnet_bench.py [--preset cpu] [--threads 2] [--iters 5] [--rounds 3] [--binary PATH]
 
 Runs `workcell bench` (release build, with feature tch when it was built so) and
 `bench/procnet.py bench` on the same weights (the preset's seeded initialisation), one after
 the other on an otherwise idle machine, and prints a Markdown table with the ratios to PyTorch.
+With several rounds (the backends take turns in each), the table gives each backend's median
+and the range of the per-round ratios: on a shared machine one run of each can be off by 20 %.
 Workload: a training step is batch 4 x 10 frames, Dice + prediction-error loss, backward,
 clipping, AdamW; inference is one frame, batch 1, with the recurrent state carried.
 """
@@ -13,6 +15,7 @@ clipping, AdamW; inference is one frame, batch 1, with the recurrent state carri
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -32,31 +35,49 @@ def main():
     ap.add_argument("--iters", type=int, default=5)
     ap.add_argument("--backends", default="flex,tch")
     ap.add_argument("--binary", default=os.path.join(HERE, "..", "target", "release", "workcell"))
+    ap.add_argument("--rounds", type=int, default=3)
     args = ap.parse_args()
 
     env = dict(os.environ, OMP_NUM_THREADS=str(args.threads), MKL_NUM_THREADS=str(args.threads))
+    rounds = []
     with tempfile.TemporaryDirectory() as tmp:
         weights = os.path.join(tmp, "bench.safetensors")
         common = ["--threads", str(args.threads), "--iters", str(args.iters)]
-        rows = run_json_lines([args.binary, "bench", "--preset", args.preset, "--backends", "",
-                               "--write-weights", weights], env)
-        for b in args.backends.split(","):
-            try:
-                rows += run_json_lines([args.binary, "bench", "--weights", weights, "--backends", b] + common, env)
-            except subprocess.CalledProcessError as e:
-                print(f"backend {b}: {e.stderr.strip()}", file=sys.stderr)
-        rows += run_json_lines([sys.executable, os.path.join(HERE, "procnet.py"), "bench", "--weights", weights]
-                               + common, env)
-    torch = next(r for r in rows if r["backend"].startswith("pytorch"))
+        run_json_lines([args.binary, "bench", "--preset", args.preset, "--backends", "",
+                        "--write-weights", weights], env)
+        for _ in range(max(1, args.rounds)):
+            rows = []
+            for b in args.backends.split(","):
+                try:
+                    rows += run_json_lines([args.binary, "bench", "--weights", weights, "--backends", b] + common, env)
+                except subprocess.CalledProcessError as e:
+                    print(f"backend {b}: {e.stderr.strip()}", file=sys.stderr)
+            rows += run_json_lines([sys.executable, os.path.join(HERE, "procnet.py"), "bench", "--weights", weights]
+                                   + common, env)
+            rounds.append({r["backend"]: r for r in rows})
+    names = list(rounds[0])
+    torch_name = next(n for n in names if n.startswith("pytorch"))
+    median = lambda xs: statistics.median(xs)
+
+    def column(name, key):
+        return [r[name][key] for r in rounds if name in r]
+
+    def ratios(name, key):
+        return [r[name][key] / r[torch_name][key] for r in rounds if name in r]
+
+    def cell_ratio(name, key):
+        rs = ratios(name, key)
+        text = f"{median(column(name, key)) / median(column(torch_name, key)):.2f}"
+        return text if len(rs) == 1 else f"{text} ({min(rs):.2f}-{max(rs):.2f})"
+
     print(f"ProcNet `{args.preset}` preset, {args.threads} threads; training step: batch 4 x 10 frames; "
-          "inference: 1 frame, batch 1\n")
+          f"inference: 1 frame, batch 1; median of {len(rounds)} rounds (range of the per-round ratios)\n")
     print("| backend | training step (s) | x PyTorch | inference per frame (ms) | x PyTorch | frames/s |")
     print("|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r['backend']} | {r['train_step_s']:.3f} | {r['train_step_s'] / torch['train_step_s']:.2f} "
-              f"| {1e3 * r['infer_frame_s']:.2f} | {r['infer_frame_s'] / torch['infer_frame_s']:.2f} "
-              f"| {1 / r['infer_frame_s']:.0f} |")
-
+    for n in names:
+        step, frame = median(column(n, "train_step_s")), median(column(n, "infer_frame_s"))
+        print(f"| {n} | {step:.3f} | {cell_ratio(n, 'train_step_s')} "
+              f"| {1e3 * frame:.2f} | {cell_ratio(n, 'infer_frame_s')} | {1 / frame:.0f} |")
 
 if __name__ == "__main__":
     main()
