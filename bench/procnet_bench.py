@@ -66,6 +66,8 @@ def main():
         return [r[name][key] / r[torch_name][key] for r in rounds if name in r]
 
     def cell_ratio(name, key):
+        if name == torch_name:
+            return "1.00"
         rs = ratios(name, key)
         text = f"{median(column(name, key)) / median(column(torch_name, key)):.2f}"
         return text if len(rs) == 1 else f"{text} ({min(rs):.2f}-{max(rs):.2f})"

@@ -146,10 +146,13 @@ mod direct {
         if c_pad == c_out {
             return out;
         }
+        // Drop the zero channels of the last block.
         let plane = h * w;
-        (0..b)
-            .flat_map(|s| out[s * c_pad * plane..][..c_out * plane].to_vec())
-            .collect()
+        let mut trimmed = Vec::with_capacity(b * c_out * plane);
+        for s in 0..b {
+            trimmed.extend_from_slice(&out[s * c_pad * plane..][..c_out * plane]);
+        }
+        trimmed
     }
 
     /// Picks the widest instruction set this CPU has.
