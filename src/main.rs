@@ -57,6 +57,9 @@ enum Command {
 enum EvalCommand {
     /// ProcNet segmentation on a dataset split: Dice, focal and IoU per class and group.
     Segmentation(cli::perception::EvalSegmentationArgs),
+    /// The forearm's pose by render-and-compare from gt, visible or ProcNet masks: Table 2's
+    /// layout with the paper's numbers, per-frame CSV, error against distance.
+    Pose(cli::pose::EvalPoseArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -122,6 +125,9 @@ fn main() -> ExitCode {
         Command::Eval {
             command: EvalCommand::Segmentation(a),
         } => cli::perception::eval_segmentation(&a),
+        Command::Eval {
+            command: EvalCommand::Pose(a),
+        } => cli::pose::eval_pose(&a),
     };
     match result {
         Ok(code) => code,

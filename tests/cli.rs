@@ -329,6 +329,50 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         "{}",
         text(&bad.stderr)
     );
+
+    // The forearm's pose from the dataset's own masks and from the tiny network's: Table 2's
+    // layout with the paper's numbers beside, the per-frame CSV and the distance plot.
+    for masks in ["gt", "procnet"] {
+        let pose_out = tmp.path().join(format!("pose-{masks}"));
+        let pose = workcell(&[
+            "eval",
+            "pose",
+            "--masks",
+            masks,
+            "--weights",
+            weights.to_str().expect("utf-8"),
+            "--dataset",
+            data_s,
+            "--split",
+            "test",
+            "--out",
+            pose_out.to_str().expect("utf-8"),
+        ]);
+        assert!(pose.status.success(), "{}", text(&pose.stderr));
+        let md = text(&pose.stdout);
+        assert!(
+            md.contains("| short | light |") && md.contains("| 1.73 | 1.62 |"),
+            "{md}"
+        );
+        assert!(md.contains("elbow anchored to the shoulder"), "{md}");
+        for file in [
+            "pose_eval.md",
+            "pose_frames.csv",
+            "pose_error_vs_distance.svg",
+            "pose_error_vs_distance.png",
+        ] {
+            assert!(pose_out.join(file).exists(), "{masks}: {file} missing");
+        }
+        let csv = std::fs::read_to_string(pose_out.join("pose_frames.csv")).expect("csv");
+        assert!(csv.starts_with("sequence,frame,"), "{csv}");
+    }
+    let bad = workcell(&["eval", "pose", "--masks", "oracle", "--dataset", data_s]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("gt, visible, procnet"),
+        "{}",
+        text(&bad.stderr)
+    );
 }
 
 #[test]

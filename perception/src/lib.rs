@@ -17,6 +17,7 @@ pub mod loss;
 pub mod model;
 pub mod nn;
 pub mod ops;
+pub mod pose;
 pub mod train;
 pub mod weights;
 

@@ -4,6 +4,7 @@ pub mod crosscheck;
 pub mod dataset;
 pub mod evaluate;
 pub mod perception;
+pub mod pose;
 pub mod robot;
 pub mod simulate;
 
@@ -27,4 +28,16 @@ pub fn prepare_out(out: &std::path::Path, force: bool, outputs: &[&str]) -> anyh
         }
     }
     Ok(())
+}
+
+/// A dataset split by name.
+///
+/// # Errors
+/// A name other than train, validation or test.
+pub fn parse_split(name: &str) -> anyhow::Result<workcell::sim::dataset::Split> {
+    use workcell::sim::dataset::Split;
+    Split::ALL
+        .into_iter()
+        .find(|s| s.name() == name)
+        .ok_or_else(|| anyhow::anyhow!("unknown split {name:?} (train, validation, test)"))
 }

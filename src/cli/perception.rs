@@ -9,7 +9,7 @@ use workcell::perception::eval::evaluate;
 use workcell::perception::train::{TrainConfig, Trainer, read_metrics};
 use workcell::perception::{Backend, backend, weights};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
-use workcell::sim::dataset::{Dataset, Split};
+use workcell::sim::dataset::Dataset;
 
 #[derive(Debug, clap::Args)]
 pub struct TrainArgs {
@@ -197,12 +197,7 @@ fn write_loss_curve(
 }
 
 pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
-    let split = match args.split.as_str() {
-        "train" => Split::Train,
-        "validation" => Split::Validation,
-        "test" => Split::Test,
-        other => anyhow::bail!("unknown split {other:?} (train, validation, test)"),
-    };
+    let split = super::parse_split(&args.split)?;
     backend::set_threads(args.threads);
     let device = Backend::parse(&args.backend)?.device()?;
     let (model, config) = weights::load(&args.weights, &device)?;

@@ -87,19 +87,26 @@ impl RenderMesh {
     /// A closed cylinder along z centred at the origin.
     #[must_use]
     pub fn cylinder(radius: f64, length: f64, color: [f32; 3]) -> Self {
+        Self::cylinder_with(radius, length, color, SEGMENTS)
+    }
+
+    /// [`RenderMesh::cylinder`] with `segments` around the axis (at least 3).
+    #[must_use]
+    pub fn cylinder_with(radius: f64, length: f64, color: [f32; 3], segments: usize) -> Self {
+        let segments = segments.max(3);
         let (r, h) = (radius as f32, (length / 2.0) as f32);
-        let mut positions = Vec::with_capacity(2 * SEGMENTS + 2);
-        for k in 0..SEGMENTS {
-            let a = std::f32::consts::TAU * k as f32 / SEGMENTS as f32;
+        let mut positions = Vec::with_capacity(2 * segments + 2);
+        for k in 0..segments {
+            let a = std::f32::consts::TAU * k as f32 / segments as f32;
             positions.push([r * a.cos(), r * a.sin(), -h]);
             positions.push([r * a.cos(), r * a.sin(), h]);
         }
         let (bottom, top) = (positions.len() as u32, positions.len() as u32 + 1);
         positions.push([0.0, 0.0, -h]);
         positions.push([0.0, 0.0, h]);
-        let mut triangles = Vec::with_capacity(4 * SEGMENTS);
-        for k in 0..SEGMENTS as u32 {
-            let n = (k + 1) % SEGMENTS as u32;
+        let mut triangles = Vec::with_capacity(4 * segments);
+        for k in 0..segments as u32 {
+            let n = (k + 1) % segments as u32;
             let (b0, t0, b1, t1) = (2 * k, 2 * k + 1, 2 * n, 2 * n + 1);
             triangles.push([b0, b1, t1]);
             triangles.push([b0, t1, t0]);
@@ -113,8 +120,16 @@ impl RenderMesh {
     /// sphere.
     #[must_use]
     pub fn capsule(radius: f64, length: f64, color: [f32; 3]) -> Self {
+        Self::capsule_with(radius, length, color, SEGMENTS)
+    }
+
+    /// [`RenderMesh::capsule`] with `segments` around the axis (at least 4; half as many
+    /// latitude bands per hemisphere).
+    #[must_use]
+    pub fn capsule_with(radius: f64, length: f64, color: [f32; 3], segments: usize) -> Self {
+        let segments = segments.max(4);
         let (r, h) = (radius as f32, (length / 2.0) as f32);
-        let rings = SEGMENTS / 2; // latitude bands per hemisphere, pole excluded
+        let rings = segments / 2; // latitude bands per hemisphere, pole excluded
         let mut positions = Vec::new();
         // Rings from the bottom pole to the top pole; the two equator rings are offset by the
         // cylinder's half length.
@@ -129,15 +144,15 @@ impl RenderMesh {
             ring_z.push((r * lat.cos(), r * lat.sin() + h));
         }
         for &(rr, z) in &ring_z {
-            for k in 0..SEGMENTS {
-                let a = std::f32::consts::TAU * k as f32 / SEGMENTS as f32;
+            for k in 0..segments {
+                let a = std::f32::consts::TAU * k as f32 / segments as f32;
                 positions.push([rr * a.cos(), rr * a.sin(), z]);
             }
         }
         let (south, north) = (positions.len() as u32, positions.len() as u32 + 1);
         positions.push([0.0, 0.0, -r - h]);
         positions.push([0.0, 0.0, r + h]);
-        let s = SEGMENTS as u32;
+        let s = segments as u32;
         let last = (ring_z.len() as u32 - 1) * s;
         let mut triangles = Vec::new();
         for k in 0..s {
@@ -168,14 +183,25 @@ impl RenderMesh {
     /// gives none.
     #[must_use]
     pub fn from_geometry(g: &Geometry, default_color: [f32; 3]) -> Self {
+        Self::from_geometry_with(g, default_color, SEGMENTS)
+    }
+
+    /// [`RenderMesh::from_geometry`] with `segments` around round shapes: a coarser mesh
+    /// for a search that renders a small object thousands of times.
+    #[must_use]
+    pub fn from_geometry_with(g: &Geometry, default_color: [f32; 3], segments: usize) -> Self {
         let color = g
             .rgba
             .map_or(default_color, |c| [c[0] as f32, c[1] as f32, c[2] as f32]);
         let local = match &g.shape {
             Shape::Box { size_m } => Self::cuboid(size_m.map(|s| s / 2.0), color),
-            Shape::Cylinder { radius_m, length_m } => Self::cylinder(*radius_m, *length_m, color),
-            Shape::Capsule { radius_m, length_m } => Self::capsule(*radius_m, *length_m, color),
-            Shape::Sphere { radius_m } => Self::capsule(*radius_m, 0.0, color),
+            Shape::Cylinder { radius_m, length_m } => {
+                Self::cylinder_with(*radius_m, *length_m, color, segments)
+            }
+            Shape::Capsule { radius_m, length_m } => {
+                Self::capsule_with(*radius_m, *length_m, color, segments)
+            }
+            Shape::Sphere { radius_m } => Self::capsule_with(*radius_m, 0.0, color, segments),
             Shape::Mesh { mesh, .. } => Self::from_trimesh(mesh, color),
         };
         let mut out = Self::default();
@@ -328,5 +354,54 @@ mod orientation_tests {
         let (v, mut t) = tetrahedron(0.0, false);
         t.pop();
         assert!(!orient_closed_parts(&v, &mut t));
+    }
+}
+
+#[cfg(test)]
+mod segment_tests {
+    use super::*;
+
+    /// Signed volume of a closed mesh (positive when wound outward).
+    fn volume(m: &RenderMesh) -> f64 {
+        m.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| {
+                    let p = m.positions[i as usize];
+                    [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]
+                });
+                (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                    + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                    / 6.0
+            })
+            .sum()
+    }
+
+    #[test]
+    fn coarser_round_shapes_keep_their_closed_form_volume() {
+        // An n-gon prism of circumradius r has volume n r^2 sin(2 pi / n) / 2 * length.
+        let (r, l) = (0.01, 0.2);
+        for n in [6, 16] {
+            let c = RenderMesh::cylinder_with(r, l, [1.0; 3], n);
+            assert_eq!(c.len(), 4 * n);
+            let exact = n as f64 * r * r * (std::f64::consts::TAU / n as f64).sin() / 2.0 * l;
+            assert!(
+                (volume(&c) - exact).abs() < 1e-6 * exact,
+                "{n}: {}",
+                volume(&c)
+            );
+        }
+        // Spheres: fewer triangles, outward, within the inscribed and circumscribed volumes.
+        let (coarse, fine) = (
+            RenderMesh::capsule_with(r, 0.0, [1.0; 3], 6),
+            RenderMesh::capsule(r, 0.0, [1.0; 3]),
+        );
+        assert!(coarse.len() < fine.len() / 4);
+        let sphere = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+        for m in [&coarse, &fine] {
+            let v = volume(m);
+            assert!(v > 0.5 * sphere && v < sphere, "{v} vs {sphere}");
+        }
+        assert!(volume(&coarse) < volume(&fine));
     }
 }
