@@ -416,6 +416,7 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         "evaluation.toml",
         "separation.png",
         "speed_scaling.png",
+        "perception_error.png",
     ] {
         assert!(out_dir.join(f).is_file(), "{f} missing");
     }
@@ -423,6 +424,34 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     assert_eq!(csv.lines().count(), 3, "header and one row per episode");
     let summary = std::fs::read_to_string(out_dir.join("summary.md")).expect("summary");
     assert!(summary.contains("## Verdict") && summary.contains("![separation](separation.png)"));
+    // ProcNet and render-and-compare in the loop: the camera is rendered, segmented and fitted
+    // at its rate, and the report says so.
+    for (perception, name) in [
+        (
+            "procnet",
+            "ProcNet (perception/weights/procnet-cpu.safetensors)",
+        ),
+        (
+            "pose-gt-masks",
+            "ground-truth forearm masks + render-and-compare",
+        ),
+    ] {
+        let loop_dir = dir.path().join(perception);
+        let out = workcell(&[
+            "evaluate",
+            eval.to_str().expect("utf-8"),
+            "--episodes",
+            "1",
+            "--perception",
+            perception,
+            "--out",
+            loop_dir.to_str().expect("utf-8"),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let summary = std::fs::read_to_string(loop_dir.join("summary.md")).expect("summary");
+        assert!(summary.contains(name), "{summary}");
+        assert!(loop_dir.join("perception_error.png").is_file());
+    }
     // A second run into the same folder keeps the first report unless --force.
     let again = run(args("ssm"));
     assert!(!again.status.success());
@@ -465,6 +494,16 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         "perception.dropout",
     );
     bad(&format!("{cell_line}speed = 3\n"), "unknown field");
+    bad(
+        &format!(
+            "{cell_line}[perception]\nkind = \"procnet\"\nweights = \"no/such.safetensors\"\n"
+        ),
+        "perception.weights",
+    );
+    bad(
+        &format!("{cell_line}[perception]\nkind = \"procnet\"\ncamera = \"ceiling\"\n"),
+        "no camera named \"ceiling\"",
+    );
     bad("cell = \"missing.toml\"\n", "missing.toml");
     let out = workcell(&["evaluate", &eval.display().to_string(), "--episodes", "0"]);
     assert!(

@@ -12,12 +12,12 @@ use rayon::prelude::*;
 use workcell::evaluate::report::{
     Aggregate, SummaryContext, metrics_csv, summary_markdown, write_plots,
 };
-use workcell::evaluate::{Evaluation, EvaluationConfig, PerceptionKind, run_episode};
+use workcell::evaluate::{Evaluation, EvaluationConfig, MaskKind, PerceptionKind, run_episode};
 use workcell::safety::iso::effective_robot_mass_kg;
 use workcell::safety::{BodyRegion, FilterMode, HumanPart};
 
 /// Files `evaluate` writes into `--out`.
-pub const OUTPUTS: [&str; 7] = [
+pub const OUTPUTS: [&str; 9] = [
     "summary.md",
     "metrics.csv",
     "evaluation.toml",
@@ -25,6 +25,8 @@ pub const OUTPUTS: [&str; 7] = [
     "separation.svg",
     "speed_scaling.png",
     "speed_scaling.svg",
+    "perception_error.png",
+    "perception_error.svg",
 ];
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -43,6 +45,11 @@ pub enum PerceptionArg {
     GroundTruth,
     /// A 30 Hz camera with noise, dropouts and latency (settings in the file).
     Noisy,
+    /// The cell's camera rendered, ProcNet's forearm mask, render-and-compare
+    /// (`perception.weights`, `perception.camera` in the file).
+    Procnet,
+    /// As `procnet` with the forearm's true pixels for its mask: the pose search alone.
+    PoseGtMasks,
 }
 
 #[derive(Debug, clap::Args)]
@@ -95,10 +102,17 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     }
     let mut evaluation = Evaluation::from_file(path)?;
     if let Some(p) = args.perception {
-        evaluation.config.perception.kind = match p {
+        let perception = &mut evaluation.config.perception;
+        perception.kind = match p {
             PerceptionArg::GroundTruth => PerceptionKind::GroundTruth,
             PerceptionArg::Noisy => PerceptionKind::Noisy,
+            PerceptionArg::Procnet | PerceptionArg::PoseGtMasks => PerceptionKind::Procnet,
         };
+        match p {
+            PerceptionArg::Procnet => perception.masks = MaskKind::Network,
+            PerceptionArg::PoseGtMasks => perception.masks = MaskKind::GroundTruth,
+            _ => {}
+        }
     }
     let mode = match args.filter {
         FilterArg::None => FilterMode::None,
@@ -167,7 +181,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     } else {
         Vec::new()
     };
-    let perception = evaluation.config.perception.build(args.seed).name();
+    let perception = evaluation.config.perception.describe();
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let context = SummaryContext {
         evaluation_file: &path.display().to_string(),

@@ -13,6 +13,7 @@
 //! ```
 
 pub mod perception;
+pub mod procnet;
 pub mod report;
 
 use std::path::{Path, PathBuf};
@@ -26,7 +27,8 @@ use workcell_safety::{
 use workcell_sim::{CellModel, CellState, RobotCommand, Scenario, step};
 
 pub use perception::{
-    GroundTruth, HumanPerception, NoisyCamera, PerceptionConfig, PerceptionInput, PerceptionKind,
+    GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig, PerceptionInput,
+    PerceptionKind,
 };
 
 /// A robot point slower than this counts as standing, m/s.
@@ -212,6 +214,9 @@ pub struct EpisodeTrace {
     pub separation_m: Vec<f64>,
     /// |qdot| / |qdot_nom| (1 when the nominal command is 0).
     pub speed_scale: Vec<f64>,
+    /// Mean distance of the estimated parts' end points from the true ones, m (NaN when
+    /// perception delivers no human).
+    pub perception_error_m: Vec<f64>,
 }
 
 /// One closed-loop episode of `evaluation` with `filter` and the perception of the
@@ -239,7 +244,10 @@ pub fn run_episode(
     let dof = robot.dof();
     let mut filter = SafetyFilter::new(robot, model.X_WR, mode, c.safety.clone())?;
     let mut human_geometry = HumanGeometry::new(&model.human)?;
-    let mut perception = perception.unwrap_or_else(|| c.perception.build(seed));
+    let mut perception = match perception {
+        Some(p) => p,
+        None => c.perception.build(seed, &scenario, &model)?,
+    };
 
     let dt_physics = model.time_step_s();
     let substeps = (c.control_period_s / dt_physics).round().max(1.0) as usize;
@@ -382,6 +390,7 @@ pub fn run_episode(
             },
             &mut estimate,
         );
+        let mut tick_error = f64::NAN;
         if estimate.parts.len() == truth.parts.len() && !estimate.parts.is_empty() {
             let e: f64 = estimate
                 .parts
@@ -395,6 +404,7 @@ pub fn run_episode(
                 / truth.parts.len() as f64;
             error_sum += e;
             error_ticks += 1;
+            tick_error = e;
         }
 
         let out = filter.tick(robot, state.q(), &qdot_nom, &estimate, dt);
@@ -423,6 +433,7 @@ pub fn run_episode(
         let nominal_norm = qdot_nom.iter().map(|v| v * v).sum::<f64>().sqrt();
         let command_norm = filter.command().iter().map(|v| v * v).sum::<f64>().sqrt();
         trace.t_s.push(t);
+        trace.perception_error_m.push(tick_error);
         trace.speed_scale.push(if nominal_norm > 1e-6 {
             (command_norm / nominal_norm).min(2.0)
         } else {

@@ -32,8 +32,18 @@ pub trait HumanPerception {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PerceptionConfig {
-    /// `ground_truth` (exact, every tick) or `noisy` (a camera: the settings below).
+    /// `ground_truth` (exact, every tick), `noisy` (a camera: the settings below) or
+    /// `procnet` (the cell's camera rendered, ProcNet and render-and-compare; `rate_hz` is
+    /// the camera's, the noise settings do not apply).
     pub kind: PerceptionKind,
+    /// For `procnet`: the network's weights, relative to the working directory. Default
+    /// `perception/weights/procnet-cpu.safetensors`.
+    pub weights: std::path::PathBuf,
+    /// For `procnet`: the cell's camera by name; empty for the first. Default empty.
+    pub camera: String,
+    /// For `procnet`: `network` (ProcNet's forearm mask) or `ground_truth` (the forearm's
+    /// pixels in the rendered frame: the pose search alone). Default `network`.
+    pub masks: MaskKind,
     /// Camera frame rate, Hz. Default 30.
     pub rate_hz: f64,
     /// Standard deviation of the position error of each part end point, per axis, m.
@@ -52,18 +62,30 @@ pub struct PerceptionConfig {
     pub confidence_sigmas: f64,
 }
 
+/// Where the `procnet` perception's forearm masks come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MaskKind {
+    Network,
+    GroundTruth,
+}
+
 /// Which perception model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PerceptionKind {
     GroundTruth,
     Noisy,
+    Procnet,
 }
 
 impl Default for PerceptionConfig {
     fn default() -> Self {
         Self {
             kind: PerceptionKind::Noisy,
+            weights: "perception/weights/procnet-cpu.safetensors".into(),
+            camera: String::new(),
+            masks: MaskKind::Network,
             rate_hz: 30.0,
             position_noise_m: 0.01,
             velocity_noise_m_s: 0.05,
@@ -114,12 +136,40 @@ impl PerceptionConfig {
         Ok(())
     }
 
-    /// The perception this configuration describes, seeded.
-    #[must_use]
-    pub fn build(&self, seed: u64) -> Box<dyn HumanPerception> {
-        match self.kind {
+    /// The perception this configuration describes, seeded, for the cell `model` built from
+    /// `scenario`.
+    ///
+    /// # Errors
+    /// For `procnet`: no such camera, weights that do not load, a human without a forearm.
+    pub fn build(
+        &self,
+        seed: u64,
+        scenario: &workcell_sim::Scenario,
+        model: &CellModel,
+    ) -> anyhow::Result<Box<dyn HumanPerception>> {
+        Ok(match self.kind {
             PerceptionKind::GroundTruth => Box::new(GroundTruth),
             PerceptionKind::Noisy => Box::new(NoisyCamera::new(self.clone(), seed)),
+            PerceptionKind::Procnet => {
+                Box::new(super::procnet::ProcNetCamera::new(self, scenario, model)?)
+            }
+        })
+    }
+
+    /// A short description for reports, without building anything.
+    #[must_use]
+    pub fn describe(&self) -> String {
+        match self.kind {
+            PerceptionKind::GroundTruth => GroundTruth.name(),
+            PerceptionKind::Noisy => NoisyCamera::new(self.clone(), 0).name(),
+            PerceptionKind::Procnet => format!(
+                "{} + render-and-compare, latency {:.0} ms",
+                match self.masks {
+                    MaskKind::Network => format!("ProcNet ({})", self.weights.display()),
+                    MaskKind::GroundTruth => "ground-truth forearm masks".to_string(),
+                },
+                self.latency_s * 1e3
+            ),
         }
     }
 }

@@ -269,7 +269,7 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
     }
     let _ = writeln!(
         md,
-        "\n![separation](separation.png)\n\n![speed scaling](speed_scaling.png)"
+        "\n![separation](separation.png)\n\n![speed scaling](speed_scaling.png)\n\n![perception error](perception_error.png)"
     );
     md
 }
@@ -320,7 +320,16 @@ pub fn write_plots(
         y_label: "scale".into(),
         series: Vec::new(),
     };
+    let mut perception = Panel {
+        title: "Perception error: mean distance of the estimated parts' end points from the true ones (gaps: no estimate)".into(),
+        y_label: "error [m]".into(),
+        series: Vec::new(),
+    };
     for &i in &order {
+        perception.series.push((
+            format!("ep {}", episodes[i].episode),
+            resample(&traces[i].t_s, &traces[i].perception_error_m),
+        ));
         let name = format!(
             "ep {}: min {:.3} m",
             episodes[i].episode, episodes[i].min_separation_m
@@ -342,7 +351,11 @@ pub fn write_plots(
         .series
         .push(("contact".into(), vec![0.0; x.len()]));
     let mut written = Vec::new();
-    for (name, panel) in [("separation", separation), ("speed_scaling", scaling)] {
+    for (name, panel) in [
+        ("separation", separation),
+        ("speed_scaling", scaling),
+        ("perception_error", perception),
+    ] {
         let svg = svg_panels(&x, "time [s]", &[panel]);
         let svg_path = out.join(format!("{name}.svg"));
         std::fs::write(&svg_path, &svg).map_err(|e| format!("{}: {e}", svg_path.display()))?;

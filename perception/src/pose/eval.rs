@@ -587,7 +587,7 @@ impl PoseEvaluation {
         );
         let _ = writeln!(
             md,
-            "The paper's PoseCNN column is PoseCNN; this project's stand-in for it is the `baseline` model.\n"
+            "The paper's PoseCNN column is PoseCNN itself; this project's stand-in for it, a feed-forward `baseline` segmenter, is not built yet.\n"
         );
         let _ = writeln!(
             md,

@@ -444,9 +444,25 @@ impl<R: Renderer> PoseEstimator<R> {
                 }));
             }
         }
-        let Some((climb, fit, spread_m, reacquired)) = found else {
+        let Some((climb, fit, mut spread_m, reacquired)) = found else {
             return Ok(Err(NoPose::PoorFit));
         };
+        if let Some(mirror) = self.mirror(&climb.state) {
+            // The wrist's other point on its ray: as anchored as the fit, and if the mask
+            // cannot tell it from the fit either, the fit is only one of two.
+            let target = self.target(camera, mask, &support, None)?;
+            let last = target.levels.len() - 1;
+            let gains = self.score(&target, last, &[climb.state, mirror])?;
+            let pixel = 2.0 / target.levels[last].norm.max(1.0);
+            if gains[1] >= gains[0] - 2.0 * pixel {
+                let far = |s: &State| {
+                    self.model
+                        .pose(s.centre, s.R)
+                        .transform_point(2.0 * self.model.centre_O - self.end_O())
+                };
+                spread_m = spread_m.max((far(&mirror) - far(&climb.state)).length());
+            }
+        }
         let sigma = climb.sigma;
         let norm = (sigma[0] * sigma[0] + sigma[1] * sigma[1] + sigma[2] * sigma[2]).sqrt();
         Ok(Ok(PoseEstimate {
@@ -460,6 +476,32 @@ impl<R: Renderer> PoseEstimator<R> {
             reacquired,
             renders: self.renders,
         }))
+    }
+
+    /// The anchored end of the object (its origin without an anchor).
+    fn end_O(&self) -> Vector {
+        self.anchor.map_or(Vector::ZERO, |a| a.end_O)
+    }
+
+    /// With an anchor: `state` turned about its anchored end so that its far end moves to
+    /// the other point of the far end's camera ray at the same distance from the anchored
+    /// end. The two render nearly the same mask (see the module docs). `None` without an
+    /// anchor or when that point is behind the camera.
+    fn mirror(&self, state: &State) -> Option<State> {
+        self.anchor?;
+        let X = self.model.pose(state.centre, state.R);
+        let e = X.transform_point(self.end_O());
+        let w = X.transform_point(2.0 * self.model.centre_O - self.end_O());
+        let r = w.normalize();
+        let t = 2.0 * r.dot(e) - w.length();
+        if !(t > workcell_sim::render::NEAR_M && (t * r - w).length() > 1e-6) {
+            return None;
+        }
+        let turn = Rotation::from_rotation_arc((w - e).normalize(), (t * r - e).normalize());
+        let R = (turn * state.R).normalize();
+        // The anchored end stays where it is.
+        let centre = e + R * (self.model.centre_O - self.end_O());
+        Some(State { centre, R })
     }
 
     /// The gain of `X_CO` as the global search scores it (for tests).

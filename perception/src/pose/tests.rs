@@ -360,4 +360,13 @@ fn an_anchored_elbow_recovers_the_depth_up_to_the_wrist_s_mirror() {
         .map(|X| (model.centre(&found.X_CO) - model.centre(X)).length())
         .fold(f64::INFINITY, f64::min);
     assert!(err < 0.05, "centre {err} m from both solutions");
+    // ... and the reported uncertainty covers the other one: the wrist ends differ by this.
+    let wrist = |X: &Pose| X.transform_point(2.0 * model.centre_O);
+    let apart = (wrist(&truth) - wrist(&mirror)).length();
+    assert!(apart > 0.2, "{apart}");
+    assert!(
+        found.uncertainty_m > apart - 0.05,
+        "uncertainty {} for wrists {apart} m apart",
+        found.uncertainty_m
+    );
 }
