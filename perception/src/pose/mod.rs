@@ -20,23 +20,34 @@
 //! - **With a prior** (the previous frame's pose): gradient ascent from the prior. The
 //!   gradient is a central difference from 12 renders around the current pose in scaled
 //!   coordinates (one unit moves the image by about a pixel: `z / f` across, `z^2 / (f L)` in
-//!   depth, `2 z / (f L)` in rotation about the forearm's centre), then a line search of 3
-//!   renders along it. An improving step may grow the difference step by 1.5; a failed one
-//!   halves it; the climb stops when the step falls below [`PoseConfig::min_step_px`] or after
-//!   [`PoseConfig::max_iterations`].
+//!   depth, `2 z / (f L)` swinging the forearm's axis, `z / (f w)` spinning about it), then a
+//!   line search of 3 renders along it; 12 random probes share the batch. An improving step
+//!   may grow the difference step by 1.5; a failed one halves it; the climb stops when the
+//!   step falls below [`PoseConfig::min_step_px`] or after [`PoseConfig::max_iterations`].
+//!   The forearm's bones are under two pixels thick, so the exact score is flat beyond a
+//!   pixel of misalignment: the climb runs coarse to fine, comparing masks dilated by 2 and 1
+//!   pixels and with the render's pixel coverage before the paper's point-sampled comparison.
 //! - **Without a prior**, or when the climb ends below [`PoseConfig::min_gain`] (the track is
 //!   lost): a global search. Orientation hypotheses are directions of the forearm's axis on a
-//!   hemisphere (the forearm is symmetric end for end) that agree with the mask's principal
-//!   axis, at two rolls; each one's depth follows from the mask's length and the forearm's
-//!   known length foreshortened by its tilt, its centre lies on the ray through the mask's
-//!   centroid. All are rendered in one batch; the best few are climbed and the best climb
-//!   wins. Such frames are marked [`PoseEstimate::reacquired`].
+//!   sphere (a hemisphere without an anchor: the forearm is symmetric end for end) that agree
+//!   with the mask's principal axis, at two spins; each one's centre lies on the ray through
+//!   the mask's centroid, at the depth the mask's length and the forearm's known length give
+//!   (or, with an anchor, at the depths that put the anchored end on its sphere). All are
+//!   rendered in one batch; the best few are climbed and the best climb wins. Such frames are
+//!   marked [`PoseEstimate::reacquired`].
+//! - **An anchor** ([`Anchor`]): a thin rod's silhouette fixes the rays through its ends but
+//!   not where along them the ends lie, a one-parameter family of poses with the same mask.
+//!   The forearm's elbow hangs from a shoulder whose place in the cell is known; a penalty
+//!   keeps it on that sphere. One ambiguity is left: the wrist at either point of its ray a
+//!   forearm's length from the elbow (the *mirror*).
 //! - **Uncertainty**: per camera axis, the displacement over which the gain of the quadratic
-//!   fitted to the last central differences drops by two mask pixels' worth, and the spread of
-//!   the climbed hypotheses that end within 0.05 gain of the best. [`PoseEstimate::uncertainty_m`]
-//!   is the larger, the radius by which the safety layer inflates the forearm capsule.
+//!   fitted to the last central differences drops by two mask pixels' worth; the spread of
+//!   the climbed hypotheses that end within 0.05 gain of the best; and, with an anchor, the
+//!   distance to the mirror's wrist when the mask cannot tell the two apart.
+//!   [`PoseEstimate::uncertainty_m`] is the largest, the radius by which the safety layer
+//!   inflates the arm's capsules.
 //!
-//! Roll about the forearm's axis is weakly observable (two thin bones side by side); it is
+//! Spin about the forearm's axis is weakly observable (two thin bones side by side); it is
 //! reported, and evaluated, on its own.
 
 pub mod eval;
@@ -58,7 +69,7 @@ pub struct PoseConfig {
     /// A fit that leaves more than this fraction of the mask's support farther than a pixel
     /// from the render is no pose (several blobs, say). Default 0.7.
     pub min_explained: f64,
-    /// Climb iterations at most. Default 30.
+    /// Climb iterations at most, per level of the coarse-to-fine schedule. Default 12.
     pub max_iterations: usize,
     /// First central-difference step, in pixels of image motion. Default 2.
     pub initial_step_px: f64,
