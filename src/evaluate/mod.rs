@@ -214,9 +214,9 @@ pub struct EpisodeTrace {
     pub separation_m: Vec<f64>,
     /// |qdot| / |qdot_nom| (1 when the nominal command is 0).
     pub speed_scale: Vec<f64>,
-    /// Mean distance of the estimated parts' end points from the true ones, m (NaN when
+    /// Mean distance of the estimated parts' end points from the true ones, m (`None` when
     /// perception delivers no human).
-    pub perception_error_m: Vec<f64>,
+    pub perception_error_m: Vec<Option<f64>>,
 }
 
 /// One closed-loop episode of `evaluation` with `filter` and the perception of the
@@ -390,7 +390,7 @@ pub fn run_episode(
             },
             &mut estimate,
         );
-        let mut tick_error = f64::NAN;
+        let mut tick_error = None;
         if estimate.parts.len() == truth.parts.len() && !estimate.parts.is_empty() {
             let e: f64 = estimate
                 .parts
@@ -404,7 +404,7 @@ pub fn run_episode(
                 / truth.parts.len() as f64;
             error_sum += e;
             error_ticks += 1;
-            tick_error = e;
+            tick_error = Some(e);
         }
 
         let out = filter.tick(robot, state.q(), &qdot_nom, &estimate, dt);

@@ -328,7 +328,14 @@ pub fn write_plots(
     for &i in &order {
         perception.series.push((
             format!("ep {}", episodes[i].episode),
-            resample(&traces[i].t_s, &traces[i].perception_error_m),
+            resample(
+                &traces[i].t_s,
+                &traces[i]
+                    .perception_error_m
+                    .iter()
+                    .map(|e| e.unwrap_or(f64::NAN))
+                    .collect::<Vec<_>>(),
+            ),
         ));
         let name = format!(
             "ep {}: min {:.3} m",
