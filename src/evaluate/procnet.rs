@@ -26,16 +26,6 @@ struct Measured {
     uncertainty_m: f64,
 }
 
-/// Counters for the report.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct ProcNetStats {
-    pub frames: usize,
-    pub no_pose: usize,
-    pub reacquired: usize,
-    pub network_s: f64,
-    pub pose_s: f64,
-}
-
 /// The camera, ProcNet and the pose search, as a [`HumanPerception`].
 pub struct ProcNetCamera {
     config: PerceptionConfig,
@@ -52,7 +42,6 @@ pub struct ProcNetCamera {
     /// The newest delivered measurement, its exposure time, and the one before (velocity).
     latest: Option<(f64, Measured)>,
     previous: Option<(f64, Measured)>,
-    pub stats: ProcNetStats,
 }
 
 impl ProcNetCamera {
@@ -107,7 +96,6 @@ impl ProcNetCamera {
             in_flight: VecDeque::new(),
             latest: None,
             previous: None,
-            stats: ProcNetStats::default(),
         })
     }
 
@@ -124,7 +112,6 @@ impl ProcNetCamera {
                 planar[c * n + p] = f32::from(rgb[c]) / 255.0;
             }
         }
-        let started = std::time::Instant::now();
         let mask = match &mut self.net {
             Some(net) => {
                 let s = net.config().input_size;
@@ -148,18 +135,12 @@ impl ProcNetCamera {
                     .collect()
             }
         };
-        let fitted = std::time::Instant::now();
-        self.stats.network_s += (fitted - started).as_secs_f64();
         self.estimator
             .set_anchor(self.setup.anchor(&self.camera.X_WC));
         let outcome = self.estimator.estimate(&self.camera, &mask)?;
-        self.stats.pose_s += fitted.elapsed().as_secs_f64();
-        self.stats.frames += 1;
         let Ok(pose) = outcome else {
-            self.stats.no_pose += 1;
             return Ok(None);
         };
-        self.stats.reacquired += usize::from(pose.reacquired);
         // Carry the true forearm's and hand's capsules (the model's dimensions, in their link
         // frames) rigidly onto the estimated forearm; the upper arm from the shoulder to the
         // estimated elbow.

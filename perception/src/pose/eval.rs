@@ -17,8 +17,8 @@ use std::fmt::Write as _;
 use std::sync::Arc;
 use std::time::Instant;
 
-use workcell_robots::math::{Pose, Rotation, Vector, pose_to_xyz_rpy};
-use workcell_sim::dataset::{Dataset, FrameLabels, PoseLabel, Sequence, Split};
+use workcell_robots::math::{Pose, Vector, pose_to_xyz_rpy};
+use workcell_sim::dataset::{Dataset, Sequence, Split};
 use workcell_sim::render::{Camera, CellScene, Class, CpuRenderer, RenderMesh};
 use workcell_sim::{CellModel, Scenario};
 
@@ -232,28 +232,6 @@ impl ForearmSetup {
     }
 }
 
-/// The camera of a frame.
-fn camera_of(labels: &FrameLabels) -> Camera {
-    let c = &labels.camera;
-    Camera {
-        width: c.width_px,
-        height: c.height_px,
-        fx: c.fx,
-        fy: c.fy,
-        cx: c.cx,
-        cy: c.cy,
-        X_WC: pose_of(&c.X_WC),
-    }
-}
-
-fn pose_of(label: &PoseLabel) -> Pose {
-    let [x, y, z, w] = label.quaternion_xyzw;
-    Pose::from_parts(
-        Vector::from_array(label.xyz_m),
-        Rotation::from_xyzw(x, y, z, w).normalize(),
-    )
-}
-
 /// The errors of one estimate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseError {
@@ -439,7 +417,7 @@ pub fn evaluate_pose(
             let t0 = Instant::now();
             let mask = source.forearm(&seq, t)?;
             let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
-            let camera = camera_of(labels);
+            let camera = Camera::from(&labels.camera);
             estimator.set_anchor(if anchored {
                 setup.anchor(&camera.X_WC)
             } else {
@@ -457,7 +435,7 @@ pub fn evaluate_pose(
             if t == 0 {
                 continue;
             }
-            let truth = pose_of(&part.X_CP);
+            let truth = Pose::from(&part.X_CP);
             let (mut reacquired, mut f_m, mut gain, mut unc, mut renders) =
                 (false, 0.0, 0.0, 0.0, 0);
             let outcome = outcome.map(|e| {
@@ -721,7 +699,7 @@ impl PoseEvaluation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use workcell_robots::math::pose_from_xyz_rpy;
+    use workcell_robots::math::{Rotation, pose_from_xyz_rpy};
 
     fn model() -> RigidModel {
         let m = CellModel::new(&Scenario::default(), std::path::Path::new("inline.toml"))

@@ -1,7 +1,7 @@
 //! What a dataset stores besides images: per-frame labels and the manifest.
 
 use serde::{Deserialize, Serialize};
-use workcell_robots::math::{Pose, pose_to_xyz_rpy};
+use workcell_robots::math::{Pose, Rotation, Vector, pose_to_xyz_rpy};
 
 use crate::occlusion::Occluder;
 
@@ -28,6 +28,17 @@ impl From<&Pose> for PoseLabel {
     }
 }
 
+impl From<&PoseLabel> for Pose {
+    /// The pose back from its position and quaternion (the rpy are redundant).
+    fn from(label: &PoseLabel) -> Self {
+        let [x, y, z, w] = label.quaternion_xyzw;
+        Pose::from_parts(
+            Vector::from_array(label.xyz_m),
+            Rotation::from_xyzw(x, y, z, w).normalize(),
+        )
+    }
+}
+
 /// The camera of a sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CameraLabel {
@@ -39,6 +50,20 @@ pub struct CameraLabel {
     pub cy: f64,
     /// Camera frame (x right, y down, z forward) in the world.
     pub X_WC: PoseLabel,
+}
+
+impl From<&CameraLabel> for crate::render::Camera {
+    fn from(c: &CameraLabel) -> Self {
+        Self {
+            width: c.width_px,
+            height: c.height_px,
+            fx: c.fx,
+            fy: c.fy,
+            cx: c.cx,
+            cy: c.cy,
+            X_WC: Pose::from(&c.X_WC),
+        }
+    }
 }
 
 /// One segmented part (a class) in one frame.
@@ -148,4 +173,18 @@ pub struct Manifest {
     pub width_px: u32,
     pub height_px: u32,
     pub sequences: Vec<SequenceEntry>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use workcell_robots::math::pose_from_xyz_rpy;
+
+    #[test]
+    fn pose_labels_round_trip() {
+        let X = pose_from_xyz_rpy([0.3, -1.2, 2.5], [0.4, -0.9, 2.8]);
+        let back = Pose::from(&PoseLabel::from(&X));
+        assert!((back.translation - X.translation).length() < 1e-15);
+        assert!((back.rotation.dot(X.rotation).abs() - 1.0).abs() < 1e-15);
+    }
 }
