@@ -369,10 +369,89 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     let bad = workcell(&["eval", "pose", "--masks", "oracle", "--dataset", data_s]);
     assert!(!bad.status.success());
     assert!(
-        text(&bad.stderr).contains("gt, visible, procnet"),
+        text(&bad.stderr).contains("gt, visible, procnet, baseline"),
         "{}",
         text(&bad.stderr)
     );
+
+    // The feed-forward baseline: the same command and recipe with --model baseline, its own
+    // weight file, named as the PoseCNN stand-in in every table.
+    let base_out = tmp.path().join("run-baseline");
+    let base = workcell(&[
+        "train",
+        "--config",
+        cfg_s,
+        "--model",
+        "baseline",
+        "--steps",
+        "2",
+        "--out",
+        base_out.to_str().expect("utf-8"),
+    ]);
+    assert!(base.status.success(), "{}", text(&base.stderr));
+    assert!(
+        text(&base.stdout).contains("feed-forward baseline (PoseCNN stand-in)"),
+        "{}",
+        text(&base.stdout)
+    );
+    let base_weights = base_out.join("baseline.safetensors");
+    assert!(base_weights.exists() && !base_out.join("procnet.safetensors").exists());
+    let bad = workcell(&[
+        "train", "--config", cfg_s, "--model", "posecnn", "--out", out_s,
+    ]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("procnet, baseline"),
+        "{}",
+        text(&bad.stderr)
+    );
+    // ProcNet's weights are not a baseline.
+    let bad = workcell(&[
+        "eval",
+        "pose",
+        "--masks",
+        "baseline",
+        "--weights",
+        weights.to_str().expect("utf-8"),
+        "--dataset",
+        data_s,
+    ]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("holds a ProcNet"),
+        "{}",
+        text(&bad.stderr)
+    );
+    // Two mask sources side by side.
+    let pose_out = tmp.path().join("pose-compare");
+    let pose = workcell(&[
+        "eval",
+        "pose",
+        "--masks",
+        "gt,baseline",
+        "--weights",
+        base_weights.to_str().expect("utf-8"),
+        "--dataset",
+        data_s,
+        "--out",
+        pose_out.to_str().expect("utf-8"),
+    ]);
+    assert!(pose.status.success(), "{}", text(&pose.stderr));
+    let md = text(&pose.stdout);
+    assert!(
+        md.contains("feed-forward baseline (PoseCNN stand-in)")
+            && md.contains("baseline, common (cm)"),
+        "{md}"
+    );
+    for file in [
+        "pose_eval_gt.md",
+        "pose_eval_baseline.md",
+        "pose_frames_baseline.csv",
+        "pose_compare.md",
+        "pose_error_vs_distance.png",
+    ] {
+        assert!(pose_out.join(file).exists(), "compare: {file} missing");
+    }
 }
 
 #[test]

@@ -99,16 +99,116 @@ impl ProcNetConfig {
         }
     }
 
-    /// A preset by name: `paper` or `cpu`.
+    /// The feed-forward baseline of the `cpu` preset ([`Self::feed_forward_baseline`]).
+    #[must_use]
+    pub fn baseline() -> Self {
+        Self::cpu().feed_forward_baseline()
+    }
+
+    /// A preset by name: `paper`, `cpu` or `baseline`.
     pub fn preset(name: &str) -> Result<Self> {
         match name {
             "paper" => Ok(Self::paper()),
             "cpu" => Ok(Self::cpu()),
+            "baseline" => Ok(Self::baseline()),
             other => Err(PerceptionError::Config {
                 key: "preset".into(),
-                message: format!("unknown preset {other:?} (known: paper, cpu)"),
+                message: format!("unknown preset {other:?} (known: paper, cpu, baseline)"),
             }),
         }
+    }
+
+    /// Each frame's masks depend on that frame alone: plain convolution cells, no
+    /// prediction loss (no layer predicts from the last frame) and no axonal delay (no signal
+    /// is read from the last frame).
+    #[must_use]
+    pub fn is_feed_forward(&self) -> bool {
+        self.cell == CellKind::Conv && !self.prediction_loss && !self.axonal_delay
+    }
+
+    /// What tables call a network of this configuration.
+    #[must_use]
+    pub fn model_name(&self) -> &'static str {
+        if self.is_feed_forward() {
+            "feed-forward baseline (PoseCNN stand-in)"
+        } else {
+            "ProcNet"
+        }
+    }
+
+    /// The single-frame baseline of the same size: this network's encoder-decoder with
+    /// plain convolution cells, without the prediction loss and the axonal delay, its
+    /// channels widened by the common factor that brings its parameter count nearest to this
+    /// network's. The paper compares ProcNet with PoseCNN; this is the project's own
+    /// stand-in for it, trained by the same recipe on the same data.
+    #[must_use]
+    pub fn feed_forward_baseline(&self) -> Self {
+        let target = self.parameter_count() as f64;
+        let widen = |c: usize, f: f64| {
+            // Keep multiples of 8 (the decoder's normalisation groups) where they were.
+            let unit = if c.is_multiple_of(8) { 8.0 } else { 1.0 };
+            (((c as f64 * f) / unit).round() * unit).max(1.0) as usize
+        };
+        let candidate = |f: f64| {
+            let mut c = Self {
+                cell: CellKind::Conv,
+                prediction_loss: false,
+                axonal_delay: false,
+                ..self.clone()
+            };
+            c.repr_channels = self.repr_channels.iter().map(|&r| widen(r, f)).collect();
+            c.input_channels = self
+                .input_channels
+                .iter()
+                .enumerate()
+                .map(|(l, &a)| if l == 0 { a } else { widen(a, f) })
+                .collect();
+            c
+        };
+        (0..=300)
+            .map(|i| candidate(1.0 + f64::from(i) / 100.0))
+            .min_by(|a, b| {
+                let gap = |c: &Self| (c.parameter_count() as f64 - target).abs();
+                gap(a).total_cmp(&gap(b))
+            })
+            .unwrap_or_else(|| candidate(1.0))
+    }
+
+    /// The number of trainable parameters of a model of this configuration, without
+    /// building it.
+    #[must_use]
+    pub fn parameter_count(&self) -> usize {
+        let l_count = self.layers();
+        let r = &self.repr_channels;
+        let a = &self.input_channels;
+        let e = |l: usize| if self.prediction_loss { 2 * a[l] } else { a[l] };
+        let conv = |c_in: usize, c_out: usize, k: usize, bias: bool| {
+            c_in * c_out * k * k + if bias { c_out } else { 0 }
+        };
+        let s = self.cell_kernel;
+        let mut n = 0;
+        for l in 0..l_count {
+            let k = r[l];
+            if self.prediction_loss {
+                n += conv(k, a[l], 1, true);
+            }
+            let c_in = e(l) + if l + 1 < l_count { r[l + 1] } else { 0 };
+            n += match self.cell {
+                CellKind::Hgru => {
+                    let input = if c_in == k { 0 } else { conv(c_in, k, 1, true) };
+                    // u1, u2; w_inh, w_exc; alpha, mu, gamma, kappa, omega; four norms.
+                    input + 2 * conv(k, k, 1, true) + 2 * k * k * s * s + 5 * k + 4 * 2 * k
+                }
+                CellKind::ConvLstm => conv(c_in + k, 4 * k, s, true) + conv(k, 3 * k, s, false),
+                CellKind::Conv => conv(c_in, k, 5, true),
+            };
+            if l + 1 < l_count {
+                n += conv(e(l), a[l + 1], 5, true);
+                // The decoder stage from l+1 to l: a norm and a 3x3 transposed convolution.
+                n += 2 * r[l + 1] + r[l + 1] * r[l] * 9;
+            }
+        }
+        n + 2 * r[0] + conv(r[0], self.num_classes(), 1, false)
     }
 
     #[must_use]
@@ -211,6 +311,45 @@ mod tests {
     fn presets_validate() {
         ProcNetConfig::paper().validate().unwrap();
         ProcNetConfig::cpu().validate().unwrap();
+        ProcNetConfig::baseline().validate().unwrap();
+    }
+
+    #[test]
+    fn parameter_count_matches_the_built_model() {
+        use burn::module::Module;
+        let device = crate::Backend::Flex.device().unwrap();
+        let mut configs = vec![ProcNetConfig::cpu(), ProcNetConfig::baseline()];
+        for cell in CellKind::ALL {
+            for prediction_loss in [true, false] {
+                configs.push(ProcNetConfig {
+                    cell,
+                    prediction_loss,
+                    repr_channels: vec![8, 12, 16, 24],
+                    input_channels: vec![3, 8, 12, 16],
+                    ..ProcNetConfig::cpu()
+                });
+            }
+        }
+        for c in configs {
+            let model = c.init(&device, 0).unwrap();
+            assert_eq!(c.parameter_count(), model.num_params(), "{c:?}");
+        }
+    }
+
+    #[test]
+    fn the_baseline_is_feed_forward_and_of_the_same_size() {
+        let procnet = ProcNetConfig::cpu();
+        let baseline = procnet.feed_forward_baseline();
+        assert!(baseline.is_feed_forward() && !procnet.is_feed_forward());
+        assert_eq!(baseline.input_size, procnet.input_size);
+        assert_eq!(baseline.classes, procnet.classes);
+        let ratio = baseline.parameter_count() as f64 / procnet.parameter_count() as f64;
+        assert!((0.9..1.1).contains(&ratio), "{ratio}: {baseline:?}");
+        // The paper's width too.
+        let paper = ProcNetConfig::paper();
+        let ratio =
+            paper.feed_forward_baseline().parameter_count() as f64 / paper.parameter_count() as f64;
+        assert!((0.9..1.1).contains(&ratio), "{ratio}");
     }
 
     #[test]

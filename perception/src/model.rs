@@ -138,6 +138,14 @@ impl ProcNetModel {
         }
     }
 
+    /// Each frame's output depends on that frame alone (`ProcNetConfig::is_feed_forward`).
+    #[must_use]
+    pub fn is_feed_forward(&self) -> bool {
+        !self.prediction_loss
+            && !self.axonal_delay
+            && self.layers.iter().all(|l| matches!(l.cell, Cell::Conv(_)))
+    }
+
     fn repr_channels(&self, l: usize) -> usize {
         match &self.layers[l].cell {
             Cell::Hgru(c) => c.alpha.dims()[0],

@@ -313,8 +313,9 @@ pub struct WindowLoss {
 }
 
 /// Runs `model` over a batch of windows from a zero state and returns the weighted losses
-/// (frame weight 0 at the window's first frame, 1 after; per-class weights, one per output
-/// channel, when given).
+/// (frame weight 0 at the window's first frame, where a recurrent network has seen nothing
+/// yet, and 1 after; a feed-forward network's first frame weighs 1 too. Per-class weights,
+/// one per output channel, when given).
 pub fn window_loss(
     model: &ProcNetModel,
     rgb: &[Tensor<4>],
@@ -329,7 +330,8 @@ pub fn window_loss(
     let mut focal_sum: Option<Tensor<1>> = None;
     let mut pred_sum: Option<Tensor<1>> = None;
     let add = |acc: Option<Tensor<1>>, v: Tensor<1>| Some(acc.map_or(v.clone(), |a| a + v));
-    let weighted = (rgb.len() - 1) as f64;
+    let first = usize::from(!model.is_feed_forward());
+    let weighted = (rgb.len() - first) as f64;
     let c = target[0].dims()[1];
     let class_weights = class_weights.map(|w| Tensor::<1>::from_floats(w, &device).reshape([1, c]));
     let reduce = |per_class: Tensor<2>| match &class_weights {
@@ -346,7 +348,7 @@ pub fn window_loss(
             next,
         ) = model.step(x.clone(), state);
         state = next;
-        if t == 0 {
+        if t < first {
             continue;
         }
         // Terms of weight 0 are not computed (nor differentiated).
@@ -390,12 +392,21 @@ pub struct Progress {
 #[derive(Debug, Clone)]
 pub struct RunFiles {
     pub dir: PathBuf,
+    /// The run trains a feed-forward network (the baseline): its weights are
+    /// `baseline.safetensors` rather than `procnet.safetensors`.
+    pub feed_forward: bool,
 }
 
 impl RunFiles {
+    /// The final weights: `procnet.safetensors`, or `baseline.safetensors` for a
+    /// feed-forward network.
     #[must_use]
     pub fn weights(&self) -> PathBuf {
-        self.dir.join("procnet.safetensors")
+        self.dir.join(if self.feed_forward {
+            "baseline.safetensors"
+        } else {
+            "procnet.safetensors"
+        })
     }
     #[must_use]
     pub fn checkpoint_weights(&self) -> PathBuf {
@@ -452,10 +463,11 @@ impl Trainer {
     pub fn new(config: TrainConfig, out: &Path) -> Result<Self> {
         config.validate()?;
         Ok(Self {
-            config,
             files: RunFiles {
                 dir: out.to_path_buf(),
+                feed_forward: config.model.is_feed_forward(),
             },
+            config,
         })
     }
 

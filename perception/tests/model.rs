@@ -85,6 +85,25 @@ fn the_state_carries_information_and_reset_forgets_it() {
 }
 
 #[test]
+fn the_feed_forward_baseline_sees_each_frame_alone() {
+    let device = Device::flex();
+    let config = tiny(CellKind::Hgru).feed_forward_baseline();
+    assert!(config.is_feed_forward());
+    let model = config.init(&device, 5).unwrap();
+    let mut net = ProcNet::new(model, config.clone(), device);
+    let s = config.input_size;
+    let fresh = net.segment(&reference_frame(3, 0, s)).unwrap();
+    for t in 0..3 {
+        net.segment(&reference_frame(t, 1, s)).unwrap();
+    }
+    // After other frames, the same frame gives the same masks: nothing carries over.
+    let after_history = net.segment(&reference_frame(3, 0, s)).unwrap();
+    assert_eq!(fresh.probabilities, after_history.probabilities);
+    let other = net.segment(&reference_frame(2, 1, s)).unwrap();
+    assert_ne!(fresh.probabilities, other.probabilities);
+}
+
+#[test]
 fn save_and_load_give_identical_outputs() {
     let device = Device::flex();
     let dir = tempfile::tempdir().unwrap();
@@ -258,26 +277,33 @@ fn flex_and_the_gpu_give_the_same_masks() {
     same_masks_as_flex(Backend::Gpu);
 }
 
-/// The shipped weights load, are of the configuration `configs/train.toml` trains, and run.
+/// The shipped weights (ProcNet and its feed-forward baseline) load, are of the configuration
+/// `configs/train.toml` trains (with `--model baseline` for the second), and run.
 #[test]
 fn the_shipped_weights_load_and_match_their_recipe() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let path = root.join("weights/procnet-cpu.safetensors");
-    let size = std::fs::metadata(&path).unwrap().len();
-    assert!(
-        size < 20 * 1024 * 1024,
-        "{size} bytes: over the 20 MB budget"
-    );
-    let mut net = ProcNet::load(&path, Backend::Flex).unwrap();
     let recipe =
         workcell_perception::TrainConfig::from_file(&root.join("../configs/train.toml")).unwrap();
-    assert_eq!(net.config(), &recipe.model);
-    let s = net.config().input_size;
-    let masks = net.segment(&reference_frame(0, 0, s)).unwrap();
-    assert_eq!(
-        masks.classes,
-        ["robot", "torso", "upper_arm", "forearm", "hand"]
-    );
+    for (file, model) in [
+        ("procnet-cpu", recipe.model.clone()),
+        ("baseline-cpu", recipe.model.feed_forward_baseline()),
+    ] {
+        let path = root.join(format!("weights/{file}.safetensors"));
+        let size = std::fs::metadata(&path).unwrap().len();
+        assert!(
+            size < 20 * 1024 * 1024,
+            "{file}: {size} bytes, over the 20 MB budget"
+        );
+        let mut net = ProcNet::load(&path, Backend::Flex).unwrap();
+        assert_eq!(net.config(), &model, "{file}");
+        assert_eq!(net.config().is_feed_forward(), file.starts_with("baseline"));
+        let s = net.config().input_size;
+        let masks = net.segment(&reference_frame(0, 0, s)).unwrap();
+        assert_eq!(
+            masks.classes,
+            ["robot", "torso", "upper_arm", "forearm", "hand"]
+        );
+    }
 }
 
 /// The paper preset has the size of the authors' runs: about 5.4 M parameters for 3 layers

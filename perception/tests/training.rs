@@ -243,3 +243,58 @@ fn a_tiny_batch_overfits() {
         "Dice loss after training {dice:.4} (before {first_dice:.4})"
     );
 }
+
+/// A window's loss is the mean over its weighted frames: a recurrent network's first frame
+/// weighs 0 (its state is empty), a feed-forward network's weighs 1 like the rest.
+#[test]
+fn a_window_weighs_its_first_frame_only_for_a_feed_forward_network() {
+    let device = Device::flex();
+    let s = 16;
+    let xs = frames(3, s, &device);
+    let targets: Vec<Tensor<4>> = (0..3)
+        .map(|t| {
+            let y: Vec<f32> = (0..2 * s * s)
+                .map(|i| f32::from(u8::from((i + 5 * t) % 7 < 2)))
+                .collect();
+            Tensor::from_data(TensorData::new(y, [1, 2, s, s]), &device)
+        })
+        .collect();
+    let loss = LossConfig {
+        prediction: 0.0,
+        ..LossConfig::default()
+    };
+    let total = |model: &ProcNetModel, range: std::ops::Range<usize>| {
+        let l = window_loss(model, &xs[range.clone()], &targets[range], &loss, None);
+        f64::from(l.total.into_scalar::<f32>())
+    };
+    // Feed-forward: each frame alone, so the window's loss is the mean of the frames' own.
+    let baseline = tiny(CellKind::Hgru).feed_forward_baseline();
+    let model = baseline.init(&device, 2).unwrap();
+    let single: Vec<f64> = (0..3).map(|t| total(&model, t..t + 1)).collect();
+    let mean = single.iter().sum::<f64>() / 3.0;
+    assert!((total(&model, 0..3) - mean).abs() < 1e-5, "{single:?}");
+    assert!(single.iter().all(|l| l.is_finite() && *l > 0.0));
+    // Recurrent: frame 0 is not scored, so frames 1 and 2 alone decide the window's loss.
+    let model = tiny(CellKind::Hgru).init(&device, 2).unwrap();
+    let window = window_loss(&model, &xs, &targets, &loss, None);
+    let mut state = model.initial_state(1, s, s, &device);
+    let mut sum = 0.0;
+    for t in 0..3 {
+        let (out, next) = model.step(xs[t].clone(), state);
+        state = next;
+        if t > 0 {
+            let p = burn::tensor::activation::sigmoid(out.logits);
+            sum += f64::from(
+                dice_per_class(p, targets[t].clone())
+                    .mean()
+                    .into_scalar::<f32>(),
+            );
+        }
+    }
+    let dice = f64::from(window.dice.into_scalar::<f32>());
+    assert!(
+        (dice - sum / 2.0).abs() < 1e-5,
+        "{dice} against {}",
+        sum / 2.0
+    );
+}

@@ -16,10 +16,17 @@ pub struct TrainArgs {
     /// Training configuration (TOML), e.g. configs/train.toml.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Run folder: checkpoints, metrics.csv, loss_curve.svg, procnet.safetensors. A folder
-    /// holding a checkpoint of the same configuration is resumed.
+    /// Run folder: checkpoints, metrics.csv, loss_curve.svg, procnet.safetensors (or
+    /// baseline.safetensors). A folder holding a checkpoint of the same configuration is
+    /// resumed.
     #[arg(long)]
     pub out: PathBuf,
+    /// `procnet`: the configuration's network as written. `baseline`: its feed-forward
+    /// stand-in for the paper's PoseCNN, a single-frame encoder-decoder of the same
+    /// parameter count (plain convolution cells, no prediction loss), trained by the same
+    /// recipe.
+    #[arg(long, default_value = "procnet")]
+    pub model: String,
     /// Override the configuration's backend (flex, tch, gpu).
     #[arg(long)]
     pub backend: Option<String>,
@@ -56,6 +63,11 @@ pub struct EvalSegmentationArgs {
     pub out: Option<PathBuf>,
 }
 
+fn format_channels(c: &[usize]) -> String {
+    let c: Vec<String> = c.iter().map(ToString::to_string).collect();
+    format!("({})", c.join(", "))
+}
+
 fn bar(len: u64, template: &str) -> ProgressBar {
     ProgressBar::new(len).with_style(
         ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -78,6 +90,20 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     if let Some(s) = args.steps {
         config.steps = s;
     }
+    match args.model.as_str() {
+        "procnet" => {}
+        "baseline" => config.model = config.model.feed_forward_baseline(),
+        other => anyhow::bail!("unknown --model {other:?} (procnet, baseline)"),
+    }
+    println!(
+        "{}: {} parameters, {} cells, {} channels, {}x{} input",
+        config.model.model_name(),
+        config.model.parameter_count(),
+        config.model.cell.name(),
+        format_channels(&config.model.repr_channels),
+        config.model.input_size,
+        config.model.input_size
+    );
     backend::set_threads(config.threads);
     let trainer = Trainer::new(config, &args.out)?;
     let progress = bar(
@@ -212,7 +238,8 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
     })?;
     progress.finish_and_clear();
     let md = format!(
-        "# ProcNet segmentation: {}\n\nWeights `{}` ({} cell, {} layers, {}x{} input), dataset `{}`.\n\n{}",
+        "# {} segmentation: {}\n\nWeights `{}` ({} cell, {} layers, {}x{} input), dataset `{}`.\n\n{}",
+        config.model_name(),
         args.split,
         args.weights.display(),
         config.cell.name(),

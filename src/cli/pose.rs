@@ -8,7 +8,8 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use workcell::perception::pose::PoseConfig;
 use workcell::perception::pose::eval::{
-    GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, VisibleMasks, evaluate_pose,
+    GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, VisibleMasks, compare_markdown,
+    evaluate_pose,
 };
 use workcell::perception::{Backend, ProcNet, backend};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
@@ -24,12 +25,15 @@ pub struct EvalPoseArgs {
     pub split: String,
     /// Where the forearm masks come from: `gt` (the dataset's forearm without the occluder:
     /// the pose estimator's own error), `visible` (only the pixels the occluder leaves),
-    /// `procnet` (the network of --weights).
+    /// `procnet` or `baseline` (the network of --weights; `baseline` is the feed-forward
+    /// stand-in for the paper's PoseCNN). Several, comma-separated, are evaluated in turn
+    /// and compared side by side (pose_compare.md).
     #[arg(long, default_value = "procnet")]
     pub masks: String,
-    /// Network weights for --masks procnet.
-    #[arg(long, default_value = "perception/weights/procnet-cpu.safetensors")]
-    pub weights: PathBuf,
+    /// Network weights for --masks procnet or baseline [default:
+    /// perception/weights/procnet-cpu.safetensors or baseline-cpu.safetensors].
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
     /// flex, tch or gpu (the latter two with their cargo features), for the network.
     #[arg(long, default_value = "flex")]
     pub backend: String,
@@ -47,94 +51,161 @@ pub struct EvalPoseArgs {
     pub out: PathBuf,
 }
 
-pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
-    let split = super::parse_split(&args.split)?;
-    backend::set_threads(args.threads);
-    let mut source: Box<dyn MaskSource> = match args.masks.as_str() {
+/// The mask source of one `--masks` entry.
+fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
+    Ok(match kind {
         "gt" => Box::new(GroundTruthMasks),
         "visible" => Box::new(VisibleMasks),
-        "procnet" => {
-            let net = ProcNet::load(&args.weights, Backend::parse(&args.backend)?)
-                .with_context(|| format!("loading {}", args.weights.display()))?;
+        "procnet" | "baseline" => {
+            let weights = args.weights.clone().unwrap_or_else(|| {
+                PathBuf::from(format!("perception/weights/{kind}-cpu.safetensors"))
+            });
+            let net = ProcNet::load(&weights, Backend::parse(&args.backend)?)
+                .with_context(|| format!("loading {}", weights.display()))?;
+            if net.config().is_feed_forward() != (kind == "baseline") {
+                anyhow::bail!(
+                    "--masks {kind}, but {} holds a {}",
+                    weights.display(),
+                    net.config().model_name()
+                );
+            }
             Box::new(NetworkMasks {
-                name: format!("ProcNet ({})", args.weights.display()),
+                name: format!("{} ({})", net.config().model_name(), weights.display()),
                 net,
             })
         }
-        other => anyhow::bail!("unknown --masks {other:?} (gt, visible, procnet)"),
-    };
+        other => anyhow::bail!("unknown --masks {other:?} (gt, visible, procnet, baseline)"),
+    })
+}
+
+pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
+    let split = super::parse_split(&args.split)?;
+    backend::set_threads(args.threads);
+    let kinds: Vec<&str> = args.masks.split(',').map(str::trim).collect();
+    if args.weights.is_some()
+        && kinds
+            .iter()
+            .filter(|k| matches!(**k, "procnet" | "baseline"))
+            .count()
+            > 1
+    {
+        anyhow::bail!("--weights names one network; leave it out to compare procnet and baseline");
+    }
+    let mut sources = kinds
+        .iter()
+        .map(|k| mask_source(k, args))
+        .collect::<Result<Vec<_>>>()?;
     let dataset = Dataset::open(&args.dataset)?;
     let n = dataset.entries(Some(split)).count();
-    let progress = ProgressBar::new(n as u64).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
     let config = PoseConfig {
         roi: !args.no_roi,
         ..PoseConfig::default()
     };
-    let ev = evaluate_pose(
-        &dataset,
-        split,
-        source.as_mut(),
-        &config,
-        !args.no_anchor,
-        &mut |done, _| {
-            progress.set_position(done as u64);
-        },
-    )?;
-    progress.finish_and_clear();
-    let md = format!(
-        "# Forearm pose: {}\n\nDataset `{}`.\n\n{}",
-        args.split,
-        args.dataset.display(),
-        ev.to_markdown()
-    );
-    print!("{md}");
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let write = |name: &str, text: &str| -> Result<()> {
         let path = args.out.join(name);
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
     };
-    write("pose_eval.md", &md)?;
-    write("pose_frames.csv", &ev.to_csv())?;
-    let svg = distance_plot(&ev);
+    let several = kinds.len() > 1;
+    let mut evaluations = Vec::with_capacity(kinds.len());
+    let mut written = Vec::new();
+    for (kind, source) in kinds.iter().zip(&mut sources) {
+        let progress = ProgressBar::new(n as u64).with_style(
+            ProgressStyle::with_template(&format!(
+                "{kind}: {{bar:40}} {{pos}}/{{len}} sequences, {{elapsed}} (eta {{eta}})"
+            ))
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        let ev = evaluate_pose(
+            &dataset,
+            split,
+            source.as_mut(),
+            &config,
+            !args.no_anchor,
+            &mut |done, _| {
+                progress.set_position(done as u64);
+            },
+        )?;
+        progress.finish_and_clear();
+        let md = format!(
+            "# Forearm pose: {}, {kind} masks\n\nDataset `{}`.\n\n{}",
+            args.split,
+            args.dataset.display(),
+            ev.to_markdown()
+        );
+        print!("{md}");
+        let suffix = if several {
+            format!("_{kind}")
+        } else {
+            String::new()
+        };
+        write(&format!("pose_eval{suffix}.md"), &md)?;
+        write(&format!("pose_frames{suffix}.csv"), &ev.to_csv())?;
+        written.push(format!("pose_eval{suffix}.md"));
+        written.push(format!("pose_frames{suffix}.csv"));
+        evaluations.push(ev);
+    }
+    if several {
+        let named: Vec<(&str, &PoseEvaluation)> = kinds.iter().copied().zip(&evaluations).collect();
+        let md = format!(
+            "# Forearm pose: {} masks side by side, {} split\n\n{}",
+            kinds.join(", "),
+            args.split,
+            compare_markdown(&named)?
+        );
+        print!("\n{md}");
+        write("pose_compare.md", &md)?;
+        written.push("pose_compare.md".into());
+    }
+    let svg = distance_plot(&kinds, &evaluations);
     write("pose_error_vs_distance.svg", &svg)?;
     let png = args.out.join("pose_error_vs_distance.png");
     svg_to_png(&svg, &png).map_err(anyhow::Error::msg)?;
     println!(
-        "\nwrote {}/pose_eval.md, pose_frames.csv, {}",
+        "\nwrote {}/{}, {}",
         args.out.display(),
+        written.join(", "),
         png.display()
     );
     Ok(ExitCode::SUCCESS)
 }
 
-/// Mean position error in 0.5 m bins of camera distance, with the share of frames without a
-/// pose in the same bins (the paper's Fig. 5).
-fn distance_plot(ev: &PoseEvaluation) -> String {
-    let bins = ev.by_distance(0.5);
-    let x: Vec<f64> = bins.iter().map(|b| b.0).collect();
+/// Mean position error in 0.5 m bins of camera distance, with the frames without a pose in
+/// the same bins, one series per mask source (the paper's Fig. 5).
+fn distance_plot(kinds: &[&str], evaluations: &[PoseEvaluation]) -> String {
+    let bins: Vec<_> = evaluations.iter().map(|ev| ev.by_distance(0.5)).collect();
+    let x: Vec<f64> = bins
+        .first()
+        .map_or_else(Vec::new, |b| b.iter().map(|b| b.0).collect());
+    let mut frames = vec![(
+        "all frames".to_string(),
+        bins.first()
+            .map_or_else(Vec::new, |b| b.iter().map(|b| (b.2 + b.3) as f64).collect()),
+    )];
+    frames.extend(kinds.iter().zip(&bins).map(|(k, b)| {
+        (
+            format!("no pose, {k}"),
+            b.iter().map(|b| b.3 as f64).collect(),
+        )
+    }));
     let panels = [
         Panel {
             title: format!(
-                "position error against camera distance ({} masks)",
-                ev.masks
+                "forearm position error against camera distance ({} masks)",
+                kinds.join(", ")
             ),
             y_label: "mean error (cm)".into(),
-            series: vec![("error".into(), bins.iter().map(|b| b.1).collect())],
+            series: kinds
+                .iter()
+                .zip(&bins)
+                .map(|(k, b)| (k.to_string(), b.iter().map(|b| b.1).collect()))
+                .collect(),
         },
         Panel {
             title: "frames per 0.5 m bin".into(),
             y_label: "frames".into(),
-            series: vec![
-                (
-                    "with a pose".into(),
-                    bins.iter().map(|b| b.2 as f64).collect(),
-                ),
-                ("no pose".into(), bins.iter().map(|b| b.3 as f64).collect()),
-            ],
+            series: frames,
         },
     ];
     svg_panels(&x, "forearm distance from the camera (m)", &panels)

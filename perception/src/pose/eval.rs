@@ -476,6 +476,127 @@ fn fmt_cm(v: Option<f64>) -> String {
     v.map_or_else(|| "failed".to_string(), |v| format!("{v:.2}"))
 }
 
+/// Several mask sources on the same split side by side (`eval pose --masks procnet,baseline`):
+/// per cell of Table 2 and per occlusion level, each source's mean position error and frames
+/// without a pose, then the same means over only the frames where every source has a pose
+/// (a source that gives up on hard frames is not rewarded for it), with the paper's numbers.
+///
+/// # Errors
+/// The evaluations are not of the same frames.
+pub fn compare_markdown(evals: &[(&str, &PoseEvaluation)]) -> Result<String> {
+    let Some((_, first)) = evals.first() else {
+        return Err(PerceptionError::Input {
+            message: "nothing to compare".into(),
+        });
+    };
+    let key = |f: &FrameResult| (f.sequence, f.frame);
+    for (name, ev) in evals {
+        if ev.frames.len() != first.frames.len()
+            || ev
+                .frames
+                .iter()
+                .zip(&first.frames)
+                .any(|(a, b)| key(a) != key(b))
+        {
+            return Err(PerceptionError::Input {
+                message: format!("{name} was evaluated on other frames than {}", evals[0].0),
+            });
+        }
+    }
+    let every_has_pose: Vec<bool> = (0..first.frames.len())
+        .map(|i| evals.iter().all(|(_, ev)| ev.frames[i].outcome.is_ok()))
+        .collect();
+    // (distance, occlusion, paper ProcNet, paper PoseCNN); `None` matches every value.
+    type Row<'a> = (Option<&'a str>, Option<&'a str>, Option<f64>, Option<f64>);
+    let mut rows: Vec<Row> = PAPER_TABLE2
+        .iter()
+        .map(|&(d, l, a, b)| (Some(d), Some(l), a, b))
+        .collect();
+    for level in ["light", "medium", "heavy"] {
+        rows.push((None, Some(level), None, None));
+    }
+    rows.push((None, None, Some(PAPER_AVERAGE.0), Some(PAPER_AVERAGE.1)));
+    let matches = |f: &FrameResult, d: Option<&str>, l: Option<&str>| {
+        d.is_none_or(|d| f.distance_class == d) && l.is_none_or(|l| f.occlusion_level == l)
+    };
+    let mut md = String::new();
+    let names: Vec<&str> = evals.iter().map(|(n, _)| *n).collect();
+    let _ = writeln!(
+        md,
+        "Position error (cm) and frames without a pose; then the error over the frames where all of {} have a pose. The paper's PoseCNN column is PoseCNN itself; `baseline` is this project's feed-forward stand-in for it.\n",
+        names.join(", ")
+    );
+    let mut header = "| distance | occlusion | frames |".to_string();
+    let mut rule = "|---|---|---|".to_string();
+    for n in &names {
+        let _ = write!(header, " {n} (cm) | {n} no pose |");
+        rule.push_str("---|---|");
+    }
+    header.push_str(" common frames |");
+    rule.push_str("---|");
+    for n in &names {
+        let _ = write!(header, " {n}, common (cm) |");
+        rule.push_str("---|");
+    }
+    header.push_str(" paper ProcNet (cm) | paper PoseCNN (cm) |");
+    rule.push_str("---|---|");
+    let _ = writeln!(md, "{header}\n{rule}");
+    for (d, l, paper_procnet, paper_posecnn) in rows {
+        let average = d.is_none() && l.is_none();
+        let mut line = format!(
+            "| {} | {} | {} |",
+            d.unwrap_or(if average { "average" } else { "all" }),
+            l.unwrap_or(""),
+            first.summary(d, l).frames
+        );
+        for (_, ev) in evals {
+            let s = ev.summary(d, l);
+            let cm = if s.frames == 0 {
+                "-".into()
+            } else {
+                fmt_cm(finite(s.position_cm))
+            };
+            let _ = write!(line, " {cm} | {} |", s.no_pose);
+        }
+        let common: Vec<usize> = (0..first.frames.len())
+            .filter(|&i| every_has_pose[i] && matches(&first.frames[i], d, l))
+            .collect();
+        let _ = write!(line, " {} |", common.len());
+        for (_, ev) in evals {
+            let sum: f64 = common
+                .iter()
+                .filter_map(|&i| ev.frames[i].outcome.as_ref().ok())
+                .map(|e| e.position_cm)
+                .sum();
+            let mean = if common.is_empty() {
+                "-".into()
+            } else {
+                format!("{:.2}", sum / common.len() as f64)
+            };
+            let _ = write!(line, " {mean} |");
+        }
+        let paper = |v: Option<f64>| {
+            if d.is_none() && !average {
+                String::new()
+            } else {
+                fmt_cm(v)
+            }
+        };
+        let _ = writeln!(
+            line,
+            " {} | {} |",
+            paper(paper_procnet),
+            paper(paper_posecnn)
+        );
+        md.push_str(&line);
+    }
+    Ok(md)
+}
+
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
 impl PoseEvaluation {
     /// Statistics of the frames of a (distance class, occlusion level) pair; `None` matches
     /// every value.
@@ -565,7 +686,7 @@ impl PoseEvaluation {
         );
         let _ = writeln!(
             md,
-            "The paper's PoseCNN column is PoseCNN itself; this project's stand-in for it, a feed-forward `baseline` segmenter, is not built yet.\n"
+            "The paper's PoseCNN column is PoseCNN itself; this project's stand-in for it is the feed-forward baseline (`--masks baseline`; `--masks procnet,baseline` compares the two).\n"
         );
         let _ = writeln!(
             md,

@@ -370,3 +370,67 @@ fn an_anchored_elbow_recovers_the_depth_up_to_the_wrist_s_mirror() {
         found.uncertainty_m
     );
 }
+
+#[test]
+fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
+    use super::eval::{FrameResult, PoseError, PoseEvaluation, compare_markdown};
+    let frame = |i: usize, cm: Option<f64>| FrameResult {
+        sequence: 0,
+        frame: i,
+        distance_class: "short".into(),
+        occlusion_level: "heavy".into(),
+        distance_m: 1.0,
+        occlusion: 0.8,
+        outcome: cm
+            .map(|position_cm| PoseError {
+                position_cm,
+                yaw_deg: 0.0,
+                pitch_deg: 0.0,
+                roll_deg: 0.0,
+                axis_deg: 0.0,
+                spin_deg: 0.0,
+                flipped: false,
+            })
+            .ok_or(NoPose::Empty),
+        reacquired: false,
+        f_m: 0.0,
+        gain: 0.0,
+        uncertainty_m: 0.0,
+        pose_ms: 0.0,
+        mask_ms: 0.0,
+        renders: 0,
+    };
+    let eval = |frames: Vec<FrameResult>| PoseEvaluation {
+        masks: String::new(),
+        split: "test".into(),
+        sequences: 1,
+        roi: true,
+        anchored: true,
+        frames,
+    };
+    let a = eval(vec![
+        frame(0, Some(1.0)),
+        frame(1, Some(2.0)),
+        frame(2, Some(6.0)),
+    ]);
+    let b = eval(vec![
+        frame(0, Some(5.0)),
+        frame(1, Some(7.0)),
+        frame(2, None),
+    ]);
+    let md = compare_markdown(&[("a", &a), ("b", &b)]).unwrap();
+    // short / heavy: a 3.00 over its 3 frames, b 6.00 over its 2 (one without a pose); over
+    // the 2 common frames a 1.50, b 6.00; the paper's 5.84 and 6.29 beside.
+    assert!(
+        md.contains("| short | heavy | 3 | 3.00 | 0 | 6.00 | 1 | 2 | 1.50 | 6.00 | 5.84 | 6.29 |"),
+        "{md}"
+    );
+    // A cell without frames has no error to show.
+    assert!(
+        md.contains("| short | light | 0 | - | 0 | - | 0 | 0 | - | - | 1.73 | 1.62 |"),
+        "{md}"
+    );
+    // Evaluations of other frames are refused.
+    let c = eval(vec![frame(0, Some(1.0))]);
+    assert!(compare_markdown(&[("a", &a), ("c", &c)]).is_err());
+}
