@@ -373,6 +373,13 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         "{}",
         text(&bad.stderr)
     );
+    let bad = workcell(&["eval", "pose", "--masks", "gt,gt", "--dataset", data_s]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("names \"gt\" twice"),
+        "{}",
+        text(&bad.stderr)
+    );
 
     // The feed-forward baseline: the same command and recipe with --model baseline, its own
     // weight file, named as the PoseCNN stand-in in every table.

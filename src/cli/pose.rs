@@ -91,6 +91,13 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
     {
         anyhow::bail!("--weights names one network; leave it out to compare procnet and baseline");
     }
+    if let Some((i, k)) = kinds
+        .iter()
+        .enumerate()
+        .find(|(i, k)| kinds[..*i].contains(k))
+    {
+        anyhow::bail!("--masks names {k:?} twice (entry {})", i + 1);
+    }
     let mut sources = kinds
         .iter()
         .map(|k| mask_source(k, args))

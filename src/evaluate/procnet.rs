@@ -203,7 +203,11 @@ fn forearm_pose(setup: &ForearmSetup, part: &PartEstimate) -> Option<Pose> {
 
 impl HumanPerception for ProcNetCamera {
     fn name(&self) -> String {
-        self.config.describe()
+        self.config.describe_pipeline(
+            self.net
+                .as_ref()
+                .map_or("ProcNet", |net| net.config().model_name()),
+        )
     }
 
     fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {

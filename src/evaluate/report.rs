@@ -76,12 +76,21 @@ impl Aggregate {
     }
 }
 
+/// The mean task-time ratio, or `-` when no episode finished (it is NaN then).
+fn task_ratio(ratio: f64, prefix: &str) -> String {
+    if ratio.is_finite() {
+        format!("{prefix}{ratio:.3}")
+    } else {
+        "- (none finished)".into()
+    }
+}
+
 impl Aggregate {
     /// One line for the terminal.
     #[must_use]
     pub fn headline(&self, d_min_m: f64) -> String {
         format!(
-            "min separation {:.4} m (d_min {d_min_m:.3}), {} violations in {} episodes ({:.3} s below d_min, {:.3} s of it moving), {}/{} finished, task time x{:.3} of unfiltered, peak speed near the human {:.3} m/s (approach {:.3} m/s)",
+            "min separation {:.4} m (d_min {d_min_m:.3}), {} violations in {} episodes ({:.3} s below d_min, {:.3} s of it moving), {}/{} finished, task time {} of unfiltered, peak speed near the human {:.3} m/s (approach {:.3} m/s)",
             self.min_separation_m,
             self.violations,
             self.episodes_with_violation,
@@ -89,7 +98,7 @@ impl Aggregate {
             self.violation_moving_s,
             self.finished,
             self.episodes,
-            self.mean_task_ratio,
+            task_ratio(self.mean_task_ratio, "x"),
             self.peak_speed_near_human_m_s,
             self.peak_approach_speed_m_s
         )
@@ -186,7 +195,7 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
     let _ = writeln!(
         md,
-        "| {} | {:.4} | {} | {} | {:.3} | {:.3} | {}/{} | {:.3} | {:.3} | {:.3} |\n",
+        "| {} | {:.4} | {} | {} | {:.3} | {:.3} | {}/{} | {} | {:.3} | {:.3} |\n",
         a.episodes,
         a.min_separation_m,
         a.episodes_with_violation,
@@ -195,7 +204,7 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         a.violation_moving_s,
         a.finished,
         a.episodes,
-        a.mean_task_ratio,
+        task_ratio(a.mean_task_ratio, ""),
         a.peak_speed_near_human_m_s,
         a.peak_approach_speed_m_s
     );
@@ -245,7 +254,7 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
             .collect();
         let _ = writeln!(
             md,
-            "| {} | {} | {:.4} | {} | {} | {:.3} | {} | {:.3} | {} / {} / {} / {} | {} | {:.1} |",
+            "| {} | {} | {:.4} | {} | {} | {:.3} | {} | {:.3} | {} / {} / {} / {} | {} | {} |",
             e.episode,
             e.seed,
             e.min_separation_m,
@@ -264,7 +273,11 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
             } else {
                 reasons.join(", ")
             },
-            e.perception_error_m * 1e3
+            if e.perception_error_m.is_finite() {
+                format!("{:.1}", e.perception_error_m * 1e3)
+            } else {
+                "- (no estimate)".into()
+            }
         );
     }
     let _ = writeln!(
@@ -372,4 +385,42 @@ pub fn write_plots(
         written.push(format!("{name}.png"));
     }
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_where_no_episode_finished_has_no_task_ratio() {
+        let mut a = Aggregate {
+            episodes: 2,
+            min_separation_m: 0.2,
+            episodes_with_violation: 0,
+            violations: 0,
+            violation_s: 0.0,
+            violation_moving_s: 0.0,
+            finished: 2,
+            mean_task_ratio: 1.25,
+            peak_speed_near_human_m_s: 0.1,
+            peak_approach_speed_m_s: 0.1,
+            peak_human_speed_m_s: 1.0,
+            ticks_pass: 10,
+            ticks_modified: 0,
+            ticks_relaxed: 0,
+            ticks_braking: 0,
+            real_time_factor: 1.0,
+        };
+        assert!(
+            a.headline(0.1)
+                .contains("2/2 finished, task time x1.250 of unfiltered")
+        );
+        (a.finished, a.mean_task_ratio) = (0, f64::NAN);
+        let line = a.headline(0.1);
+        assert!(
+            line.contains("0/2 finished, task time - (none finished) of unfiltered"),
+            "{line}"
+        );
+        assert!(!line.contains("NaN"), "{line}");
+    }
 }
