@@ -175,24 +175,25 @@ impl ProcNetConfig {
     }
 
     /// The number of trainable parameters of a model of this configuration, without
-    /// building it.
+    /// building it (channel lists of other lengths than [`Self::validate`] accepts count
+    /// their missing entries as 0).
     #[must_use]
     pub fn parameter_count(&self) -> usize {
         let l_count = self.layers();
-        let r = &self.repr_channels;
-        let a = &self.input_channels;
-        let e = |l: usize| if self.prediction_loss { 2 * a[l] } else { a[l] };
+        let r = |l: usize| self.repr_channels.get(l).copied().unwrap_or(0);
+        let a = |l: usize| self.input_channels.get(l).copied().unwrap_or(0);
+        let e = |l: usize| if self.prediction_loss { 2 * a(l) } else { a(l) };
         let conv = |c_in: usize, c_out: usize, k: usize, bias: bool| {
             c_in * c_out * k * k + if bias { c_out } else { 0 }
         };
         let s = self.cell_kernel;
         let mut n = 0;
         for l in 0..l_count {
-            let k = r[l];
+            let k = r(l);
             if self.prediction_loss {
-                n += conv(k, a[l], 1, true);
+                n += conv(k, a(l), 1, true);
             }
-            let c_in = e(l) + if l + 1 < l_count { r[l + 1] } else { 0 };
+            let c_in = e(l) + if l + 1 < l_count { r(l + 1) } else { 0 };
             n += match self.cell {
                 CellKind::Hgru => {
                     let input = if c_in == k { 0 } else { conv(c_in, k, 1, true) };
@@ -203,12 +204,12 @@ impl ProcNetConfig {
                 CellKind::Conv => conv(c_in, k, 5, true),
             };
             if l + 1 < l_count {
-                n += conv(e(l), a[l + 1], 5, true);
+                n += conv(e(l), a(l + 1), 5, true);
                 // The decoder stage from l+1 to l: a norm and a 3x3 transposed convolution.
-                n += 2 * r[l + 1] + r[l + 1] * r[l] * 9;
+                n += 2 * r(l + 1) + r(l + 1) * r(l) * 9;
             }
         }
-        n + 2 * r[0] + conv(r[0], self.num_classes(), 1, false)
+        n + 2 * r(0) + conv(r(0), self.num_classes(), 1, false)
     }
 
     #[must_use]
@@ -345,6 +346,14 @@ mod tests {
         assert_eq!(baseline.classes, procnet.classes);
         let ratio = baseline.parameter_count() as f64 / procnet.parameter_count() as f64;
         assert!((0.9..1.1).contains(&ratio), "{ratio}: {baseline:?}");
+        // An invalid configuration counts without panicking.
+        let short = ProcNetConfig {
+            input_channels: vec![3],
+            ..ProcNetConfig::cpu()
+        };
+        assert!(short.feed_forward_baseline().parameter_count() > 0);
+        // A baseline is its own baseline.
+        assert_eq!(baseline.feed_forward_baseline(), baseline);
         // The paper's width too.
         let paper = ProcNetConfig::paper();
         let ratio =
