@@ -15,6 +15,13 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
+/// Runs `workcell args`, which must fail with `message` on stderr.
+fn refused(args: &[&str], message: &str) {
+    let out = workcell(args);
+    assert!(!out.status.success(), "{args:?} succeeded");
+    assert!(text(&out.stderr).contains(message), "{}", text(&out.stderr));
+}
+
 #[test]
 fn robot_check_reports_json_with_link_poses() {
     let out = workcell(&[
@@ -366,19 +373,13 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         let csv = std::fs::read_to_string(pose_out.join("pose_frames.csv")).expect("csv");
         assert!(csv.starts_with("sequence,frame,"), "{csv}");
     }
-    let bad = workcell(&["eval", "pose", "--masks", "oracle", "--dataset", data_s]);
-    assert!(!bad.status.success());
-    assert!(
-        text(&bad.stderr).contains("gt, visible, procnet, baseline"),
-        "{}",
-        text(&bad.stderr)
+    refused(
+        &["eval", "pose", "--masks", "oracle", "--dataset", data_s],
+        "gt, visible, procnet, baseline",
     );
-    let bad = workcell(&["eval", "pose", "--masks", "gt,gt", "--dataset", data_s]);
-    assert!(!bad.status.success());
-    assert!(
-        text(&bad.stderr).contains("names \"gt\" twice"),
-        "{}",
-        text(&bad.stderr)
+    refused(
+        &["eval", "pose", "--masks", "gt,gt", "--dataset", data_s],
+        "names \"gt\" twice",
     );
 
     // The feed-forward baseline: the same command and recipe with --model baseline, its own
@@ -403,31 +404,25 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
     let base_weights = base_out.join("baseline.safetensors");
     assert!(base_weights.exists() && !base_out.join("procnet.safetensors").exists());
-    let bad = workcell(&[
-        "train", "--config", cfg_s, "--model", "posecnn", "--out", out_s,
-    ]);
-    assert!(!bad.status.success());
-    assert!(
-        text(&bad.stderr).contains("procnet, baseline"),
-        "{}",
-        text(&bad.stderr)
+    refused(
+        &[
+            "train", "--config", cfg_s, "--model", "posecnn", "--out", out_s,
+        ],
+        "procnet, baseline",
     );
     // ProcNet's weights are not a baseline.
-    let bad = workcell(&[
-        "eval",
-        "pose",
-        "--masks",
-        "baseline",
-        "--weights",
-        weights.to_str().expect("utf-8"),
-        "--dataset",
-        data_s,
-    ]);
-    assert!(!bad.status.success());
-    assert!(
-        text(&bad.stderr).contains("holds a ProcNet"),
-        "{}",
-        text(&bad.stderr)
+    refused(
+        &[
+            "eval",
+            "pose",
+            "--masks",
+            "baseline",
+            "--weights",
+            weights.to_str().expect("utf-8"),
+            "--dataset",
+            data_s,
+        ],
+        "holds a ProcNet",
     );
     // Two mask sources side by side.
     let pose_out = tmp.path().join("pose-compare");

@@ -166,12 +166,12 @@ impl ProcNetConfig {
             c
         };
         (0..=300)
-            .map(|i| candidate(1.0 + f64::from(i) / 100.0))
-            .min_by(|a, b| {
-                let gap = |c: &Self| (c.parameter_count() as f64 - target).abs();
-                gap(a).total_cmp(&gap(b))
+            .map(|i| {
+                let c = candidate(1.0 + f64::from(i) / 100.0);
+                ((c.parameter_count() as f64 - target).abs(), c)
             })
-            .unwrap_or_else(|| candidate(1.0))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map_or_else(|| candidate(1.0), |(_, c)| c)
     }
 
     /// The number of trainable parameters of a model of this configuration, without

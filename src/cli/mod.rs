@@ -30,6 +30,15 @@ pub fn prepare_out(out: &std::path::Path, force: bool, outputs: &[&str]) -> anyh
     Ok(())
 }
 
+/// A progress bar of `len` steps drawn with indicatif's `template` (its default style when
+/// the template does not parse).
+pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
+    indicatif::ProgressBar::new(len).with_style(
+        indicatif::ProgressStyle::with_template(template)
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    )
+}
+
 /// A dataset split by name.
 ///
 /// # Errors

@@ -4,7 +4,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use workcell::perception::eval::evaluate;
 use workcell::perception::train::{TrainConfig, Trainer, read_metrics};
 use workcell::perception::{Backend, backend, weights};
@@ -68,12 +67,6 @@ fn format_channels(c: &[usize]) -> String {
     format!("({})", c.join(", "))
 }
 
-fn bar(len: u64, template: &str) -> ProgressBar {
-    ProgressBar::new(len).with_style(
-        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
-    )
-}
-
 pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     if args.print_defaults {
         print!("{}", TrainConfig::default().to_toml());
@@ -106,7 +99,7 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     );
     backend::set_threads(config.threads);
     let trainer = Trainer::new(config, &args.out)?;
-    let progress = bar(
+    let progress = super::progress_bar(
         trainer.config.steps as u64,
         "{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}",
     );
@@ -229,7 +222,7 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
     let (model, config) = weights::load(&args.weights, &device)?;
     let dataset = Dataset::open(&args.dataset)?;
     let n = dataset.entries(Some(split)).count();
-    let progress = bar(
+    let progress = super::progress_bar(
         n as u64,
         "{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})",
     );

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use workcell::perception::pose::PoseConfig;
 use workcell::perception::pose::eval::{
     GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, VisibleMasks, compare_markdown,
@@ -118,11 +117,9 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
     let mut evaluations = Vec::with_capacity(kinds.len());
     let mut written = Vec::new();
     for (kind, source) in kinds.iter().zip(&mut sources) {
-        let progress = ProgressBar::new(n as u64).with_style(
-            ProgressStyle::with_template(&format!(
-                "{kind}: {{bar:40}} {{pos}}/{{len}} sequences, {{elapsed}} (eta {{eta}})"
-            ))
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        let progress = super::progress_bar(
+            n as u64,
+            &format!("{kind}: {{bar:40}} {{pos}}/{{len}} sequences, {{elapsed}} (eta {{eta}})"),
         );
         let ev = evaluate_pose(
             &dataset,

@@ -162,26 +162,22 @@ impl PerceptionConfig {
         match self.kind {
             PerceptionKind::GroundTruth => GroundTruth.name(),
             PerceptionKind::Noisy => NoisyCamera::new(self.clone(), 0).name(),
-            // The weights' own header says which network they hold (ProcNet or the
-            // feed-forward baseline); an unreadable file fails later, when it is loaded.
-            PerceptionKind::Procnet => self.describe_pipeline(
-                crate::perception::weights::read_config(&self.weights)
-                    .map_or("ProcNet", |c| c.model_name()),
+            PerceptionKind::Procnet => format!(
+                "{} + render-and-compare, latency {:.0} ms",
+                match self.masks {
+                    // The weights' own header says which network they hold (ProcNet or the
+                    // feed-forward baseline); an unreadable file fails when it is loaded.
+                    MaskKind::Network => format!(
+                        "{} ({})",
+                        crate::perception::weights::read_config(&self.weights)
+                            .map_or("ProcNet", |c| c.model_name()),
+                        self.weights.display()
+                    ),
+                    MaskKind::GroundTruth => "ground-truth forearm masks".to_string(),
+                },
+                self.latency_s * 1e3
             ),
         }
-    }
-
-    /// The render-and-compare pipeline's description, its network called `network` (the
-    /// weights may hold the feed-forward baseline).
-    pub(crate) fn describe_pipeline(&self, network: &str) -> String {
-        format!(
-            "{} + render-and-compare, latency {:.0} ms",
-            match self.masks {
-                MaskKind::Network => format!("{network} ({})", self.weights.display()),
-                MaskKind::GroundTruth => "ground-truth forearm masks".to_string(),
-            },
-            self.latency_s * 1e3
-        )
     }
 }
 

@@ -203,11 +203,7 @@ fn forearm_pose(setup: &ForearmSetup, part: &PartEstimate) -> Option<Pose> {
 
 impl HumanPerception for ProcNetCamera {
     fn name(&self) -> String {
-        self.config.describe_pipeline(
-            self.net
-                .as_ref()
-                .map_or("ProcNet", |net| net.config().model_name()),
-        )
+        self.config.describe()
     }
 
     fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {

@@ -301,6 +301,15 @@ pub struct FrameResult {
     pub renders: usize,
 }
 
+impl FrameResult {
+    /// The frame is of this distance class and occlusion level; `None` matches every value.
+    #[must_use]
+    pub fn is_in(&self, distance: Option<&str>, level: Option<&str>) -> bool {
+        distance.is_none_or(|d| self.distance_class == d)
+            && level.is_none_or(|l| self.occlusion_level == l)
+    }
+}
+
 /// Statistics of a group of frames.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Summary {
@@ -516,9 +525,6 @@ pub fn compare_markdown(evals: &[(&str, &PoseEvaluation)]) -> Result<String> {
         rows.push((None, Some(level), None, None));
     }
     rows.push((None, None, Some(PAPER_AVERAGE.0), Some(PAPER_AVERAGE.1)));
-    let matches = |f: &FrameResult, d: Option<&str>, l: Option<&str>| {
-        d.is_none_or(|d| f.distance_class == d) && l.is_none_or(|l| f.occlusion_level == l)
-    };
     let mut md = String::new();
     let names: Vec<&str> = evals.iter().map(|(n, _)| *n).collect();
     let _ = writeln!(
@@ -559,7 +565,7 @@ pub fn compare_markdown(evals: &[(&str, &PoseEvaluation)]) -> Result<String> {
             let _ = write!(line, " {cm} | {} |", s.no_pose);
         }
         let common: Vec<usize> = (0..first.frames.len())
-            .filter(|&i| every_has_pose[i] && matches(&first.frames[i], d, l))
+            .filter(|&i| every_has_pose[i] && first.frames[i].is_in(d, l))
             .collect();
         let _ = write!(line, " {} |", common.len());
         for (_, ev) in evals {
@@ -602,10 +608,7 @@ impl PoseEvaluation {
     /// every value.
     #[must_use]
     pub fn summary(&self, distance: Option<&str>, level: Option<&str>) -> Summary {
-        Summary::of(self.frames.iter().filter(|f| {
-            distance.is_none_or(|d| f.distance_class == d)
-                && level.is_none_or(|l| f.occlusion_level == l)
-        }))
+        Summary::of(self.frames.iter().filter(|f| f.is_in(distance, level)))
     }
 
     /// Per distance bin of `bin_m`: (bin centre, mean position error in cm (NaN without a
