@@ -4,9 +4,9 @@
 
 use std::path::PathBuf;
 
-use workcell::sim::image::{PixelKind, write_png};
-use workcell::sim::render::{Camera, CellScene, Class, CpuRenderer, Frame, Renderer};
-use workcell::sim::{CellModel, CellState, RobotCommand, step};
+use workcell::render::image::{PixelKind, write_png};
+use workcell::render::{Class, CpuRenderer, Frame, Renderer};
+use workcell::sim::{CellModel, CellScene, CellState, RobotCommand, step};
 
 fn main() -> anyhow::Result<()> {
     let out = PathBuf::from(
@@ -22,7 +22,7 @@ fn main() -> anyhow::Result<()> {
     }
     let mut cell = CellScene::new(&model);
     cell.update(&state);
-    let camera = Camera::from_config(&model.scenario.cameras[0])?;
+    let camera = model.scenario.cameras[0].camera()?;
     let mut frame = Frame::new();
     CpuRenderer::new().render(&cell.scene, &camera, &mut frame)?;
     write_frame(&out, "cpu", &cell, &frame)?;

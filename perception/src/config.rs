@@ -1,6 +1,7 @@
 //! The shape of a ProcNet: every switch of the paper's Table 1, and the named presets.
 
 use serde::{Deserialize, Serialize};
+use workcell_render::Class;
 
 use crate::error::{PerceptionError, Result};
 
@@ -58,11 +59,17 @@ pub struct ProcNetConfig {
     pub cell_kernel: usize,
     pub decoder_activation: Activation,
     /// One sigmoid output channel per class, in this order.
-    pub classes: Vec<String>,
+    pub classes: Vec<Class>,
 }
 
-/// The classes of `workcell dataset` (sim's `render::Class`, without the background).
-pub const DATASET_CLASSES: [&str; 5] = ["robot", "torso", "upper_arm", "forearm", "hand"];
+/// The classes of `workcell dataset` ([`Class::ALL`] without the background).
+pub const DATASET_CLASSES: [Class; 5] = [
+    Class::Robot,
+    Class::Torso,
+    Class::UpperArm,
+    Class::Forearm,
+    Class::Hand,
+];
 
 impl Default for ProcNetConfig {
     fn default() -> Self {
@@ -84,7 +91,7 @@ impl ProcNetConfig {
             prediction_loss: true,
             cell_kernel: 5,
             decoder_activation: Activation::Relu,
-            classes: DATASET_CLASSES.iter().map(|s| s.to_string()).collect(),
+            classes: DATASET_CLASSES.to_vec(),
         }
     }
 
@@ -224,8 +231,8 @@ impl ProcNetConfig {
 
     /// Index of a class by name.
     #[must_use]
-    pub fn class_index(&self, name: &str) -> Option<usize> {
-        self.classes.iter().position(|c| c == name)
+    pub fn class_index(&self, class: Class) -> Option<usize> {
+        self.classes.iter().position(|&c| c == class)
     }
 
     /// Checks every value; the error names the key.

@@ -3,10 +3,11 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
-use workcell_sim::dataset::{Dataset, Sequence, SequenceEntry, Split};
+use workcell_render::dataset::{Dataset, Sequence, SequenceEntry, Split};
 
 use crate::config::ProcNetConfig;
 use crate::error::{PerceptionError, Result};
+use crate::image::resample;
 
 /// One sequence at the model's resolution.
 #[derive(Debug, Clone)]
@@ -27,17 +28,17 @@ pub fn class_map(config: &ProcNetConfig, dataset: &Dataset) -> Result<Vec<u8>> {
     config
         .classes
         .iter()
-        .map(|name| {
+        .map(|class| {
             dataset
                 .manifest
                 .classes
                 .iter()
-                .position(|c| c == name)
+                .position(|c| c == class)
                 .and_then(|i| u8::try_from(i).ok())
                 .ok_or_else(|| PerceptionError::Config {
                     key: "classes".into(),
                     message: format!(
-                        "class {name:?} is not in the dataset (it has {:?})",
+                        "class {class} is not in the dataset (it has {:?})",
                         dataset.manifest.classes
                     ),
                 })
@@ -60,30 +61,6 @@ pub fn scale_factor(config: &ProcNetConfig, width: u32, height: u32) -> Result<u
     Ok(w / size)
 }
 
-/// Averages `f x f` blocks of a `[planes, h, w]` image.
-#[must_use]
-pub fn downsample(src: &[f32], planes: usize, h: usize, w: usize, f: usize) -> Vec<f32> {
-    if f == 1 {
-        return src.to_vec();
-    }
-    let (oh, ow) = (h / f, w / f);
-    let mut out = vec![0f32; planes * oh * ow];
-    let scale = 1.0 / (f * f) as f32;
-    for p in 0..planes {
-        for y in 0..oh {
-            for x in 0..ow {
-                let mut sum = 0f32;
-                for dy in 0..f {
-                    let row = &src[(p * h + y * f + dy) * w + x * f..][..f];
-                    sum += row.iter().sum::<f32>();
-                }
-                out[(p * oh + y) * ow + x] = sum * scale;
-            }
-        }
-    }
-    out
-}
-
 /// One-hot planes `[classes, h, w]` of a class image, for the classes of `map`.
 #[must_use]
 pub fn one_hot(classes: &[u8], map: &[u8]) -> Vec<f32> {
@@ -103,7 +80,7 @@ pub fn model_frames(sequence: &Sequence, config: &ProcNetConfig) -> Result<Vec<f
     let f = scale_factor(config, sequence.width, sequence.height)?;
     let (w, h) = (sequence.width as usize, sequence.height as usize);
     Ok((0..sequence.len())
-        .flat_map(|t| downsample(sequence.rgb_frame(t), 3, h, w, f))
+        .flat_map(|t| resample(sequence.rgb_frame(t), 3, w, h, w / f, h / f))
         .collect())
 }
 
@@ -117,7 +94,7 @@ impl SequenceTensors {
         let mut target = Vec::with_capacity(frames * map.len() * (w / f) * (h / f));
         for t in 0..frames {
             let planes = one_hot(sequence.class_frame(t), map);
-            target.extend(downsample(&planes, map.len(), h, w, f));
+            target.extend(resample(&planes, map.len(), w, h, w / f, h / f));
         }
         Ok(Self {
             entry: sequence.entry.clone(),
@@ -261,14 +238,6 @@ pub fn make_batch(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn downsample_averages_blocks() {
-        // One plane 4x4 -> 2x2.
-        let src: Vec<f32> = (0..16).map(|v| v as f32).collect();
-        let out = downsample(&src, 1, 4, 4, 2);
-        assert_eq!(out, vec![2.5, 4.5, 10.5, 12.5]);
-    }
 
     #[test]
     fn flip_twice_is_identity_and_shift_repeats_edges() {

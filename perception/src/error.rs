@@ -18,11 +18,14 @@ pub enum PerceptionError {
     /// A weight file is missing, corrupt, truncated or of another configuration.
     #[error("{path}: {message}")]
     Weights { path: PathBuf, message: String },
-    /// The dataset could not be read.
+    /// The dataset could not be read, or the renderer failed.
     #[error(transparent)]
-    Dataset(#[from] workcell_sim::SimError),
+    Render(#[from] workcell_render::RenderError),
+    /// A human model could not be loaded or lacks a part.
+    #[error(transparent)]
+    Robot(#[from] workcell_robots::RobotError),
     /// Writing an output (checkpoint, CSV, plot) failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: cannot write")]
     Io {
         path: PathBuf,
         #[source]

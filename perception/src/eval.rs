@@ -6,12 +6,13 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
+use workcell_render::Class;
 
 use burn::tensor::activation::sigmoid;
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor, TensorData};
-use workcell_sim::dataset::{Dataset, Split};
+use workcell_render::dataset::{Dataset, Split};
 
 use crate::config::ProcNetConfig;
 use crate::data::{class_map, model_frames, one_hot};
@@ -68,7 +69,7 @@ impl Scores {
 /// The scores of a split, overall and per group.
 #[derive(Debug, Clone, Default)]
 pub struct Evaluation {
-    pub classes: Vec<String>,
+    pub classes: Vec<Class>,
     pub split: String,
     pub sequences: usize,
     pub overall: Scores,
@@ -195,7 +196,7 @@ impl Evaluation {
                 self.overall.iou(c)
             );
         }
-        let Some(f) = self.classes.iter().position(|c| c == "forearm") else {
+        let Some(f) = self.classes.iter().position(|&c| c == Class::Forearm) else {
             return md;
         };
         let mut groups: Vec<(String, &Scores)> = Vec::new();

@@ -1,6 +1,7 @@
 //! Inference on one camera stream: a stateful ProcNet that takes a frame, returns class masks.
 
 use std::path::Path;
+use workcell_render::Class;
 
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -13,7 +14,7 @@ use crate::weights;
 /// Class probabilities of one frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Masks {
-    pub classes: Vec<String>,
+    pub classes: Vec<Class>,
     /// Side of the square masks (the model's input size).
     pub size: usize,
     /// `[classes, size, size]`, each in [0, 1].
@@ -21,19 +22,19 @@ pub struct Masks {
 }
 
 impl Masks {
-    /// The probability plane of a class by name, `[size, size]`.
+    /// The probability plane of `class`, `[size, size]`.
     #[must_use]
-    pub fn class(&self, name: &str) -> Option<&[f32]> {
-        let i = self.classes.iter().position(|c| c == name)?;
+    pub fn class(&self, class: Class) -> Option<&[f32]> {
+        let i = self.classes.iter().position(|&c| c == class)?;
         let n = self.size * self.size;
         self.probabilities.get(i * n..(i + 1) * n)
     }
 
     /// A class thresholded at `threshold`: 1 inside, 0 outside.
     #[must_use]
-    pub fn binary(&self, name: &str, threshold: f32) -> Option<Vec<u8>> {
+    pub fn binary(&self, class: Class, threshold: f32) -> Option<Vec<u8>> {
         Some(
-            self.class(name)?
+            self.class(class)?
                 .iter()
                 .map(|&p| u8::from(p > threshold))
                 .collect(),

@@ -5,6 +5,7 @@
 //! The model is written once; the [`Device`](burn::tensor::Device) picks the backend at run
 //! time: `flex` (pure Rust, the default), LibTorch (feature `tch`).
 
+pub mod arm;
 pub mod backend;
 pub mod bench;
 pub mod cells;
@@ -12,6 +13,7 @@ pub mod config;
 pub mod data;
 mod error;
 pub mod eval;
+pub mod image;
 mod infer;
 pub mod loss;
 pub mod model;
@@ -21,6 +23,7 @@ pub mod pose;
 pub mod train;
 pub mod weights;
 
+pub use arm::{ArmEstimate, ArmModel, ArmOutcome, ArmTracker, NoEstimate, PartCapsule};
 pub use backend::Backend;
 pub use config::{Activation, CellKind, ProcNetConfig};
 pub use error::{PerceptionError, Result};

@@ -4,6 +4,7 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use workcell_render::Class;
 
 use burn::module::Module;
 use burn::optim::grad_clipping::GradientClippingConfig;
@@ -12,7 +13,7 @@ use burn::tensor::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use workcell_sim::dataset::{Dataset, Split};
+use workcell_render::dataset::{Dataset, Split};
 
 use crate::backend::Backend;
 use crate::config::ProcNetConfig;
@@ -53,10 +54,10 @@ impl Default for LossConfig {
 impl LossConfig {
     /// The per-class weights in the model's class order, normalised to mean 1.
     #[must_use]
-    pub fn weights_for(&self, classes: &[String]) -> Vec<f32> {
+    pub fn weights_for(&self, classes: &[Class]) -> Vec<f32> {
         let w: Vec<f32> = classes
             .iter()
-            .map(|c| self.class_weights.get(c).copied().unwrap_or(1.0))
+            .map(|c| self.class_weights.get(c.name()).copied().unwrap_or(1.0))
             .collect();
         let mean = w.iter().sum::<f32>() / w.len().max(1) as f32;
         w.into_iter()
@@ -534,7 +535,7 @@ impl Trainer {
 
         let clock = Instant::now();
         let classes = cfg.model.num_classes();
-        let forearm = cfg.model.class_index("forearm");
+        let forearm = cfg.model.class_index(Class::Forearm);
         let class_weights =
             (!cfg.loss.class_weights.is_empty()).then(|| cfg.loss.weights_for(&cfg.model.classes));
         let end = stop_after.map_or(cfg.steps, |n| (start + n).min(cfg.steps));

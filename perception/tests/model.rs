@@ -5,6 +5,7 @@ mod common;
 use burn::tensor::{Device, Tensor, TensorData};
 use common::{reference_frame, tiny};
 use workcell_perception::{Backend, CellKind, PerceptionError, ProcNet, ProcNetConfig, weights};
+use workcell_render::Class;
 
 fn frame(t: usize, b: usize, s: usize, device: &Device) -> Tensor<4> {
     let v: Vec<f32> = (0..b).flat_map(|k| reference_frame(t, k, s)).collect();
@@ -81,7 +82,7 @@ fn the_state_carries_information_and_reset_forgets_it() {
     let after_reset = net.segment(&reference_frame(0, 0, s)).unwrap();
     assert_eq!(first.probabilities, after_reset.probabilities);
     assert!(first.probabilities.iter().all(|p| (0.0..=1.0).contains(p)));
-    assert_eq!(first.class("robot").unwrap().len(), s * s);
+    assert_eq!(first.class(Class::Robot).unwrap().len(), s * s);
 }
 
 #[test]
@@ -299,9 +300,16 @@ fn the_shipped_weights_load_and_match_their_recipe() {
         assert_eq!(net.config().is_feed_forward(), file.starts_with("baseline"));
         let s = net.config().input_size;
         let masks = net.segment(&reference_frame(0, 0, s)).unwrap();
+        // The shipped files name their classes as strings; they read back as the classes.
         assert_eq!(
             masks.classes,
-            ["robot", "torso", "upper_arm", "forearm", "hand"]
+            [
+                Class::Robot,
+                Class::Torso,
+                Class::UpperArm,
+                Class::Forearm,
+                Class::Hand
+            ]
         );
     }
 }

@@ -11,6 +11,7 @@ use workcell_perception::loss::dice_per_class;
 use workcell_perception::model::ProcNetModel;
 use workcell_perception::train::{LossConfig, window_loss};
 use workcell_perception::{CellKind, ProcNetConfig};
+use workcell_render::Class;
 
 fn frames(n: usize, s: usize, device: &Device) -> Vec<Tensor<4>> {
     (0..n)
@@ -179,7 +180,7 @@ fn a_tiny_batch_overfits() {
         input_size: 16,
         repr_channels: vec![8, 8, 8],
         input_channels: vec![3, 8, 8],
-        classes: vec!["forearm".into()],
+        classes: vec![Class::Forearm],
         ..tiny(CellKind::Hgru)
     };
     let device = Device::flex().autodiff();

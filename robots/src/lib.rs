@@ -24,6 +24,7 @@ pub mod assets;
 mod catalogue;
 pub mod collision;
 mod error;
+pub mod human;
 mod kinematics;
 pub mod math;
 mod mesh;
@@ -35,6 +36,7 @@ pub use catalogue::{
     CATALOGUE, CatalogueEntry, ROBOT_PATH_VAR, RobotSource, added_robots, robot_library,
 };
 pub use error::{Result, RobotError};
+pub use human::HumanPart;
 pub use kinematics::{Jacobian, KinematicState};
 pub use mesh::{DECODER_CRATE, TriMesh};
 pub use model::{

@@ -1,43 +1,13 @@
 //! The human as the safety layer sees it: one capsule per arm part, with velocities and the
 //! uncertainty that perception reports.
 
-use serde::{Deserialize, Serialize};
+pub use workcell_robots::HumanPart;
 use workcell_robots::collision::{LinkCapsule, link_bounding_capsule};
 use workcell_robots::math::Vector;
 use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
 
 use crate::error::{Result, SafetyError};
 use crate::geometry::Capsule;
-
-/// The parts of the arm that the safety layer models, each an ISO/TS 15066 body region.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum HumanPart {
-    UpperArm,
-    Forearm,
-    Hand,
-}
-
-impl HumanPart {
-    /// Every part, in the order used in tables.
-    pub const ALL: [HumanPart; 3] = [HumanPart::UpperArm, HumanPart::Forearm, HumanPart::Hand];
-
-    /// The link name of the part in the catalogue `human_arm`.
-    #[must_use]
-    pub fn link_name(self) -> &'static str {
-        match self {
-            HumanPart::UpperArm => "upper_arm",
-            HumanPart::Forearm => "forearm",
-            HumanPart::Hand => "hand",
-        }
-    }
-}
-
-impl std::fmt::Display for HumanPart {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.link_name())
-    }
-}
 
 /// One part as estimated: its capsule (not yet inflated) and the velocities of its two axis
 /// end points, in the world.
@@ -99,8 +69,8 @@ impl HumanGeometry {
     /// # Errors
     /// [`SafetyError::Robot`] when a part's link is missing or has no collision geometry.
     pub fn new(human: &RobotModel) -> Result<Self> {
-        let mut parts = Vec::with_capacity(HumanPart::ALL.len());
-        for part in HumanPart::ALL {
+        let mut parts = Vec::with_capacity(HumanPart::ARM.len());
+        for part in HumanPart::ARM {
             let missing = |what: &str| SafetyError::Robot {
                 robot: human.name().to_string(),
                 message: format!("human part '{part}': {what}"),

@@ -131,13 +131,15 @@ pub struct BodyRegion {
 
 impl BodyRegion {
     /// The Annex A values of `part` (forearm/wrist 160 N, 40 N/mm, 2 kg; hand 140 N,
-    /// 75 N/mm, 0.6 kg; upper arm 150 N, 30 N/mm, 3 kg).
+    /// 75 N/mm, 0.6 kg; upper arm 150 N, 30 N/mm, 3 kg; torso: the chest's 140 N, 25 N/mm
+    /// and the torso's effective mass of 40 kg, Tables A.2 and A.3).
     #[must_use]
     pub fn of(part: HumanPart) -> Self {
         let (force_n, stiffness_n_mm, mass_kg) = match part {
             HumanPart::Forearm => (160.0, 40.0, 2.0),
             HumanPart::Hand => (140.0, 75.0, 0.6),
             HumanPart::UpperArm => (150.0, 30.0, 3.0),
+            HumanPart::Torso => (140.0, 25.0, 40.0),
         };
         Self {
             part,

@@ -4,11 +4,9 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use workcell_robots::math::{Pose, Rotation, Vector};
-use workcell_sim::image::{PixelKind, encode_png};
-use workcell_sim::render::{
-    Camera, CellScene, CpuRenderer, Frame, MaskBatch, RenderMesh, Renderer,
-};
-use workcell_sim::{CellModel, CellState, RobotCommand, step};
+use workcell_sim::render::image::{PixelKind, encode_png};
+use workcell_sim::render::{Camera, CpuRenderer, Frame, MaskBatch, RenderMesh, Renderer};
+use workcell_sim::{CellModel, CellScene, CellState, RobotCommand, step};
 
 fn default_cell() -> (CellScene, Camera) {
     let model = CellModel::from_file(concat!(
@@ -22,7 +20,7 @@ fn default_cell() -> (CellScene, Camera) {
     }
     let mut cell = CellScene::new(&model);
     cell.update(&state);
-    let camera = Camera::from_config(&model.scenario.cameras[0]).expect("camera");
+    let camera = model.scenario.cameras[0].camera().expect("camera");
     (cell, camera)
 }
 

@@ -9,7 +9,7 @@ use workcell_robots::RobotError;
 #[non_exhaustive]
 pub enum SimError {
     /// The scenario file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read")]
     Io {
         path: PathBuf,
         #[source]
@@ -26,7 +26,7 @@ pub enum SimError {
         message: String,
     },
     /// A robot or human model named by the scenario failed to load.
-    #[error("{path}: {key}: {source}")]
+    #[error("{path}: {key}")]
     Robot {
         path: PathBuf,
         key: String,
@@ -50,13 +50,10 @@ pub enum SimError {
     /// a panic; it points at a bug or at a robot rapier cannot represent).
     #[error("physics: {message}")]
     Physics { message: String },
-    /// A camera, pose or image size given to the renderer is not usable.
-    #[error("render: {message}")]
-    InvalidRender { message: String },
-    /// The GPU backend failed (no adapter, device lost, a wgpu validation error).
-    #[error("gpu: {message}")]
-    Gpu { message: String },
-    /// A dataset file is missing, malformed or inconsistent with its manifest.
+    /// The renderer, or reading or writing an image or a dataset file, failed.
+    #[error(transparent)]
+    Render(#[from] workcell_render::RenderError),
+    /// A dataset being generated cannot be written where it is asked to be.
     #[error("{path}: {message}")]
     Dataset { path: PathBuf, message: String },
 }

@@ -25,12 +25,10 @@ pub mod dataset;
 mod error;
 pub mod human;
 pub mod ik;
-pub mod image;
 mod multibody;
-pub mod occlusion;
 mod planning;
-pub mod render;
 pub mod scenario;
+mod scene;
 pub mod trajectory;
 
 pub use cell::{CellModel, CellState, RobotCommand, step};
@@ -38,3 +36,6 @@ pub use clutter::ClutterBox;
 pub use error::{Result, SimError};
 pub use multibody::{RapierCheck, check_in_rapier};
 pub use scenario::Scenario;
+pub use scene::CellScene;
+/// The renderer crate, which this crate renders its cell with.
+pub use workcell_render as render;

@@ -308,6 +308,21 @@ impl Default for CameraConfig {
 }
 
 impl CameraConfig {
+    /// The pinhole camera this configuration describes.
+    ///
+    /// # Errors
+    /// As [`workcell_render::Camera::look_at`].
+    pub fn camera(&self) -> Result<workcell_render::Camera, workcell_render::RenderError> {
+        workcell_render::Camera::look_at(
+            self.eye,
+            self.target,
+            self.up,
+            self.width_px,
+            self.height_px,
+            self.fov_y_deg,
+        )
+    }
+
     /// Focal lengths and principal point `(fx, fy, cx, cy)` in pixels.
     #[must_use]
     pub fn intrinsics(&self) -> (f64, f64, f64, f64) {

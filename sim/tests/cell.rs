@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use approx::assert_relative_eq;
 use workcell_robots::collision::link_collision_shape;
+use workcell_sim::render::Renderer as _;
 use workcell_sim::scenario::{HumanMotionKind, RobotMotionConfig};
 use workcell_sim::{CellModel, CellState, RobotCommand, Scenario, SimError, step};
 
@@ -436,5 +437,35 @@ fn corrupted_scenarios_are_errors_not_panics() {
                 let _ = CellModel::new(&scenario, &default_path());
             }
         }
+    }
+}
+
+/// The cell's scene through the renderer crate (workcell-render knows no cells).
+#[test]
+fn the_default_cell_renders_every_class_it_shows_at_any_supported_size() {
+    let model = workcell_sim::CellModel::from_file(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/default.toml"
+    ))
+    .unwrap();
+    let cell = workcell_sim::CellScene::new(&model);
+    let base = model.scenario.cameras[0].camera().unwrap();
+    let mut frame = workcell_sim::render::Frame::new();
+    for (w, h) in [(64, 64), (128, 128), (320, 240), (640, 480)] {
+        let cam = base.resized(w, h).unwrap();
+        workcell_sim::render::CpuRenderer::new()
+            .render(&cell.scene, &cam, &mut frame)
+            .unwrap();
+        let classes = frame.classes(&cell.scene);
+        for class in [
+            workcell_sim::render::Class::Background,
+            workcell_sim::render::Class::Robot,
+            workcell_sim::render::Class::Torso,
+        ] {
+            assert!(classes.contains(&(class as u8)), "{class:?} at {w}x{h}");
+        }
+        assert!(frame.depth_m.iter().all(|d| d.is_finite() && *d >= 0.0));
+        // The sky is never black: only the occluder is.
+        assert!(frame.rgb.chunks(3).all(|c| c != [0, 0, 0]));
     }
 }

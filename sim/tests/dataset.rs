@@ -110,7 +110,7 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
             // The stored occlusion is the stored masks' hidden over all forearm pixels.
             let all = amodal.iter().filter(|&&v| v == 1).count();
             let seen = (0..n).filter(|&p| visible[p] == forearm).count();
-            let label = s.labels[t].part("forearm").unwrap();
+            let label = s.labels[t].part(Class::Forearm).unwrap();
             assert_eq!(label.pixels_amodal as usize, all);
             assert_eq!(label.pixels_visible as usize, seen);
             if all > 0 {

@@ -4,10 +4,8 @@
 #![cfg(feature = "gpu")]
 
 use workcell_robots::math::{Pose, Rotation, Vector};
-use workcell_sim::render::{
-    Camera, CellScene, CpuRenderer, Frame, GpuRenderer, MaskBatch, Renderer,
-};
-use workcell_sim::{CellModel, CellState, RobotCommand, step};
+use workcell_sim::render::{Camera, CpuRenderer, Frame, GpuRenderer, MaskBatch, Renderer};
+use workcell_sim::{CellModel, CellScene, CellState, RobotCommand, step};
 
 fn agreement(a: &[u16], b: &[u16]) -> f64 {
     a.iter().zip(b).filter(|(x, y)| x == y).count() as f64 / a.len() as f64
@@ -24,7 +22,7 @@ fn both_backends_agree_on_the_object_index_of_the_default_scene() {
     .unwrap();
     let mut state = CellState::new(&model).unwrap();
     let mut cell = CellScene::new(&model);
-    let base = Camera::from_config(&model.scenario.cameras[0]).unwrap();
+    let base = model.scenario.cameras[0].camera().unwrap();
     let mut cpu = CpuRenderer::new();
     let (mut a, mut b) = (Frame::new(), Frame::new());
     for second in 0..3 {

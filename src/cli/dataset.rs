@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::{Dataset, DatasetConfig, Generator, Split, contact_sheet};
-use workcell::sim::image::{PixelKind, write_png};
 
 #[derive(Debug, clap::Args)]
 pub struct GenerateArgs {

@@ -145,7 +145,10 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
                 Ok(r) => Some(r),
                 Err(e) => {
                     if let Ok(mut slot) = first_error.lock() {
-                        slot.get_or_insert(e.context(format!("episode {episode} (seed {seed})")));
+                        slot.get_or_insert(
+                            anyhow::Error::new(e)
+                                .context(format!("episode {episode} (seed {seed})")),
+                        );
                     }
                     None
                 }
@@ -169,7 +172,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     )?;
     let m_r = effective_robot_mass_kg(robot.mass_kg(), 0.0);
     let limits: Vec<(String, f64)> = if m_r > 0.0 {
-        HumanPart::ALL
+        HumanPart::ARM
             .iter()
             .map(|&p| {
                 (

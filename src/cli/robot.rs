@@ -156,13 +156,13 @@ pub fn add(args: &AddArgs) -> Result<ExitCode> {
                 .collect(),
         );
     }
-    let (width, height, rgb) = workcell::sim::render::robot_preview(&robot, &configurations, 320)?;
+    let (width, height, rgb) = workcell::render::robot_preview(&robot, &configurations, 320)?;
     let preview = added.urdf.with_file_name("preview.png");
-    workcell::sim::image::write_png(
+    workcell::render::image::write_png(
         &preview,
         width,
         height,
-        workcell::sim::image::PixelKind::Rgb,
+        workcell::render::image::PixelKind::Rgb,
         &rgb,
     )?;
     println!(

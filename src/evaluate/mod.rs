@@ -26,6 +26,8 @@ use workcell_safety::{
 };
 use workcell_sim::{CellModel, CellState, RobotCommand, Scenario, step};
 
+use crate::error::{Error, Result};
+
 pub use perception::{
     GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig, PerceptionInput,
     PerceptionKind,
@@ -93,18 +95,27 @@ impl Evaluation {
     /// A message naming the file and the key for unreadable files, unknown keys, values out
     /// of range, and a `d_min_m` that no cell could keep (larger than the distance between
     /// the robot's and the human's bases plus their reach).
-    pub fn from_file(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", path.display()))?;
-        let config: EvaluationConfig =
-            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        let scenario_path = path.parent().unwrap_or(Path::new(".")).join(&config.cell);
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut config: EvaluationConfig = toml::from_str(&text).map_err(|e| Error::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        // Paths inside the file are relative to the file.
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let scenario_path = dir.join(&config.cell);
+        if config.perception.weights.is_relative() {
+            config.perception.weights = dir.join(&config.perception.weights);
+        }
         let mut scenario = Scenario::from_file(&scenario_path)?;
         if let Some(speed) = config.human_speed_scale {
             scenario.human.speed_scale = speed;
             scenario
                 .validate(&scenario_path)
-                .map_err(|e| anyhow::anyhow!("{}: human_speed_scale: {e}", path.display()))?;
+                .map_err(|e| Error::config("human_speed_scale", e.to_string()).in_file(path))?;
         }
         let this = Self {
             path: path.to_path_buf(),
@@ -112,18 +123,24 @@ impl Evaluation {
             scenario,
             scenario_path,
         };
-        this.validate()
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        this.validate().map_err(|e| e.in_file(path))?;
         Ok(this)
     }
 
-    fn validate(&self) -> Result<(), String> {
+    /// Checks ranges; the error names the key.
+    ///
+    /// # Errors
+    /// [`Error::Config`] naming the first value out of range.
+    pub fn validate(&self) -> Result<()> {
         let c = &self.config;
         let positive = |key: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(format!("{key}: must be finite and > 0, got {v}"))
+                Err(Error::config(
+                    key,
+                    format!("must be finite and > 0, got {v}"),
+                ))
             }
         };
         positive("task_s", c.task_s)?;
@@ -132,21 +149,26 @@ impl Evaluation {
         positive("progress_tolerance_rad", c.progress_tolerance_rad)?;
         positive("near_m", c.near_m)?;
         if !(c.timeout_factor.is_finite() && c.timeout_factor >= 1.0) {
-            return Err(format!(
-                "timeout_factor: must be >= 1, got {}",
-                c.timeout_factor
+            return Err(Error::config(
+                "timeout_factor",
+                format!("must be >= 1, got {}", c.timeout_factor),
             ));
         }
         let dt = self.scenario.time_step_s;
         let ratio = c.control_period_s / dt;
         if (ratio - ratio.round()).abs() > 1e-6 || ratio.round() < 1.0 {
-            return Err(format!(
-                "control_period_s: {} is not a multiple of the cell's time step {dt}",
-                c.control_period_s
+            return Err(Error::config(
+                "control_period_s",
+                format!(
+                    "{} is not a multiple of the cell's time step {dt}",
+                    c.control_period_s
+                ),
             ));
         }
         c.perception.validate()?;
-        c.safety.validate().map_err(|e| e.to_string())?;
+        c.safety
+            .validate()
+            .map_err(|e| Error::config("safety", e.to_string()))?;
         // The robot's base and the human's shoulder are this far apart; a d_min beyond it plus
         // both reaches (2 m each, generous) can never be kept.
         let b_r = self.scenario.robot.base.xyz;
@@ -155,9 +177,13 @@ impl Evaluation {
             ((b_r[0] - b_h[0]).powi(2) + (b_r[1] - b_h[1]).powi(2) + (b_r[2] - b_h[2]).powi(2))
                 .sqrt();
         if c.safety.d_min_m > bases + 4.0 {
-            return Err(format!(
-                "safety.d_min_m: {} m is larger than the whole cell (bases {bases:.2} m apart): no motion could keep it",
-                c.safety.d_min_m
+            return Err(Error::config(
+                "safety.d_min_m",
+                format!(
+                    "{} m is larger than the whole cell (bases {bases:.2} m apart): no motion \
+                     could keep it",
+                    c.safety.d_min_m
+                ),
             ));
         }
         Ok(())
@@ -233,7 +259,7 @@ pub fn run_episode(
     seed: u64,
     perception: Option<Box<dyn HumanPerception>>,
     mut on_tick: impl FnMut(f64),
-) -> anyhow::Result<(EpisodeMetrics, EpisodeTrace)> {
+) -> Result<(EpisodeMetrics, EpisodeTrace)> {
     let started = Instant::now();
     let c = &evaluation.config;
     let mut scenario = evaluation.scenario.clone();
@@ -302,8 +328,7 @@ pub fn run_episode(
         // Ground truth of the human, now.
         model
             .human
-            .forward_kinematics(state.human_q(), &mut human_kinematics)
-            .map_err(|e| anyhow::anyhow!("human kinematics: {e}"))?;
+            .forward_kinematics(state.human_q(), &mut human_kinematics)?;
         human_geometry.estimate_into(
             &model.human,
             &human_kinematics,
@@ -316,9 +341,7 @@ pub fn run_episode(
                 .max(p.v_a_W.length())
                 .max(p.v_b_W.length());
         }
-        robot
-            .forward_kinematics(state.q(), &mut robot_kinematics)
-            .map_err(|e| anyhow::anyhow!("robot kinematics: {e}"))?;
+        robot.forward_kinematics(state.q(), &mut robot_kinematics)?;
 
         // True separation and the robot's speed at the closest point.
         if let Some(pair) = filter

@@ -36,8 +36,8 @@ pub struct PerceptionConfig {
     /// `procnet` (the cell's camera rendered, ProcNet and render-and-compare; `rate_hz` is
     /// the camera's, the noise settings do not apply).
     pub kind: PerceptionKind,
-    /// For `procnet`: the network's weights, relative to the working directory. Default
-    /// `perception/weights/procnet-cpu.safetensors`.
+    /// For `procnet`: the network's weights, relative to the evaluation file. Default: the
+    /// shipped `perception/weights/procnet-cpu.safetensors` of this source tree.
     pub weights: std::path::PathBuf,
     /// For `procnet`: the cell's camera by name; empty for the first. Default empty.
     pub camera: String,
@@ -83,7 +83,11 @@ impl Default for PerceptionConfig {
     fn default() -> Self {
         Self {
             kind: PerceptionKind::Noisy,
-            weights: "perception/weights/procnet-cpu.safetensors".into(),
+            weights: concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/perception/weights/procnet-cpu.safetensors"
+            )
+            .into(),
             camera: String::new(),
             masks: MaskKind::Network,
             rate_hz: 30.0,
@@ -101,13 +105,16 @@ impl PerceptionConfig {
     /// Checks ranges; the error names the key.
     ///
     /// # Errors
-    /// A message `perception.<key>: ...`.
-    pub fn validate(&self) -> Result<(), String> {
+    /// [`crate::Error::Config`] with the key `perception.<key>`.
+    pub fn validate(&self) -> crate::Result<()> {
         let check = |key: &str, v: f64, ok: bool| {
             if v.is_finite() && ok {
                 Ok(())
             } else {
-                Err(format!("perception.{key}: out of range: {v}"))
+                Err(crate::Error::config(
+                    format!("perception.{key}"),
+                    format!("out of range: {v}"),
+                ))
             }
         };
         check("rate_hz", self.rate_hz, self.rate_hz > 0.0)?;
@@ -146,7 +153,7 @@ impl PerceptionConfig {
         seed: u64,
         scenario: &workcell_sim::Scenario,
         model: &CellModel,
-    ) -> anyhow::Result<Box<dyn HumanPerception>> {
+    ) -> crate::error::Result<Box<dyn HumanPerception>> {
         Ok(match self.kind {
             PerceptionKind::GroundTruth => Box::new(GroundTruth),
             PerceptionKind::Noisy => Box::new(NoisyCamera::new(self.clone(), seed)),

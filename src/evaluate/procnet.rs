@@ -7,32 +7,28 @@
 
 use std::collections::VecDeque;
 
-use anyhow::Context as _;
-use workcell_perception::pose::eval::{ForearmSetup, resize_planes};
-use workcell_perception::pose::{PoseConfig, PoseEstimator};
-use workcell_perception::{Backend, ProcNet};
+use workcell_perception::pose::PoseConfig;
+use workcell_perception::{ArmModel, ArmTracker, Backend, ProcNet};
 use workcell_safety::{Capsule, HumanEstimate, HumanPart, PartEstimate};
-use workcell_sim::render::{Camera, CellScene, CpuRenderer, Frame, Renderer};
-use workcell_sim::{CellModel, Scenario};
+use workcell_sim::render::{Camera, CpuRenderer, Frame, Renderer};
+use workcell_sim::{CellModel, CellScene, Scenario};
 
 use super::perception::{HumanPerception, MaskKind, PerceptionConfig, PerceptionInput};
-use crate::robots::math::{Pose, Vector};
+use crate::error::{Error, Result};
+use crate::robots::math::Vector;
 
-/// One measurement: world end points of each part (as the truth orders them) and the pose
-/// uncertainty.
+/// One measurement: world end points and radius of each part, and the pose uncertainty.
 #[derive(Debug, Clone)]
 struct Measured {
     parts: Vec<(HumanPart, Vector, Vector, f64)>,
     uncertainty_m: f64,
 }
 
-/// The camera, ProcNet and the pose search, as a [`HumanPerception`].
+/// The cell's camera rendered and handed to an [`ArmTracker`], as a [`HumanPerception`]:
+/// this wiring adds the camera's rate, its latency and velocities from successive frames.
 pub struct ProcNetCamera {
     config: PerceptionConfig,
-    /// The network; `None` for ground-truth masks (`perception.masks = "ground_truth"`).
-    net: Option<ProcNet>,
-    estimator: PoseEstimator<CpuRenderer>,
-    setup: ForearmSetup,
+    tracker: ArmTracker,
     camera: Camera,
     scene: CellScene,
     renderer: CpuRenderer,
@@ -50,44 +46,35 @@ impl ProcNetCamera {
     ///
     /// # Errors
     /// The scenario has no such camera, the weights do not load, the human has no forearm.
-    pub fn new(
-        config: &PerceptionConfig,
-        scenario: &Scenario,
-        model: &CellModel,
-    ) -> anyhow::Result<Self> {
+    pub fn new(config: &PerceptionConfig, scenario: &Scenario, model: &CellModel) -> Result<Self> {
         let camera_config = scenario
             .cameras
             .iter()
             .find(|c| config.camera.is_empty() || c.name == config.camera)
-            .with_context(|| {
-                format!(
-                    "perception.camera: the cell has no camera named {:?} (it has {:?})",
-                    config.camera,
-                    scenario.cameras.iter().map(|c| &c.name).collect::<Vec<_>>()
+            .ok_or_else(|| {
+                Error::config(
+                    "perception.camera",
+                    format!(
+                        "the cell has no camera named {:?} (it has {:?})",
+                        config.camera,
+                        scenario.cameras.iter().map(|c| &c.name).collect::<Vec<_>>()
+                    ),
                 )
             })?;
-        let camera = Camera::from_config(camera_config)?;
-        let net = match config.masks {
-            MaskKind::Network => Some(
-                ProcNet::load(&config.weights, Backend::Flex)
-                    .with_context(|| format!("perception.weights: {}", config.weights.display()))?,
-            ),
-            MaskKind::GroundTruth => None,
-        };
-        let setup = ForearmSetup::of_cell(model)?;
-        let estimator = PoseEstimator::new(
-            CpuRenderer::new(),
-            setup.model.clone(),
-            PoseConfig::default(),
-        );
+        let camera = camera_config
+            .camera()
+            .map_err(workcell_sim::SimError::from)?;
+        let arm = ArmModel::new(&model.human, &model.X_WH)?;
+        let mut tracker = ArmTracker::new(arm, PoseConfig::default());
+        if config.masks == MaskKind::Network {
+            tracker = tracker.with_network(ProcNet::load(&config.weights, Backend::Flex)?)?;
+        }
         Ok(Self {
             config: PerceptionConfig {
                 rate_hz: camera_config.rate_hz,
                 ..config.clone()
             },
-            net,
-            estimator,
-            setup,
+            tracker,
             camera,
             scene: CellScene::new(model),
             renderer: CpuRenderer::new(),
@@ -99,106 +86,38 @@ impl ProcNetCamera {
         })
     }
 
-    /// Renders, segments and fits one frame; `None` when there is no pose.
-    fn measure(&mut self, input: &PerceptionInput<'_>) -> anyhow::Result<Option<Measured>> {
+    /// Renders and tracks one frame; `None` when there is no estimate.
+    fn measure(&mut self, input: &PerceptionInput<'_>) -> Result<Option<Measured>> {
         self.scene.update(input.state);
         self.renderer
-            .render(&self.scene.scene, &self.camera, &mut self.frame)?;
-        let (w, h) = (self.frame.width as usize, self.frame.height as usize);
-        let n = w * h;
-        let mut planar = vec![0.0f32; 3 * n];
-        for (p, rgb) in self.frame.rgb.chunks_exact(3).enumerate() {
-            for c in 0..3 {
-                planar[c * n + p] = f32::from(rgb[c]) / 255.0;
-            }
-        }
-        let mask = match &mut self.net {
-            Some(net) => {
-                let s = net.config().input_size;
-                let masks = net.segment(&resize_planes(&planar, 3, w, h, s, s))?;
-                let forearm = masks
-                    .class("forearm")
-                    .context("the network has no forearm class")?;
-                resize_planes(forearm, 1, s, s, w, h)
-            }
-            None => {
-                // The perfect segmenter: the forearm's pixels in the frame.
-                let id = self
-                    .scene
-                    .forearm_object()
-                    .and_then(|k| u16::try_from(k + 1).ok())
-                    .context("the cell's human has no forearm")?;
-                self.frame
-                    .object
-                    .iter()
-                    .map(|&o| f32::from(u8::from(o == id)))
-                    .collect()
-            }
+            .render(&self.scene.scene, &self.camera, &mut self.frame)
+            .map_err(workcell_sim::SimError::from)?;
+        let outcome = if self.tracker.network().is_some() {
+            self.tracker.track(&self.camera, &self.frame.rgb)?
+        } else {
+            // The perfect segmenter: the forearm's pixels in the frame.
+            let id = self
+                .scene
+                .forearm_object()
+                .and_then(|k| u16::try_from(k + 1).ok())
+                .ok_or_else(|| Error::config("human.model", "the cell's human has no forearm"))?;
+            let mask: Vec<f32> = self
+                .frame
+                .object
+                .iter()
+                .map(|&o| f32::from(u8::from(o == id)))
+                .collect();
+            self.tracker.track_mask(&self.camera, &mask)?
         };
-        self.estimator
-            .set_anchor(self.setup.anchor(&self.camera.X_WC));
-        let outcome = self.estimator.estimate(&self.camera, &mask)?;
-        let Ok(pose) = outcome else {
-            return Ok(None);
-        };
-        // Carry the true forearm's and hand's capsules (the model's dimensions, in their link
-        // frames) rigidly onto the estimated forearm; the upper arm from the shoulder to the
-        // estimated elbow.
-        let X_WO: Pose = self.camera.X_WC * pose.X_CO;
-        let true_forearm = input
-            .truth
-            .parts
-            .iter()
-            .find(|p| p.part == HumanPart::Forearm)
-            .context("the human has no forearm part")?;
-        let Some(X_WO_true) = forearm_pose(&self.setup, true_forearm) else {
-            return Ok(None);
-        };
-        let carry = X_WO * X_WO_true.inverse();
-        let elbow = X_WO.transform_point(Vector::ZERO);
-        let parts = input
-            .truth
-            .parts
-            .iter()
-            .map(|p| match p.part {
-                HumanPart::UpperArm => {
-                    let shoulder = self.setup.shoulder_W.map_or(p.capsule.a_W, |(s, _)| s);
-                    (p.part, shoulder, elbow, p.capsule.radius_m)
-                }
-                _ => (
-                    p.part,
-                    carry.transform_point(p.capsule.a_W),
-                    carry.transform_point(p.capsule.b_W),
-                    p.capsule.radius_m,
-                ),
-            })
-            .collect();
-        Ok(Some(Measured {
-            parts,
-            uncertainty_m: pose.uncertainty_m,
+        Ok(outcome.ok().map(|estimate| Measured {
+            parts: estimate
+                .parts
+                .iter()
+                .map(|p| (p.part, p.a_W, p.b_W, p.radius_m))
+                .collect(),
+            uncertainty_m: estimate.uncertainty_m,
         }))
     }
-}
-
-/// A frame for the true forearm: origin at its capsule's elbow end (the end at the upper
-/// arm's length from the shoulder), the model's axis along the capsule away from the wrist.
-/// Only its axis and origin matter for carrying the forearm's and hand's capsules, which lie
-/// on that axis and are round.
-fn forearm_pose(setup: &ForearmSetup, part: &PartEstimate) -> Option<Pose> {
-    let (mut elbow, mut wrist) = (part.capsule.a_W, part.capsule.b_W);
-    if let Some((shoulder, radius)) = setup.shoulder_W {
-        let off = |p: Vector| ((p - shoulder).length() - radius).abs();
-        if off(wrist) < off(elbow) {
-            std::mem::swap(&mut elbow, &mut wrist);
-        }
-    }
-    let axis = elbow - wrist;
-    if axis.length() < 1e-9 {
-        return None;
-    }
-    let R =
-        workcell_robots::math::Rotation::from_rotation_arc(setup.model.axis_O, axis.normalize());
-    Some(Pose::from_parts(elbow, R))
 }
 
 impl HumanPerception for ProcNetCamera {
@@ -263,7 +182,7 @@ mod tests {
     use workcell_sim::{CellState, RobotCommand, step};
 
     /// The loop's conventions end to end: the cell's camera, the forearm's mask rendered at
-    /// its true pose, the anchored search, and the pose back in the world.
+    /// its true pose, the tracker with the cell's human model, and the arm back in the world.
     #[test]
     fn the_cell_camera_finds_the_forearm_it_renders() {
         let path =
@@ -271,14 +190,10 @@ mod tests {
         let scenario = Scenario::from_file(path).expect("scenario");
         let model = CellModel::new(&scenario, path).expect("cell");
         let mut state = CellState::new(&model).expect("state");
-        let setup = ForearmSetup::of_cell(&model).expect("forearm");
-        let camera = Camera::from_config(&scenario.cameras[0]).expect("camera");
-        let mut estimator = PoseEstimator::new(
-            CpuRenderer::new(),
-            setup.model.clone(),
-            PoseConfig::default(),
-        );
-        estimator.set_anchor(setup.anchor(&camera.X_WC));
+        let arm = ArmModel::new(&model.human, &model.X_WH).expect("arm");
+        let camera = scenario.cameras[0].camera().expect("camera");
+        let mesh = arm.forearm.mesh.clone();
+        let mut tracker = ArmTracker::new(arm, PoseConfig::default());
         let forearm = model.human.link_id("forearm").expect("forearm link");
         let mut batch = MaskBatch::new();
         for _ in 0..4 {
@@ -288,18 +203,21 @@ mod tests {
             let X_WO = state.human_link_poses()[forearm];
             let X_CO = camera.X_WC.inverse() * X_WO;
             CpuRenderer::new()
-                .render_masks(&setup.model.mesh, &camera, &[X_CO], &mut batch)
+                .render_masks(&mesh, &camera, &[X_CO], &mut batch)
                 .expect("render");
             let mask: Vec<f32> = batch.mask(0).iter().map(|&v| f32::from(v)).collect();
-            let pose = estimator
-                .estimate(&camera, &mask)
-                .expect("estimate")
-                .expect("a pose");
-            let found = camera.X_WC * pose.X_CO;
+            let estimate = tracker
+                .track_mask(&camera, &mask)
+                .expect("track")
+                .expect("an estimate");
             // The elbow, 2.3 m from the camera: within 10 cm (a forearm 18 pixels long
             // leaves depth to a few centimetres even when anchored; see docs/perception.md).
-            let err = (found.translation - X_WO.translation).length();
+            let err = (estimate.X_WF.translation - X_WO.translation).length();
             assert!(err < 0.10, "elbow {err} m off");
+            // The upper arm ends at the estimated elbow.
+            let upper = estimate.parts[0];
+            assert_eq!(upper.part, HumanPart::UpperArm);
+            assert!((upper.b_W - estimate.X_WF.translation).length() < 1e-12);
         }
     }
 }

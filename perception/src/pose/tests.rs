@@ -1,18 +1,27 @@
 use std::sync::Arc;
 
+use workcell_render::{Camera, CpuRenderer, MaskBatch, RenderMesh, Renderer};
+use workcell_robots::RobotModel;
 use workcell_robots::math::{Pose, Rotation, Vector, pose_from_xyz_rpy};
-use workcell_sim::render::{Camera, CellScene, CpuRenderer, MaskBatch, Renderer};
-use workcell_sim::{CellModel, Scenario};
 
+use super::image::blobs;
 use super::*;
+use crate::error::PerceptionError;
 
 /// The forearm of the built-in human arm (two bones, 25 cm).
 fn forearm() -> RigidModel {
-    let model = CellModel::new(&Scenario::default(), std::path::Path::new("inline.toml"))
-        .expect("default scenario");
-    let cell = CellScene::new(&model);
-    let k = cell.forearm_object().expect("the human arm has a forearm");
-    RigidModel::new(Arc::clone(&cell.scene.objects[k].mesh)).expect("mesh")
+    let human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+    let forearm = human
+        .link_id("forearm")
+        .expect("the human arm has a forearm");
+    let mut mesh = RenderMesh::default();
+    for g in &human.links()[forearm].visuals {
+        mesh.append(
+            &RenderMesh::from_geometry(g, [0.85, 0.72, 0.62]),
+            &Pose::IDENTITY,
+        );
+    }
+    RigidModel::new(Arc::new(mesh)).expect("mesh")
 }
 
 /// A 128x128 camera with the field of view the dataset uses at `distance_m`.

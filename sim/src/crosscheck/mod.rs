@@ -61,7 +61,7 @@ pub enum CrosscheckError {
     Sim(#[from] SimError),
     #[error(transparent)]
     Robot(#[from] workcell_robots::RobotError),
-    #[error("{path}: {source}")]
+    #[error("{path}: cannot read or write")]
     Io {
         path: PathBuf,
         #[source]

@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
-use crate::occlusion::OccluderKind;
 use crate::scenario::{parse_toml, read_text};
+use workcell_render::occlusion::OccluderKind;
 
 /// A camera distance class: cameras between `range_m` from the cell centre, with a field of
 /// view that narrows with distance like a zoom lens (the cell stays in frame but looks

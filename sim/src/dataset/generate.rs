@@ -9,17 +9,19 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use workcell_robots::math::{Pose, Vector};
 
+use workcell_render::dataset::{
+    CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, SequenceEntry,
+    Split, frame_files, sequence_dir,
+};
+use workcell_render::image::{PixelKind, encode_png, write_atomic};
+use workcell_render::occlusion::{Occluder, OccluderKind, PartPixels, fit_occluder};
+use workcell_render::{Backend, Camera, Class, Frame, MaskBatch, RenderError, Renderer};
+
 use crate::cell::{CellModel, CellState, RobotCommand, step};
 use crate::dataset::config::DatasetConfig;
-use crate::dataset::labels::{
-    CameraLabel, FORMAT, FrameLabels, Manifest, PartLabel, PoseLabel, SequenceEntry, Split,
-};
 use crate::error::{Result, SimError};
-use crate::image::{PixelKind, encode_png, write_atomic};
-use crate::occlusion::{Occluder, OccluderKind, PartPixels, fit_occluder};
-use crate::render::cpu::{Affine, Projection, draw_mask};
-use crate::render::{Camera, CellScene, Class, CpuRenderer, Frame, Renderer};
 use crate::scenario::Scenario;
+use crate::scene::CellScene;
 
 /// The classes stored per frame, in the order of [`FrameLabels::parts`].
 const PARTS: [Class; 5] = [
@@ -92,6 +94,8 @@ pub struct Report {
 #[derive(Debug, Clone)]
 pub struct Generator {
     pub config: DatasetConfig,
+    /// The renderer backend; [`Backend::Cpu`] unless set with [`Generator::with_backend`].
+    pub backend: Backend,
     scenario: Scenario,
     scenario_path: PathBuf,
 }
@@ -109,6 +113,21 @@ struct Tick {
 struct Episode {
     model: CellModel,
     ticks: Vec<Tick>,
+}
+
+/// The occluder of a sequence before it is sized per frame (drawn once per sequence).
+#[derive(Debug, Clone, Copy)]
+struct SequenceOcclusion {
+    kind: OccluderKind,
+    /// The occlusion of the forearm it is sized to.
+    target: f64,
+    angle: f64,
+    /// Turn per frame, rad.
+    spin: f64,
+    aspect: f64,
+    offset_dir: f64,
+    offset_len: f64,
+    drift_dir: f64,
 }
 
 /// One camera draw of a sequence: its start, camera and unoccluded frames with the
@@ -144,9 +163,18 @@ impl Generator {
         let scenario = Scenario::from_file(&scenario_path)?;
         Ok(Self {
             config,
+            backend: Backend::Cpu,
             scenario,
             scenario_path,
         })
+    }
+
+    /// The same generator rendering with `backend` (the GPU's pixels differ from the CPU's
+    /// where its rasterizer rounds differently, so the bytes are those of that backend).
+    #[must_use]
+    pub fn with_backend(mut self, backend: Backend) -> Self {
+        self.backend = backend;
+        self
     }
 
     /// Reads a configuration file and makes its generator.
@@ -217,11 +245,16 @@ impl Generator {
         Ok(Episode { model, ticks })
     }
 
-    /// Generates sequence `index` in memory.
+    /// Generates sequence `index` in memory, rendering with `renderer`.
     ///
     /// # Errors
     /// [`SimError`] from the simulation or the renderer.
-    pub fn sequence(&self, index: usize, timing: &mut Timing) -> Result<GeneratedSequence> {
+    pub fn sequence(
+        &self,
+        index: usize,
+        renderer: &mut dyn Renderer,
+        timing: &mut Timing,
+    ) -> Result<GeneratedSequence> {
         let c = &self.config;
         let seed = self.sequence_seed(index);
         let (d_class, level, split) = self.plan(index);
@@ -234,6 +267,54 @@ impl Generator {
             path: self.scenario_path.clone(),
             message: "the human model has no link named forearm".into(),
         })?;
+        let draw = self.draw(&episode, &mut cell, forearm, seed, d_class, level, renderer)?;
+        timing.render += t.elapsed();
+
+        let t = Instant::now();
+        let occlusion = self.occlusion(seed, level);
+        let mut out = Vec::with_capacity(c.frames);
+        for f in 0..draw.frames.len() {
+            let frame = self.occluded_frame(
+                &episode, &mut cell, &draw, &occlusion, index, d_class, level, f, renderer,
+            )?;
+            out.push(frame);
+        }
+        timing.occlusion += t.elapsed();
+        let forearm_occlusion: Vec<f64> = out
+            .iter()
+            .filter_map(|f| f.labels.part(Class::Forearm).and_then(|p| p.occlusion))
+            .collect();
+        let entry = SequenceEntry {
+            index,
+            dir: sequence_dir(index),
+            seed,
+            attempts: draw.attempts,
+            distance_class: c.distances[d_class].name.clone(),
+            occlusion_level: c.occlusion_levels[level].name.clone(),
+            split,
+            frames: c.frames,
+            mean_forearm_occlusion: (!forearm_occlusion.is_empty())
+                .then(|| forearm_occlusion.iter().sum::<f64>() / forearm_occlusion.len() as f64),
+            frames_without_forearm: c.frames - forearm_occlusion.len(),
+        };
+        Ok(GeneratedSequence { entry, frames: out })
+    }
+
+    /// Draws the sequence's start and camera until the forearm is in view and not too hidden
+    /// by the scene in every frame (or keeps the best of `attempts` draws), rendering its
+    /// unoccluded frames and the forearm's amodal masks.
+    #[allow(clippy::too_many_arguments)]
+    fn draw(
+        &self,
+        episode: &Episode,
+        cell: &mut CellScene,
+        forearm: usize,
+        seed: u64,
+        d_class: usize,
+        level: usize,
+        renderer: &mut dyn Renderer,
+    ) -> Result<Draw> {
+        let c = &self.config;
         let model = &episode.model;
         // The cell centre: between the robot's base and the human's shoulder.
         let shoulder = cell
@@ -243,11 +324,10 @@ impl Generator {
             .find(|(o, _)| o.is_some_and(|k| cell.scene.objects[k].class == Class::UpperArm))
             .map_or(model.X_WH.translation, |(_, X)| X.translation);
         let centre = 0.5 * (model.X_WR.translation + shoulder);
-
         let distance = &c.distances[d_class];
         let range = c.occlusion_levels[level].range;
-        let mut renderer = CpuRenderer::new();
         let mut frame = Frame::new();
+        let mut masks = MaskBatch::new();
         let mut best: Option<Draw> = None;
         for attempt in 0..c.attempts {
             let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ mix(attempt as u64 + 0x5eed)));
@@ -290,7 +370,7 @@ impl Generator {
                 let (robot, human) = (&tick.robot, &tick.human);
                 cell.set_link_poses(robot, human);
                 renderer.render(&cell.scene, &camera, &mut frame)?;
-                let amodal = amodal_mask(&cell, &camera, &[forearm]);
+                let amodal = amodal_mask(cell, &camera, &[forearm], renderer, &mut masks)?;
                 let shown: Vec<bool> = frame
                     .object
                     .iter()
@@ -318,25 +398,17 @@ impl Generator {
                 break;
             }
         }
-        timing.render += t.elapsed();
-        let Some(Draw {
-            attempts,
-            first_tick,
-            camera,
-            distance_m: d,
-            frames,
-            ..
-        }) = best
-        else {
-            return Err(SimError::Dataset {
-                path: self.scenario_path.clone(),
-                message: "no attempt was made".into(),
-            });
-        };
+        best.ok_or_else(|| SimError::Dataset {
+            path: self.scenario_path.clone(),
+            message: "no attempt was made".into(),
+        })
+    }
 
-        // The occluder: one shape per sequence, sized per frame to the target occlusion,
-        // following the forearm and drifting across it.
-        let t = Instant::now();
+    /// The sequence's occluder, before it is sized per frame: one shape per sequence that
+    /// follows the forearm and drifts across it, and the occlusion it is sized to.
+    fn occlusion(&self, seed: u64, level: usize) -> SequenceOcclusion {
+        let c = &self.config;
+        let range = c.occlusion_levels[level].range;
         let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0x0cc1_0de5));
         let kind = c.occluders[rng.random_range(0..c.occluders.len())];
         let margin = 0.02_f64.min(0.25 * (range[1] - range[0]));
@@ -348,153 +420,172 @@ impl Generator {
         let offset_dir = rng.random_range(0.0..std::f64::consts::TAU);
         let offset_len = rng.random_range(0.0..=0.5);
         let drift_dir = rng.random_range(0.0..std::f64::consts::TAU);
+        SequenceOcclusion {
+            kind,
+            target,
+            angle,
+            spin,
+            aspect,
+            offset_dir,
+            offset_len,
+            drift_dir,
+        }
+    }
+
+    /// Frame `f` of a draw with its occluder fitted to the target occlusion, and its labels.
+    #[allow(clippy::too_many_arguments)]
+    fn occluded_frame(
+        &self,
+        episode: &Episode,
+        cell: &mut CellScene,
+        draw: &Draw,
+        occlusion: &SequenceOcclusion,
+        index: usize,
+        d_class: usize,
+        level: usize,
+        f: usize,
+        renderer: &mut dyn Renderer,
+    ) -> Result<GeneratedFrame> {
+        let c = &self.config;
+        let model = &episode.model;
+        let forearm = cell.forearm_object().unwrap_or(0);
+        let range = c.occlusion_levels[level].range;
         let (w, h) = (c.width_px, c.height_px);
         let n = w as usize * h as usize;
-        let mut out = Vec::with_capacity(c.frames);
-        for (f, (frame, amodal)) in frames.into_iter().enumerate() {
-            let Tick {
-                time_s,
-                robot,
-                human,
-                robot_q,
-                human_q,
-            } = &episode.ticks[first_tick + f];
-            cell.set_link_poses(robot, human);
+        let SequenceOcclusion {
+            kind,
+            target,
+            angle,
+            spin,
+            aspect,
+            offset_dir,
+            offset_len,
+            drift_dir,
+        } = *occlusion;
+        let camera = &draw.camera;
+        let (frame, amodal) = &draw.frames[f];
+        let mut masks = MaskBatch::new();
+        let Tick {
+            time_s,
+            robot,
+            human,
+            robot_q,
+            human_q,
+        } = &episode.ticks[draw.first_tick + f];
+        cell.set_link_poses(robot, human);
+        let shown: Vec<bool> = frame
+            .object
+            .iter()
+            .map(|&o| usize::from(o) == forearm + 1)
+            .collect();
+        let (centroid, extent) = centroid_extent(amodal, w);
+        let progress = if c.frames > 1 {
+            f as f64 / (c.frames - 1) as f64 - 0.5
+        } else {
+            0.0
+        };
+        let shift = extent * (offset_len * 0.5);
+        let drift = extent * c.occluder_drift * progress;
+        let base = Occluder {
+            kind,
+            centre_px: [
+                centroid[0] + shift * offset_dir.cos() + drift * drift_dir.cos(),
+                centroid[1] + shift * offset_dir.sin() + drift * drift_dir.sin(),
+            ],
+            size_px: match kind {
+                OccluderKind::Blob => [1.0, 1.0 / aspect],
+                OccluderKind::Bar => [1.0, 0.0],
+            },
+            angle_rad: angle + spin * f as f64,
+        };
+        // A shape lying along the thin forearm can jump past the level in one step of
+        // its size; turn it until the fitted occlusion lands in the level.
+        let max_scale = 2.0 * f64::from(w + h);
+        let mut fitted = fit_occluder(&base, target, max_scale, w, amodal, &shown);
+        for k in 1..8 {
+            if fitted.1.is_none_or(|o| o >= range[0] && o <= range[1]) {
+                break;
+            }
+            let turned = Occluder {
+                angle_rad: base.angle_rad + f64::from(k) * std::f64::consts::PI / 8.0,
+                ..base
+            };
+            let candidate = fit_occluder(&turned, target, max_scale, w, amodal, &shown);
+            let miss = |o: Option<f64>| o.map_or(f64::MAX, |o| (o - target).abs());
+            if miss(candidate.1) < miss(fitted.1) {
+                fitted = candidate;
+            }
+        }
+        let occluder = fitted.0;
+        let occluder_mask = occluder.mask(w, h);
+        let classes = frame.classes(&cell.scene);
+        let mut rgb = frame.rgb.clone();
+        let mut visible = classes.clone();
+        for p in 0..n {
+            if occluder_mask[p] != 0 {
+                rgb[3 * p..3 * p + 3].fill(0);
+                visible[p] = 0;
+            }
+        }
+        let X_CW = camera.X_WC.inverse();
+        let mut parts = Vec::with_capacity(PARTS.len());
+        for class in PARTS {
+            let objects: Vec<usize> = (0..cell.scene.objects.len())
+                .filter(|&k| cell.scene.objects[k].class == class)
+                .collect();
+            let amodal = if class == Class::Forearm {
+                amodal.clone()
+            } else {
+                amodal_mask(cell, camera, &objects, renderer, &mut masks)?
+            };
             let shown: Vec<bool> = frame
                 .object
                 .iter()
-                .map(|&o| usize::from(o) == forearm + 1)
+                .map(|&o| o != 0 && cell.scene.objects[usize::from(o) - 1].class == class)
                 .collect();
-            let (centroid, extent) = centroid_extent(&amodal, w);
-            let progress = if c.frames > 1 {
-                f as f64 / (c.frames - 1) as f64 - 0.5
-            } else {
-                0.0
-            };
-            let shift = extent * (offset_len * 0.5);
-            let drift = extent * c.occluder_drift * progress;
-            let base = Occluder {
-                kind,
-                centre_px: [
-                    centroid[0] + shift * offset_dir.cos() + drift * drift_dir.cos(),
-                    centroid[1] + shift * offset_dir.sin() + drift * drift_dir.sin(),
-                ],
-                size_px: match kind {
-                    OccluderKind::Blob => [1.0, 1.0 / aspect],
-                    OccluderKind::Bar => [1.0, 0.0],
-                },
-                angle_rad: angle + spin * f as f64,
-            };
-            // A shape lying along the thin forearm can jump past the level in one step of
-            // its size; turn it until the fitted occlusion lands in the level.
-            let max_scale = 2.0 * f64::from(w + h);
-            let mut fitted = fit_occluder(&base, target, max_scale, w, &amodal, &shown);
-            for k in 1..8 {
-                if fitted.1.is_none_or(|o| o >= range[0] && o <= range[1]) {
-                    break;
-                }
-                let turned = Occluder {
-                    angle_rad: base.angle_rad + f64::from(k) * std::f64::consts::PI / 8.0,
-                    ..base
-                };
-                let candidate = fit_occluder(&turned, target, max_scale, w, &amodal, &shown);
-                let miss = |o: Option<f64>| o.map_or(f64::MAX, |o| (o - target).abs());
-                if miss(candidate.1) < miss(fitted.1) {
-                    fitted = candidate;
-                }
-            }
-            let occluder = fitted.0;
-            let occluder_mask = occluder.mask(w, h);
-            let classes = frame.classes(&cell.scene);
-            let mut rgb = frame.rgb.clone();
-            let mut visible = classes.clone();
-            for p in 0..n {
-                if occluder_mask[p] != 0 {
-                    rgb[3 * p..3 * p + 3].fill(0);
-                    visible[p] = 0;
-                }
-            }
-            let X_CW = camera.X_WC.inverse();
-            let parts = PARTS
-                .iter()
-                .map(|&class| {
-                    let objects: Vec<usize> = (0..cell.scene.objects.len())
-                        .filter(|&k| cell.scene.objects[k].class == class)
-                        .collect();
-                    let amodal = if class == Class::Forearm {
-                        amodal.clone()
-                    } else {
-                        amodal_mask(&cell, &camera, &objects)
-                    };
-                    let shown: Vec<bool> = frame
-                        .object
-                        .iter()
-                        .map(|&o| o != 0 && cell.scene.objects[usize::from(o) - 1].class == class)
-                        .collect();
-                    let pixels = PartPixels::count(&amodal, &shown, &occluder_mask);
-                    let (link, X_WP) = part_frame(&cell, model, class, robot, human);
-                    PartLabel {
-                        class: class.name().into(),
-                        link,
-                        X_CP: PoseLabel::from(&(X_CW * X_WP)),
-                        pixels_amodal: pixels.amodal,
-                        pixels_unoccluded: pixels.unoccluded,
-                        pixels_visible: pixels.visible,
-                        occlusion: pixels.occlusion(),
-                        natural_occlusion: pixels.natural_occlusion(),
-                    }
-                })
-                .collect();
-            let labels = FrameLabels {
-                sequence: index,
-                frame: f,
-                time_s: *time_s,
-                distance_class: distance.name.clone(),
-                distance_m: d,
-                occlusion_level: c.occlusion_levels[level].name.clone(),
-                target_occlusion: target,
-                occluder,
-                camera: CameraLabel {
-                    width_px: w,
-                    height_px: h,
-                    fx: camera.fx,
-                    fy: camera.fy,
-                    cx: camera.cx,
-                    cy: camera.cy,
-                    X_WC: PoseLabel::from(&camera.X_WC),
-                },
-                parts,
-                robot_q: robot_q.clone(),
-                human_q: human_q.clone(),
-            };
-            out.push(GeneratedFrame {
-                rgb,
-                classes,
-                visible,
-                occluder: occluder_mask,
-                amodal_forearm: amodal,
-                labels,
+            let pixels = PartPixels::count(&amodal, &shown, &occluder_mask);
+            let (link, X_WP) = part_frame(cell, model, class, robot, human);
+            parts.push(PartLabel {
+                class,
+                link,
+                X_CP: PoseLabel::from(&(X_CW * X_WP)),
+                pixels_amodal: pixels.amodal,
+                pixels_unoccluded: pixels.unoccluded,
+                pixels_visible: pixels.visible,
+                occlusion: pixels.occlusion(),
+                natural_occlusion: pixels.natural_occlusion(),
             });
         }
-        timing.occlusion += t.elapsed();
-        let forearm_occlusion: Vec<f64> = out
-            .iter()
-            .filter_map(|f| f.labels.part("forearm").and_then(|p| p.occlusion))
-            .collect();
-        let entry = SequenceEntry {
-            index,
-            dir: sequence_dir(index),
-            seed,
-            attempts,
-            distance_class: distance.name.clone(),
+        let labels = FrameLabels {
+            sequence: index,
+            frame: f,
+            time_s: *time_s,
+            distance_class: c.distances[d_class].name.clone(),
+            distance_m: draw.distance_m,
             occlusion_level: c.occlusion_levels[level].name.clone(),
-            split,
-            frames: c.frames,
-            mean_forearm_occlusion: (!forearm_occlusion.is_empty())
-                .then(|| forearm_occlusion.iter().sum::<f64>() / forearm_occlusion.len() as f64),
-            frames_without_forearm: c.frames - forearm_occlusion.len(),
+            target_occlusion: target,
+            occluder,
+            camera: CameraLabel {
+                width_px: w,
+                height_px: h,
+                fx: camera.fx,
+                fy: camera.fy,
+                cx: camera.cx,
+                cy: camera.cy,
+                X_WC: PoseLabel::from(&camera.X_WC),
+            },
+            parts,
+            robot_q: robot_q.clone(),
+            human_q: human_q.clone(),
         };
-        Ok(GeneratedSequence { entry, frames: out })
+        Ok(GeneratedFrame {
+            rgb,
+            classes,
+            visible,
+            occluder: occluder_mask,
+            amodal_forearm: amodal.clone(),
+            labels,
+        })
     }
 
     /// The manifest of this configuration with `sequences`.
@@ -504,7 +595,14 @@ impl Generator {
             generator: format!("workcell-sim {}", env!("CARGO_PKG_VERSION")),
             config: self.config.to_toml(),
             scenario: self.scenario.to_toml(),
-            classes: Class::ALL.iter().map(|c| c.name().to_string()).collect(),
+            classes: Class::ALL.to_vec(),
+            human: Some(HumanLabel {
+                model: Scenario::resolve_model_path(
+                    &self.scenario.human.model,
+                    &self.scenario_path,
+                ),
+                X_WH: PoseLabel::from(&self.scenario.human.base.to_pose()),
+            }),
             width_px: self.config.width_px,
             height_px: self.config.height_px,
             sequences,
@@ -543,20 +641,31 @@ impl Generator {
         let done = std::sync::atomic::AtomicUsize::new(0);
         let results: Vec<Result<(SequenceEntry, Timing, bool)>> = (0..self.config.sequence_count())
             .into_par_iter()
-            .map(|index| {
-                let dir = out.join(sequence_dir(index));
-                let entry_path = dir.join("sequence.json");
-                let result = if entry_path.exists() {
-                    read_entry(&entry_path).map(|e| (e, Timing::default(), false))
-                } else {
-                    let mut timing = Timing::default();
-                    self.sequence(index, &mut timing).and_then(|s| {
-                        write_sequence(out, &s, &mut timing).map(|()| (s.entry, timing, true))
-                    })
-                };
-                progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
-                result
-            })
+            .map_init(
+                || self.backend.renderer().map_err(|e| e.to_string()),
+                |renderer, index| {
+                    let dir = out.join(sequence_dir(index));
+                    let entry_path = dir.join("sequence.json");
+                    let result = if entry_path.exists() {
+                        read_entry(&entry_path).map(|e| (e, Timing::default(), false))
+                    } else {
+                        let mut timing = Timing::default();
+                        match renderer {
+                            Ok(renderer) => self
+                                .sequence(index, renderer.as_mut(), &mut timing)
+                                .and_then(|s| {
+                                    write_sequence(out, &s, &mut timing)
+                                        .map(|()| (s.entry, timing, true))
+                                }),
+                            Err(message) => Err(SimError::Render(RenderError::Gpu {
+                                message: message.clone(),
+                            })),
+                        }
+                    };
+                    progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
+                    result
+                },
+            )
             .collect();
         let mut entries = Vec::with_capacity(results.len());
         let (mut timing, mut generated) = (Timing::default(), 0);
@@ -578,32 +687,6 @@ impl Generator {
             timing,
         })
     }
-}
-
-/// The folder of sequence `index`.
-#[must_use]
-pub fn sequence_dir(index: usize) -> String {
-    format!("seq_{index:05}")
-}
-
-/// The file names of frame `f`: rgb, class, visible, occluder, amodal PNGs and the labels.
-#[must_use]
-pub fn frame_files(f: usize) -> [String; 6] {
-    [
-        "rgb.png",
-        "class.png",
-        "visible.png",
-        "occluder.png",
-        "amodal.png",
-        "json",
-    ]
-    .map(|s| {
-        if s == "json" {
-            format!("frame_{f:03}.json")
-        } else {
-            format!("frame_{f:03}_{s}")
-        }
-    })
 }
 
 fn read_entry(path: &Path) -> Result<SequenceEntry> {
@@ -672,22 +755,23 @@ fn write_sequence(out: &Path, s: &GeneratedSequence, timing: &mut Timing) -> Res
 }
 
 /// Union of the masks of `objects` (indices into the scene) rendered alone.
-fn amodal_mask(cell: &CellScene, camera: &Camera, objects: &[usize]) -> Vec<u8> {
-    let proj = Projection::new(camera);
+fn amodal_mask(
+    cell: &CellScene,
+    camera: &Camera,
+    objects: &[usize],
+    renderer: &mut dyn Renderer,
+    masks: &mut MaskBatch,
+) -> Result<Vec<u8>> {
     let mut mask = vec![0u8; camera.width as usize * camera.height as usize];
-    let mut scratch = Vec::new();
     let X_CW = camera.X_WC.inverse();
     for &k in objects {
         let o = &cell.scene.objects[k];
-        draw_mask(
-            &proj,
-            &o.mesh,
-            &Affine::from_pose(&(X_CW * o.X_WO)),
-            &mut scratch,
-            &mut mask,
-        );
+        renderer.render_masks(&o.mesh, camera, &[X_CW * o.X_WO], masks)?;
+        for (m, &v) in mask.iter_mut().zip(masks.mask(0)) {
+            *m |= v;
+        }
     }
-    mask
+    Ok(mask)
 }
 
 /// Centroid and diagonal extent (px) of a mask; the image centre and 1 if empty.

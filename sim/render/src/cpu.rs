@@ -3,8 +3,8 @@
 use rayon::prelude::*;
 use workcell_robots::math::Pose;
 
-use crate::error::{Result, SimError};
-use crate::render::{
+use crate::error::{RenderError, Result};
+use crate::{
     Camera, Frame, MaskBatch, NEAR_M, RenderMesh, Renderer, SUBPIXEL_BITS, Scene, pose_is_finite,
 };
 
@@ -294,7 +294,7 @@ pub(crate) fn to_srgb(table: &[u8; 4096], l: f32) -> u8 {
 /// Checks the poses of a scene's objects.
 pub(crate) fn check_scene(scene: &Scene) -> Result<()> {
     if scene.objects.len() >= usize::from(u16::MAX) {
-        return Err(SimError::InvalidRender {
+        return Err(RenderError::InvalidRender {
             message: format!(
                 "{} objects; at most {} can be indexed",
                 scene.objects.len(),
@@ -303,7 +303,7 @@ pub(crate) fn check_scene(scene: &Scene) -> Result<()> {
         });
     }
     match scene.objects.iter().find(|o| !pose_is_finite(&o.X_WO)) {
-        Some(o) => Err(SimError::InvalidRender {
+        Some(o) => Err(RenderError::InvalidRender {
             message: format!("object {} has a pose that is not finite", o.name),
         }),
         None => Ok(()),
@@ -313,7 +313,7 @@ pub(crate) fn check_scene(scene: &Scene) -> Result<()> {
 /// Checks the poses of a mask batch.
 pub(crate) fn check_poses(X_CO: &[Pose]) -> Result<()> {
     match X_CO.iter().position(|X| !pose_is_finite(X)) {
-        Some(k) => Err(SimError::InvalidRender {
+        Some(k) => Err(RenderError::InvalidRender {
             message: format!("mask pose {k} is not finite"),
         }),
         None => Ok(()),

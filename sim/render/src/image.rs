@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::error::{Result, SimError};
+use crate::error::{RenderError, Result};
 
 /// Pixel layouts this crate writes and reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -24,8 +24,8 @@ impl PixelKind {
     }
 }
 
-fn dataset_error(path: &Path, message: impl std::fmt::Display) -> SimError {
-    SimError::Dataset {
+fn dataset_error(path: &Path, message: impl std::fmt::Display) -> RenderError {
+    RenderError::Dataset {
         path: path.to_path_buf(),
         message: message.to_string(),
     }
@@ -34,11 +34,11 @@ fn dataset_error(path: &Path, message: impl std::fmt::Display) -> SimError {
 /// Encodes an 8-bit image as PNG (fast compression: encoding is on the dataset's hot path).
 ///
 /// # Errors
-/// [`SimError::InvalidRender`] when `data` does not have `width * height` pixels.
+/// [`RenderError::InvalidRender`] when `data` does not have `width * height` pixels.
 pub fn encode_png(width: u32, height: u32, kind: PixelKind, data: &[u8]) -> Result<Vec<u8>> {
     if data.len() != width as usize * height as usize * kind.channels() || width == 0 || height == 0
     {
-        return Err(SimError::InvalidRender {
+        return Err(RenderError::InvalidRender {
             message: format!(
                 "{} bytes do not make a {width}x{height} image of {} channel(s)",
                 data.len(),
@@ -57,12 +57,12 @@ pub fn encode_png(width: u32, height: u32, kind: PixelKind, data: &[u8]) -> Resu
         encoder.set_compression(png::Compression::Fast);
         let mut writer = encoder
             .write_header()
-            .map_err(|e| SimError::InvalidRender {
+            .map_err(|e| RenderError::InvalidRender {
                 message: e.to_string(),
             })?;
         writer
             .write_image_data(data)
-            .map_err(|e| SimError::InvalidRender {
+            .map_err(|e| RenderError::InvalidRender {
                 message: e.to_string(),
             })?;
     }
@@ -72,7 +72,7 @@ pub fn encode_png(width: u32, height: u32, kind: PixelKind, data: &[u8]) -> Resu
 /// Decodes an 8-bit grey or RGB PNG into `(width, height, kind, pixels)`.
 ///
 /// # Errors
-/// [`SimError::Dataset`] naming `path` for a file that is not such a PNG.
+/// [`RenderError::Dataset`] naming `path` for a file that is not such a PNG.
 pub fn decode_png(bytes: &[u8], path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
     let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     let mut reader = decoder
@@ -103,9 +103,9 @@ pub fn decode_png(bytes: &[u8], path: &Path) -> Result<(u32, u32, PixelKind, Vec
 /// Reads a PNG file.
 ///
 /// # Errors
-/// [`SimError::Io`] or [`SimError::Dataset`] naming the file.
+/// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file.
 pub fn read_png(path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
-    let bytes = std::fs::read(path).map_err(|source| SimError::Io {
+    let bytes = std::fs::read(path).map_err(|source| RenderError::Io {
         path: path.to_path_buf(),
         source,
     })?;
@@ -115,9 +115,9 @@ pub fn read_png(path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
 /// Writes `bytes` to `path` atomically: into a temporary file beside it, synced, then renamed.
 ///
 /// # Errors
-/// [`SimError::Io`] naming the file.
+/// [`RenderError::Io`] naming the file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let io = |source| SimError::Io {
+    let io = |source| RenderError::Io {
         path: path.to_path_buf(),
         source,
     };

@@ -6,9 +6,9 @@ use std::sync::Arc;
 use workcell_robots::RobotModel;
 use workcell_robots::math::{Pose, Vector};
 
-use super::scene::link_objects;
-use super::{Camera, Class, CpuRenderer, Frame, RenderMesh, Renderer, Scene, SceneObject};
-use crate::error::{Result, SimError};
+use crate::error::{RenderError, Result};
+use crate::scene::link_objects;
+use crate::{Camera, Class, CpuRenderer, Frame, RenderMesh, Renderer, Scene, SceneObject};
 
 /// Renders `robot` (base at the origin, on a floor) at each configuration of `configurations`
 /// into square tiles of `tile_px` pixels, two per row; returns `(width, height, sRGB bytes)`.
@@ -16,8 +16,8 @@ use crate::error::{Result, SimError};
 /// right and above, far enough to see them all.
 ///
 /// # Errors
-/// [`SimError::InvalidCommand`] for a configuration that does not fit the robot,
-/// [`SimError::InvalidRender`] for a tile size the camera refuses.
+/// [`RenderError::InvalidRender`] for a configuration that does not fit the robot,
+/// [`RenderError::InvalidRender`] for a tile size the camera refuses.
 pub fn robot_preview(
     robot: &RobotModel,
     configurations: &[Vec<f64>],
@@ -27,7 +27,7 @@ pub fn robot_preview(
     for q in configurations {
         let fk = robot
             .fk(Pose::IDENTITY, q)
-            .map_err(|e| SimError::InvalidCommand {
+            .map_err(|e| RenderError::InvalidRender {
                 message: e.to_string(),
             })?;
         poses.push(fk.link_poses().to_vec());

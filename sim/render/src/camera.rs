@@ -3,9 +3,8 @@
 use parry3d_f64::glamx::DMat3;
 use workcell_robots::math::{Pose, Rotation, Vector};
 
-use crate::error::{Result, SimError};
-use crate::render::pose_is_finite;
-use crate::scenario::CameraConfig;
+use crate::error::{RenderError, Result};
+use crate::pose_is_finite;
 
 /// Largest image side accepted, px.
 pub const MAX_SIDE_PX: u32 = 4096;
@@ -28,7 +27,7 @@ impl Camera {
     /// pixels and the principal point at the image centre.
     ///
     /// # Errors
-    /// [`SimError::InvalidRender`] for a size of zero or above 4096 px, a field of view
+    /// [`RenderError::InvalidRender`] for a size of zero or above 4096 px, a field of view
     /// outside (0, 180) degrees, non-finite numbers, `eye == target`, or `up` parallel to
     /// the viewing direction.
     pub fn look_at(
@@ -39,7 +38,7 @@ impl Camera {
         height: u32,
         fov_y_deg: f64,
     ) -> Result<Self> {
-        let invalid = |message: String| SimError::InvalidRender { message };
+        let invalid = |message: String| RenderError::InvalidRender { message };
         check_size(width, height)?;
         if !(fov_y_deg.is_finite() && fov_y_deg > 0.0 && fov_y_deg < 180.0) {
             return Err(invalid(format!(
@@ -76,25 +75,17 @@ impl Camera {
         })
     }
 
-    /// The camera of a scenario.
-    ///
-    /// # Errors
-    /// As [`Camera::look_at`].
-    pub fn from_config(c: &CameraConfig) -> Result<Self> {
-        Self::look_at(c.eye, c.target, c.up, c.width_px, c.height_px, c.fov_y_deg)
-    }
-
     /// Checks that the camera can be rendered from.
     ///
     /// # Errors
-    /// [`SimError::InvalidRender`] naming what is wrong.
+    /// [`RenderError::InvalidRender`] naming what is wrong.
     pub fn validate(&self) -> Result<()> {
         check_size(self.width, self.height)?;
         let finite = [self.fx, self.fy, self.cx, self.cy]
             .iter()
             .all(|v| v.is_finite());
         if !finite || self.fx <= 0.0 || self.fy <= 0.0 || !pose_is_finite(&self.X_WC) {
-            return Err(SimError::InvalidRender {
+            return Err(RenderError::InvalidRender {
                 message: format!(
                     "camera intrinsics ({}, {}, {}, {}) or pose not finite and positive",
                     self.fx, self.fy, self.cx, self.cy
@@ -140,7 +131,7 @@ impl Camera {
 
 fn check_size(width: u32, height: u32) -> Result<()> {
     if width == 0 || height == 0 || width > MAX_SIDE_PX || height > MAX_SIDE_PX {
-        return Err(SimError::InvalidRender {
+        return Err(RenderError::InvalidRender {
             message: format!("image size {width}x{height} is not within 1..={MAX_SIDE_PX} px"),
         });
     }

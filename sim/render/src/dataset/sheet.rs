@@ -1,8 +1,8 @@
 //! The contact sheet: a PNG to look at a dataset.
 
+use crate::Class;
 use crate::dataset::load::Dataset;
 use crate::error::Result;
-use crate::render::Class;
 
 /// A 3x5 pixel font: each glyph is five rows of three bits, top row first.
 fn glyph(c: char) -> [u8; 5] {
@@ -200,7 +200,7 @@ pub fn contact_sheet(dataset: &Dataset, columns: usize) -> Result<(u32, u32, Vec
                 }
             });
             let label = s.labels[t]
-                .part("forearm")
+                .part(Class::Forearm)
                 .and_then(|p| p.occlusion)
                 .map_or("-".into(), |o| format!("{:.0}%", 100.0 * o));
             canvas.text(

@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 use workcell_perception::{CellKind, ProcNetConfig};
+use workcell_render::Class;
 
 /// A 3-layer network small enough for debug-build tests.
 pub fn tiny(cell: CellKind) -> ProcNetConfig {
@@ -11,7 +12,7 @@ pub fn tiny(cell: CellKind) -> ProcNetConfig {
         repr_channels: vec![4, 6, 8],
         input_channels: vec![3, 4, 6],
         cell,
-        classes: vec!["forearm".into(), "robot".into()],
+        classes: vec![Class::Forearm, Class::Robot],
         ..ProcNetConfig::cpu()
     }
 }

@@ -5,11 +5,11 @@
 use std::sync::Arc;
 
 use approx::assert_relative_eq;
-use workcell_robots::math::{Pose, Rotation, Vector};
-use workcell_sim::SimError;
-use workcell_sim::render::{
-    Camera, Class, CpuRenderer, Frame, MaskBatch, RenderMesh, Renderer, Scene, SceneObject,
+use workcell_render::{
+    Camera, Class, CpuRenderer, Frame, MaskBatch, RenderError, RenderMesh, Renderer, Scene,
+    SceneObject,
 };
+use workcell_robots::math::{Pose, Rotation, Vector};
 
 /// A camera at the origin looking along world +x (image x = world -y, image y = world -z).
 fn camera(width: u32, height: u32, fov_y_deg: f64) -> Camera {
@@ -295,7 +295,7 @@ fn bad_cameras_and_poses_are_errors() {
     ];
     for (k, c) in bad.iter().enumerate() {
         assert!(
-            matches!(c, Err(SimError::InvalidRender { .. })),
+            matches!(c, Err(RenderError::InvalidRender { .. })),
             "case {k}: {c:?}"
         );
     }
@@ -321,29 +321,4 @@ fn bad_cameras_and_poses_are_errors() {
         )
         .unwrap_err();
     assert!(err.to_string().contains("mask pose 1"), "{err}");
-}
-
-#[test]
-fn the_default_cell_renders_every_class_it_shows_at_any_supported_size() {
-    let model = workcell_sim::CellModel::from_file(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../configs/default.toml"
-    ))
-    .unwrap();
-    let cell = workcell_sim::render::CellScene::new(&model);
-    let base = Camera::from_config(&model.scenario.cameras[0]).unwrap();
-    let mut frame = Frame::new();
-    for (w, h) in [(64, 64), (128, 128), (320, 240), (640, 480)] {
-        let cam = base.resized(w, h).unwrap();
-        CpuRenderer::new()
-            .render(&cell.scene, &cam, &mut frame)
-            .unwrap();
-        let classes = frame.classes(&cell.scene);
-        for class in [Class::Background, Class::Robot, Class::Torso] {
-            assert!(classes.contains(&(class as u8)), "{class:?} at {w}x{h}");
-        }
-        assert!(frame.depth_m.iter().all(|d| d.is_finite() && *d >= 0.0));
-        // The sky is never black: only the occluder is.
-        assert!(frame.rgb.chunks(3).all(|c| c != [0, 0, 0]));
-    }
 }

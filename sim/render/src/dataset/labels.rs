@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 use workcell_robots::math::{Pose, Rotation, Vector, pose_to_xyz_rpy};
 
+use crate::Class;
 use crate::occlusion::Occluder;
 
 /// The layout version written into manifests.
@@ -52,7 +53,7 @@ pub struct CameraLabel {
     pub X_WC: PoseLabel,
 }
 
-impl From<&CameraLabel> for crate::render::Camera {
+impl From<&CameraLabel> for crate::Camera {
     fn from(c: &CameraLabel) -> Self {
         Self {
             width: c.width_px,
@@ -69,8 +70,8 @@ impl From<&CameraLabel> for crate::render::Camera {
 /// One segmented part (a class) in one frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PartLabel {
-    /// The class name (`forearm`).
-    pub class: String,
+    /// The class (`forearm` in the file).
+    pub class: Class,
     /// The link whose frame `X_CP` is (the human's link of that name; for `robot`, the base).
     pub link: String,
     /// Pose of the part's link frame in the camera frame.
@@ -110,10 +111,10 @@ pub struct FrameLabels {
 }
 
 impl FrameLabels {
-    /// The label of class `name`.
+    /// The label of `class`.
     #[must_use]
-    pub fn part(&self, name: &str) -> Option<&PartLabel> {
-        self.parts.iter().find(|p| p.class == name)
+    pub fn part(&self, class: Class) -> Option<&PartLabel> {
+        self.parts.iter().find(|p| p.class == class)
     }
 }
 
@@ -137,6 +138,15 @@ impl Split {
             Split::Test => "test",
         }
     }
+}
+
+/// The human of a dataset: its model and where its base stands.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HumanLabel {
+    /// Catalogue name or URDF path of the human model (`human_arm`).
+    pub model: String,
+    /// The human's base frame H in the world.
+    pub X_WH: PoseLabel,
 }
 
 /// One sequence as the manifest lists it.
@@ -168,8 +178,12 @@ pub struct Manifest {
     pub config: String,
     /// The cell's scenario, as TOML (its seed is replaced per sequence).
     pub scenario: String,
-    /// Class number to name, as the class PNGs store them.
-    pub classes: Vec<String>,
+    /// The classes in the order of their numbers in the class PNGs.
+    pub classes: Vec<Class>,
+    /// The human model the frames show, for perception's own model of the arm (absent in
+    /// datasets written before it was recorded: regenerate them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub human: Option<HumanLabel>,
     pub width_px: u32,
     pub height_px: u32,
     pub sequences: Vec<SequenceEntry>,

@@ -2,11 +2,11 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::dataset::generate::frame_files;
+use crate::Class;
+use crate::dataset::frame_files;
 use crate::dataset::labels::{FORMAT, FrameLabels, Manifest, SequenceEntry, Split};
-use crate::error::{Result, SimError};
+use crate::error::{RenderError, Result};
 use crate::image::{PixelKind, read_png};
-use crate::render::Class;
 
 /// An opened dataset: its manifest and root folder.
 #[derive(Debug, Clone)]
@@ -68,8 +68,8 @@ impl Sequence {
     }
 }
 
-fn invalid(path: &Path, message: impl std::fmt::Display) -> SimError {
-    SimError::Dataset {
+fn invalid(path: &Path, message: impl std::fmt::Display) -> RenderError {
+    RenderError::Dataset {
         path: path.to_path_buf(),
         message: message.to_string(),
     }
@@ -79,7 +79,7 @@ impl Dataset {
     /// Opens the dataset in `root`.
     ///
     /// # Errors
-    /// [`SimError::Dataset`] when there is no manifest (the generation did not finish: run
+    /// [`RenderError::Dataset`] when there is no manifest (the generation did not finish: run
     /// it again to complete it) or it is not a manifest of this format.
     pub fn open(root: impl AsRef<Path>) -> Result<Self> {
         let root = root.as_ref().to_path_buf();
@@ -124,7 +124,7 @@ impl Dataset {
     /// Loads one sequence and checks it against the manifest.
     ///
     /// # Errors
-    /// [`SimError::Io`] or [`SimError::Dataset`] naming the file that is missing, corrupt or
+    /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file that is missing, corrupt or
     /// of the wrong size.
     pub fn load(&self, entry: &SequenceEntry) -> Result<Sequence> {
         if entry.dir.contains("..") || Path::new(&entry.dir).is_absolute() {
@@ -184,7 +184,7 @@ impl Dataset {
                 );
             }
             let path = dir.join(&names[5]);
-            let bytes = std::fs::read(&path).map_err(|source| SimError::Io {
+            let bytes = std::fs::read(&path).map_err(|source| RenderError::Io {
                 path: path.clone(),
                 source,
             })?;

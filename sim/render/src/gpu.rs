@@ -9,9 +9,9 @@ use std::num::NonZeroU64;
 use wgpu::util::DeviceExt;
 use workcell_robots::math::Pose;
 
-use crate::error::{Result, SimError};
-use crate::render::cpu::{Affine, check_poses, check_scene, front_faces, shade};
-use crate::render::{Camera, Frame, MaskBatch, NEAR_M, RenderMesh, Renderer, Scene};
+use crate::cpu::{Affine, check_poses, check_scene, front_faces, shade};
+use crate::error::{RenderError, Result};
+use crate::{Camera, Frame, MaskBatch, NEAR_M, RenderMesh, Renderer, Scene};
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
@@ -70,8 +70,8 @@ impl std::fmt::Debug for GpuRenderer {
     }
 }
 
-fn gpu_error(message: impl std::fmt::Display) -> SimError {
-    SimError::Gpu {
+fn gpu_error(message: impl std::fmt::Display) -> RenderError {
+    RenderError::Gpu {
         message: message.to_string(),
     }
 }
@@ -80,7 +80,7 @@ impl GpuRenderer {
     /// Opens the first Vulkan adapter (a GPU, or a software driver).
     ///
     /// # Errors
-    /// [`SimError::Gpu`] when no adapter or device can be had.
+    /// [`RenderError::Gpu`] when no adapter or device can be had.
     pub fn new() -> Result<Self> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
             backends: wgpu::Backends::VULKAN,
@@ -437,7 +437,7 @@ impl Renderer for GpuRenderer {
         camera.validate()?;
         check_scene(scene)?;
         if camera.width > self.max_side || camera.height > self.max_side {
-            return Err(SimError::InvalidRender {
+            return Err(RenderError::InvalidRender {
                 message: format!(
                     "image {}x{} exceeds the GPU's {} px",
                     camera.width, camera.height, self.max_side

@@ -1,4 +1,4 @@
-//! Camera frames of the cell: a pinhole [`Camera`], a [`Scene`] of posed triangle meshes, and
+//! Camera frames of a work-cell, without the simulator: a pinhole [`Camera`], a [`Scene`] of posed triangle meshes, and
 //! one [`Renderer`] interface with two backends that give the same pixels:
 //!
 //! - [`CpuRenderer`] (default): a software rasterizer written for this project. Vertices are
@@ -14,28 +14,35 @@
 //! render-and-compare, [`Renderer::render_masks`] draws one mesh at N poses into N binary
 //! masks in one call.
 //!
+//! The crate also holds what frames are stored as: PNG files ([`image`]), image-space
+//! occluders ([`occlusion`]) and the dataset format ([`dataset`]), so that perception reads
+//! datasets and renders its pose hypotheses beside a real camera, with no physics engine.
+//!
 //! Camera frame C: x right, y down, z forward (the optical axis); pixel (i, j) covers
 //! `[i, i+1) x [j, j+1)` and is sampled at its centre.
 
 mod camera;
-pub(crate) mod cpu;
+mod cpu;
+pub mod dataset;
+mod error;
 #[cfg(feature = "gpu")]
 mod gpu;
+pub mod image;
 mod mesh;
+pub mod occlusion;
 mod preview;
 mod scene;
 
 pub use camera::Camera;
 pub use cpu::CpuRenderer;
+pub use error::{RenderError, Result};
 #[cfg(feature = "gpu")]
 pub use gpu::GpuRenderer;
 pub use mesh::RenderMesh;
 pub use preview::robot_preview;
-pub use scene::{CellScene, Class, Scene, SceneObject};
+pub use scene::{Class, Scene, SceneObject, human_classes, link_objects};
 
 use workcell_robots::math::Pose;
-
-use crate::error::Result;
 
 /// Sub-pixel precision of vertex positions: 8 bits, as GPUs commonly snap.
 pub const SUBPIXEL_BITS: u32 = 8;
@@ -129,8 +136,8 @@ pub trait Renderer {
     /// Renders `scene` seen by `camera` into `frame` (resized to the camera's image).
     ///
     /// # Errors
-    /// [`crate::SimError::InvalidRender`] for a camera or object pose that is not finite;
-    /// [`crate::SimError::Gpu`] when the GPU fails.
+    /// [`RenderError::InvalidRender`] for a camera or object pose that is not finite;
+    /// [`RenderError::Gpu`] when the GPU fails.
     fn render(&mut self, scene: &Scene, camera: &Camera, frame: &mut Frame) -> Result<()>;
 
     /// Renders `mesh` alone at each pose `X_CO[k]` (object in the camera frame; the camera's
@@ -150,4 +157,44 @@ pub trait Renderer {
 /// Whether every number of a pose is finite.
 pub(crate) fn pose_is_finite(X: &Pose) -> bool {
     X.translation.is_finite() && X.rotation.is_finite()
+}
+
+/// A renderer backend by name, for configurations and command lines.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Backend {
+    /// The software rasterizer.
+    #[default]
+    Cpu,
+    /// wgpu (feature `gpu`).
+    Gpu,
+}
+
+impl Backend {
+    /// A new renderer of this backend.
+    ///
+    /// # Errors
+    /// [`RenderError::Gpu`] when the GPU backend is not built in or finds no adapter.
+    pub fn renderer(self) -> Result<Box<dyn Renderer + Send>> {
+        match self {
+            Backend::Cpu => Ok(Box::new(CpuRenderer::new())),
+            #[cfg(feature = "gpu")]
+            Backend::Gpu => Ok(Box::new(GpuRenderer::new()?)),
+            #[cfg(not(feature = "gpu"))]
+            Backend::Gpu => Err(RenderError::Gpu {
+                message: "this build has no GPU renderer (build with --features gpu)".into(),
+            }),
+        }
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "cpu" => Ok(Backend::Cpu),
+            "gpu" => Ok(Backend::Gpu),
+            _ => Err(format!("unknown renderer backend {s:?} (cpu or gpu)")),
+        }
+    }
 }

@@ -1,123 +1,13 @@
-//! What a camera sees: posed meshes with classes, and the scene of a cell.
+//! The scene of a cell: the room, the clutter, the robot's and the human's links, posed from
+//! a [`CellState`].
 
 use std::sync::Arc;
 
+use workcell_render::{Class, RenderMesh, Scene, SceneObject, human_classes, link_objects};
+use workcell_robots::LinkId;
 use workcell_robots::math::{Pose, Vector};
-use workcell_robots::{LinkId, RobotModel};
 
 use crate::cell::{CellModel, CellState};
-use crate::render::RenderMesh;
-
-/// The segmentation classes (the class-index PNGs store these numbers).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-#[repr(u8)]
-pub enum Class {
-    Background = 0,
-    Robot = 1,
-    Torso = 2,
-    UpperArm = 3,
-    Forearm = 4,
-    Hand = 5,
-}
-
-impl Class {
-    pub const ALL: [Class; 6] = [
-        Class::Background,
-        Class::Robot,
-        Class::Torso,
-        Class::UpperArm,
-        Class::Forearm,
-        Class::Hand,
-    ];
-
-    /// Lower-case name (`upper_arm`).
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Class::Background => "background",
-            Class::Robot => "robot",
-            Class::Torso => "torso",
-            Class::UpperArm => "upper_arm",
-            Class::Forearm => "forearm",
-            Class::Hand => "hand",
-        }
-    }
-
-    /// The class with number `k`.
-    #[must_use]
-    pub fn from_u8(k: u8) -> Option<Class> {
-        Class::ALL.get(usize::from(k)).copied()
-    }
-
-    /// A colour to draw the class with (sRGB).
-    #[must_use]
-    pub fn color(self) -> [u8; 3] {
-        match self {
-            Class::Background => [0, 0, 0],
-            Class::Robot => [255, 140, 0],
-            Class::Torso => [70, 130, 230],
-            Class::UpperArm => [60, 200, 90],
-            Class::Forearm => [230, 40, 60],
-            Class::Hand => [240, 220, 40],
-        }
-    }
-}
-
-/// One posed mesh.
-#[derive(Debug, Clone)]
-pub struct SceneObject {
-    pub name: String,
-    pub class: Class,
-    pub mesh: Arc<RenderMesh>,
-    /// Amplitude of the value-noise texture, 0 for a plain surface.
-    pub texture: f32,
-    /// Pose of the mesh frame O in the world.
-    pub X_WO: Pose,
-}
-
-/// Posed meshes and the light.
-#[derive(Debug, Clone)]
-pub struct Scene {
-    pub objects: Vec<SceneObject>,
-    /// Unit direction towards the (directional) light, world frame.
-    pub light_W: [f32; 3],
-    /// Linear RGB where nothing is seen.
-    pub sky: [f32; 3],
-}
-
-impl Default for Scene {
-    fn default() -> Self {
-        let l = Vector::new(0.35, -0.5, 1.0).normalize();
-        Self {
-            objects: Vec::new(),
-            light_W: [l.x as f32, l.y as f32, l.z as f32],
-            sky: [0.55, 0.6, 0.68],
-        }
-    }
-}
-
-impl Scene {
-    /// The class of object index `id` (0 and unknown indices are background).
-    #[must_use]
-    pub fn class_of(&self, id: u16) -> Class {
-        usize::from(id)
-            .checked_sub(1)
-            .and_then(|k| self.objects.get(k))
-            .map_or(Class::Background, |o| o.class)
-    }
-
-    /// Adds an object; returns its index in `objects` (its pixels show `index + 1`).
-    pub fn push(&mut self, object: SceneObject) -> usize {
-        self.objects.push(object);
-        self.objects.len() - 1
-    }
-
-    /// Number of triangles.
-    #[must_use]
-    pub fn triangle_count(&self) -> usize {
-        self.objects.iter().map(|o| o.mesh.len()).sum()
-    }
-}
 
 /// Texture amplitude of floor, walls, shelves and boxes.
 const TEXTURE: f32 = 0.35;
@@ -245,59 +135,6 @@ impl CellScene {
         self.forearm_link
             .and_then(|l| self.human_objects.get(l).copied().flatten())
     }
-}
-
-/// The classes of a human model's links: by link name (`torso`, `shoulder` and `upper_arm`,
-/// `forearm`, `hand`), other links inheriting their parent's class; the root defaults to torso.
-fn human_classes(human: &RobotModel) -> Vec<Class> {
-    let mut classes = vec![Class::Torso; human.links().len()];
-    // Links are stored parents first.
-    for (l, link) in human.links().iter().enumerate() {
-        let inherited = link
-            .parent_joint
-            .map_or(Class::Torso, |j| classes[human.joints()[j].parent]);
-        classes[l] = match link.name.as_str() {
-            "torso" => Class::Torso,
-            "shoulder" | "upper_arm" => Class::UpperArm,
-            "forearm" => Class::Forearm,
-            "hand" => Class::Hand,
-            _ => inherited,
-        };
-    }
-    classes
-}
-
-/// One object per link with visuals, its meshes merged in the link frame.
-pub(crate) fn link_objects(
-    scene: &mut Scene,
-    model: &RobotModel,
-    prefix: &str,
-    class: impl Fn(LinkId) -> Class,
-    default_color: [f32; 3],
-) -> Vec<Option<usize>> {
-    model
-        .links()
-        .iter()
-        .enumerate()
-        .map(|(l, link)| {
-            let mut mesh = RenderMesh::default();
-            for g in &link.visuals {
-                mesh.append(
-                    &RenderMesh::from_geometry(g, default_color),
-                    &Pose::IDENTITY,
-                );
-            }
-            (!mesh.is_empty()).then(|| {
-                scene.push(SceneObject {
-                    name: format!("{prefix}/{}", link.name),
-                    class: class(l),
-                    mesh: Arc::new(mesh),
-                    texture: 0.0,
-                    X_WO: Pose::IDENTITY,
-                })
-            })
-        })
-        .collect()
 }
 
 /// The axis-aligned bounds of the clutter (the origin's neighbourhood if there is none).

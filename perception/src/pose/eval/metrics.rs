@@ -1,0 +1,136 @@
+//! The errors of one estimate, one evaluated frame, and the statistics of a group of frames.
+
+use workcell_robots::math::{Pose, Vector, pose_to_xyz_rpy};
+
+use crate::pose::{NoPose, RigidModel};
+
+/// The errors of one estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseError {
+    /// At the forearm's centre, cm.
+    pub position_cm: f64,
+    /// Absolute differences of the URDF angles, degrees.
+    pub yaw_deg: f64,
+    pub pitch_deg: f64,
+    pub roll_deg: f64,
+    /// The angle between the axes, degrees.
+    pub axis_deg: f64,
+    /// Rotation about the forearm's own axis, degrees.
+    pub spin_deg: f64,
+    /// The end-for-end twin was the nearer.
+    pub flipped: bool,
+}
+
+/// The errors of `estimate` against `truth` (see the module docs).
+#[must_use]
+pub fn pose_error(model: &RigidModel, estimate: &Pose, truth: &Pose) -> PoseError {
+    let twin = model.twin(estimate);
+    // The twin whose axis points the truth's way (spin is weakly seen; the axis is not).
+    let along = |X: &Pose| (X.rotation * model.axis_O).dot(truth.rotation * model.axis_O);
+    let flipped = along(&twin) > along(estimate);
+    let X = if flipped { twin } else { *estimate };
+    let (_, e) = pose_to_xyz_rpy(&X);
+    let (_, t) = pose_to_xyz_rpy(truth);
+    let wrap = |a: f64| (a.sin().atan2(a.cos())).abs().to_degrees();
+    let (u, v) = (X.rotation * model.axis_O, truth.rotation * model.axis_O);
+    // The spin: the twist about the axis of the relative rotation (swing-twist split).
+    let rel = truth.rotation.inverse() * X.rotation;
+    let a = model.axis_O;
+    let p = Vector::new(rel.x, rel.y, rel.z).dot(a);
+    let spin = 2.0 * p.atan2(rel.w);
+    PoseError {
+        position_cm: 100.0 * (model.centre(&X) - model.centre(truth)).length(),
+        yaw_deg: wrap(e[2] - t[2]),
+        pitch_deg: wrap(e[1] - t[1]),
+        roll_deg: wrap(e[0] - t[0]),
+        axis_deg: u.dot(v).clamp(-1.0, 1.0).acos().to_degrees(),
+        spin_deg: wrap(spin),
+        flipped,
+    }
+}
+
+/// One evaluated frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameResult {
+    pub sequence: usize,
+    pub frame: usize,
+    pub distance_class: String,
+    pub occlusion_level: String,
+    /// The true forearm centre's distance from the camera, m.
+    pub distance_m: f64,
+    /// The forearm's occlusion in this frame (0 to 1).
+    pub occlusion: f64,
+    /// The errors, or why there was no pose.
+    pub outcome: std::result::Result<PoseError, NoPose>,
+    pub reacquired: bool,
+    pub f_m: f64,
+    pub gain: f64,
+    pub uncertainty_m: f64,
+    /// Time of the pose search (not the network), ms.
+    pub pose_ms: f64,
+    /// Time of the mask source (the network), ms.
+    pub mask_ms: f64,
+    pub renders: usize,
+}
+
+impl FrameResult {
+    /// The frame is of this distance class and occlusion level; `None` matches every value.
+    #[must_use]
+    pub fn is_in(&self, distance: Option<&str>, level: Option<&str>) -> bool {
+        distance.is_none_or(|d| self.distance_class == d)
+            && level.is_none_or(|l| self.occlusion_level == l)
+    }
+}
+
+/// Statistics of a group of frames.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Summary {
+    pub frames: usize,
+    pub no_pose: usize,
+    pub reacquired: usize,
+    pub position_cm: f64,
+    pub yaw_deg: f64,
+    pub pitch_deg: f64,
+    pub roll_deg: f64,
+    pub axis_deg: f64,
+    pub spin_deg: f64,
+    pub flipped: usize,
+}
+
+impl Summary {
+    pub(super) fn of<'a>(frames: impl Iterator<Item = &'a FrameResult>) -> Summary {
+        let mut s = Summary::default();
+        for f in frames {
+            s.frames += 1;
+            s.reacquired += usize::from(f.reacquired);
+            match &f.outcome {
+                Ok(e) => {
+                    s.position_cm += e.position_cm;
+                    s.yaw_deg += e.yaw_deg;
+                    s.pitch_deg += e.pitch_deg;
+                    s.roll_deg += e.roll_deg;
+                    s.axis_deg += e.axis_deg;
+                    s.spin_deg += e.spin_deg;
+                    s.flipped += usize::from(e.flipped);
+                }
+                Err(_) => s.no_pose += 1,
+            }
+        }
+        let n = (s.frames - s.no_pose) as f64;
+        if n > 0.0 {
+            for v in [
+                &mut s.position_cm,
+                &mut s.yaw_deg,
+                &mut s.pitch_deg,
+                &mut s.roll_deg,
+                &mut s.axis_deg,
+                &mut s.spin_deg,
+            ] {
+                *v /= n;
+            }
+        } else {
+            s.position_cm = f64::NAN;
+        }
+        s
+    }
+}

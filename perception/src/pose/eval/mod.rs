@@ -1,0 +1,186 @@
+//! Pose evaluation on a dataset split, in the layout of the paper's Table 2.
+//!
+//! Every sequence is tracked from its first frame: the estimator searches globally on frame 0
+//! and whenever the track is lost, and climbs from the previous pose otherwise. Frame 0 is
+//! left out of the statistics (as in the segmentation evaluation: ProcNet has not yet seen
+//! any motion), and so are frames whose forearm is out of view.
+//!
+//! Errors are taken at the forearm's centre, after choosing of the estimate and its
+//! end-for-end twin ([`RigidModel::twin`]) the one nearer the truth in rotation: the mask
+//! cannot tell them apart. Yaw, pitch and roll are the URDF angles of the forearm link frame
+//! in the camera frame (as the dataset's labels give them); besides them, the error of the
+//! forearm's axis direction and its *spin* (rotation about its own axis, which two thin bones
+//! barely show) are reported on their own.
+
+mod metrics;
+mod report;
+mod sources;
+
+pub use metrics::{FrameResult, PoseError, Summary, pose_error};
+pub use report::{PAPER_AVERAGE, PAPER_TABLE2, compare_markdown};
+pub use sources::{GroundTruthMasks, MaskSource, NetworkMasks, VisibleMasks};
+
+use std::time::Instant;
+
+use workcell_render::dataset::{Dataset, Split};
+use workcell_render::{Camera, Class, CpuRenderer};
+use workcell_robots::math::Pose;
+
+use super::{PoseConfig, PoseEstimator};
+use crate::arm::ArmModel;
+use crate::error::{PerceptionError, Result};
+
+/// A split's pose evaluation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseEvaluation {
+    pub masks: String,
+    pub split: String,
+    pub sequences: usize,
+    pub roi: bool,
+    /// The elbow was anchored to the shoulder.
+    pub anchored: bool,
+    pub frames: Vec<FrameResult>,
+}
+
+/// Tracks the forearm through every sequence of `split` with masks from `source`.
+/// `progress` gets (sequences done, total).
+///
+/// # Errors
+/// The dataset, the mask source or the renderer fails; the split is empty.
+pub fn evaluate_pose(
+    dataset: &Dataset,
+    split: Split,
+    source: &mut dyn MaskSource,
+    config: &PoseConfig,
+    anchored: bool,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<PoseEvaluation> {
+    let setup = ArmModel::of_dataset(dataset)?;
+    let model = setup.forearm.clone();
+    let entries: Vec<_> = dataset.entries(Some(split)).cloned().collect();
+    if entries.is_empty() {
+        return Err(PerceptionError::Input {
+            message: format!(
+                "the dataset at {} has no {} sequences",
+                dataset.root.display(),
+                split.name()
+            ),
+        });
+    }
+    let mut estimator = PoseEstimator::new(CpuRenderer::new(), model.clone(), config.clone());
+    let mut frames = Vec::new();
+    for (k, entry) in entries.iter().enumerate() {
+        let seq = dataset.load(entry)?;
+        source.start();
+        estimator.reset();
+        for t in 0..seq.len() {
+            let labels = &seq.labels[t];
+            let t0 = Instant::now();
+            let mask = source.forearm(&seq, t)?;
+            let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
+            let camera = Camera::from(&labels.camera);
+            estimator.set_anchor(if anchored {
+                setup.anchor(&camera.X_WC)
+            } else {
+                None
+            });
+            let t1 = Instant::now();
+            let outcome = estimator.estimate(&camera, &mask)?;
+            let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
+            let Some(part) = labels.part(Class::Forearm) else {
+                continue;
+            };
+            let Some(occlusion) = part.occlusion else {
+                continue; // out of view
+            };
+            if t == 0 {
+                continue;
+            }
+            let truth = Pose::from(&part.X_CP);
+            let (mut reacquired, mut f_m, mut gain, mut unc, mut renders) =
+                (false, 0.0, 0.0, 0.0, 0);
+            let outcome = outcome.map(|e| {
+                (reacquired, f_m, gain, unc, renders) =
+                    (e.reacquired, e.f_m, e.gain, e.uncertainty_m, e.renders);
+                pose_error(&model, &e.X_CO, &truth)
+            });
+            frames.push(FrameResult {
+                sequence: entry.index,
+                frame: t,
+                distance_class: entry.distance_class.clone(),
+                occlusion_level: entry.occlusion_level.clone(),
+                distance_m: model.centre(&truth).length(),
+                occlusion,
+                outcome,
+                reacquired,
+                f_m,
+                gain,
+                uncertainty_m: unc,
+                pose_ms,
+                mask_ms,
+                renders,
+            });
+        }
+        progress(k + 1, entries.len());
+    }
+    Ok(PoseEvaluation {
+        masks: source.name(),
+        split: split.name().to_string(),
+        sequences: entries.len(),
+        roi: config.roi,
+        anchored: anchored && setup.shoulder_W.is_some(),
+        frames,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use workcell_robots::RobotModel;
+    use workcell_robots::math::Vector;
+
+    use crate::pose::RigidModel;
+    use workcell_robots::math::{Rotation, pose_from_xyz_rpy};
+
+    fn model() -> RigidModel {
+        let human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+        ArmModel::new(&human, &Pose::IDENTITY)
+            .expect("forearm")
+            .forearm
+    }
+
+    #[test]
+    fn errors_of_known_displacements() {
+        let model = model();
+        let truth = pose_from_xyz_rpy([0.1, 0.2, 3.0], [0.2, -0.3, 0.4]);
+        let same = pose_error(&model, &truth, &truth);
+        assert!(same.position_cm < 1e-9 && same.axis_deg < 1e-6 && same.spin_deg < 1e-6);
+        // 3 cm along x.
+        let moved = Pose::from_parts(
+            truth.translation + Vector::new(0.03, 0.0, 0.0),
+            truth.rotation,
+        );
+        assert!((pose_error(&model, &moved, &truth).position_cm - 3.0).abs() < 1e-9);
+        // The twin is no error at all.
+        let twin = pose_error(&model, &model.twin(&truth), &truth);
+        assert!(twin.flipped && twin.position_cm < 1e-9 && twin.axis_deg < 1e-6);
+        // A 20-degree spin about the forearm's axis moves neither the centre nor the axis.
+        let spun = model.pose(
+            model.centre(&truth),
+            truth.rotation * Rotation::from_axis_angle(model.axis_O, 20f64.to_radians()),
+        );
+        let e = pose_error(&model, &spun, &truth);
+        assert!(e.position_cm < 1e-9 && e.axis_deg < 1e-6, "{e:?}");
+        assert!((e.spin_deg - 20.0).abs() < 1e-6, "{e:?}");
+        // A 10-degree tilt of the axis is 10 degrees of axis error and no spin.
+        let tilted = model.pose(
+            model.centre(&truth),
+            truth.rotation * Rotation::from_axis_angle(Vector::X, 10f64.to_radians()),
+        );
+        let e = pose_error(&model, &tilted, &truth);
+        assert!(
+            (e.axis_deg - 10.0).abs() < 1e-6 && e.spin_deg < 1e-6,
+            "{e:?}"
+        );
+    }
+}

@@ -1,0 +1,102 @@
+//! The human's parts: one vocabulary for the renderer's classes, the dataset's labels, the
+//! network's outputs and the safety layer's capsules.
+
+use serde::{Deserialize, Serialize};
+
+/// A part of the human body that the cell models, named as the links of the catalogue's
+/// `human_arm` and as the segmentation classes (`snake_case` in files).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HumanPart {
+    Torso,
+    UpperArm,
+    Forearm,
+    Hand,
+}
+
+impl HumanPart {
+    /// Every part, torso first.
+    pub const ALL: [HumanPart; 4] = [
+        HumanPart::Torso,
+        HumanPart::UpperArm,
+        HumanPart::Forearm,
+        HumanPart::Hand,
+    ];
+
+    /// The parts of the arm, in the order used in tables (the safety layer's capsules).
+    pub const ARM: [HumanPart; 3] = [HumanPart::UpperArm, HumanPart::Forearm, HumanPart::Hand];
+
+    /// Lower-case name, also the link name of the part in the catalogue `human_arm`
+    /// (`upper_arm`).
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            HumanPart::Torso => "torso",
+            HumanPart::UpperArm => "upper_arm",
+            HumanPart::Forearm => "forearm",
+            HumanPart::Hand => "hand",
+        }
+    }
+
+    /// The link name of the part in a human model (the same as [`HumanPart::name`]).
+    #[must_use]
+    pub fn link_name(self) -> &'static str {
+        self.name()
+    }
+
+    /// The part a human model's link of this name belongs to: the part names themselves,
+    /// and `shoulder` (the upper arm's first joint frame) as the upper arm.
+    #[must_use]
+    pub fn of_link_name(name: &str) -> Option<HumanPart> {
+        match name {
+            "shoulder" => Some(HumanPart::UpperArm),
+            _ => HumanPart::from_name(name),
+        }
+    }
+
+    /// The part named `name` (`forearm`), as [`HumanPart::name`] writes it.
+    #[must_use]
+    pub fn from_name(name: &str) -> Option<HumanPart> {
+        HumanPart::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
+impl std::fmt::Display for HumanPart {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for HumanPart {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        HumanPart::from_name(s).ok_or_else(|| {
+            format!(
+                "unknown human part {s:?} (one of {})",
+                HumanPart::ALL.map(HumanPart::name).join(", ")
+            )
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_through_text_and_serde() {
+        for part in HumanPart::ALL {
+            assert_eq!(part.name().parse::<HumanPart>(), Ok(part));
+            let json = format!("\"{}\"", part.name());
+            assert_eq!(serde_json::to_string(&part).unwrap(), json);
+            assert_eq!(serde_json::from_str::<HumanPart>(&json).unwrap(), part);
+        }
+        assert_eq!(
+            HumanPart::of_link_name("shoulder"),
+            Some(HumanPart::UpperArm)
+        );
+        assert_eq!(HumanPart::of_link_name("pelvis"), None);
+        assert!("elbow".parse::<HumanPart>().is_err());
+    }
+}
