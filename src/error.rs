@@ -19,6 +19,13 @@ pub enum Error {
     /// A configuration value is out of range; `key` is its dotted path.
     #[error("{key}: {message}")]
     Config { key: String, message: String },
+    /// An error of the thing a configuration key names (`perception.weights`).
+    #[error("{key}")]
+    At {
+        key: String,
+        #[source]
+        source: Box<Error>,
+    },
     /// An error inside a configuration file, named by its path.
     #[error("{path}")]
     InFile {

@@ -91,6 +91,28 @@ fn bad_input_is_a_clear_error_not_a_panic() {
         "robots/tests/fixtures/broken/missing_parent.urdf",
     ]);
     assert!(text(&out.stderr).contains("joint 'j': parent link 'nowhere' does not exist"));
+    // A cause is printed once: the OS error of a missing scenario is not repeated.
+    let out = workcell(&["simulate", "configs/nonexistent.toml"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(stderr.matches("No such file").count(), 1, "{stderr}");
+    assert_eq!(stderr.matches("nonexistent.toml").count(), 1, "{stderr}");
+    // A renderer backend that is not built in is an error, not a panic.
+    if !cfg!(feature = "gpu") {
+        let dir = tempfile::tempdir().expect("temp dir");
+        refused(
+            &[
+                "dataset",
+                "generate",
+                "--config",
+                "configs/dataset.toml",
+                "--backend",
+                "gpu",
+                "--out",
+                dir.path().to_str().expect("utf-8"),
+            ],
+            "no GPU renderer",
+        );
+    }
 }
 
 #[test]
@@ -508,9 +530,10 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     // ProcNet and render-and-compare in the loop: the camera is rendered, segmented and fitted
     // at its rate, and the report says so.
     for (perception, name) in [
+        // The shipped weights by default, wherever the evaluation file is.
         (
             "procnet",
-            "ProcNet (perception/weights/procnet-cpu.safetensors)",
+            "perception/weights/procnet-cpu.safetensors) + render-and-compare",
         ),
         (
             "pose-gt-masks",

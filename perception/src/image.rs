@@ -140,13 +140,16 @@ mod tests {
         let src = vec![0.25f32; 2 * 10 * 7];
         let out = resample(&src, 2, 10, 7, 4, 3);
         assert!(out.iter().all(|v| (v - 0.25).abs() < 1e-6), "{out:?}");
-        // A ramp's mean is kept by an area average (10 -> 4 columns: 2.5 input pixels each).
+        // 10 -> 4 columns: each output pixel covers 2.5 input pixels, pixel i holding i.
+        // The first covers pixels 0 and 1 and half of 2: (0 + 1 + 2 / 2) / 2.5 = 0.8.
         let ramp: Vec<f32> = (0..10).map(|v| v as f32).collect();
         let out = resample(&ramp, 1, 10, 1, 4, 1);
-        let expected = [1.0, 3.5, 6.0, 8.5]; // means of [0, 2.5), [2.5, 5), [5, 7.5), [7.5, 10)
+        let expected = [0.8, 3.2, 5.8, 8.2];
         for (o, e) in out.iter().zip(expected) {
             assert!((o - e).abs() < 1e-5, "{out:?}");
         }
+        // The image's mean is kept.
+        assert!((out.iter().sum::<f32>() / 4.0 - 4.5).abs() < 1e-5);
     }
 
     #[test]

@@ -5,7 +5,6 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::{Dataset, DatasetConfig, Generator, Split, contact_sheet};
 
@@ -21,6 +20,11 @@ pub struct GenerateArgs {
     /// Print the configuration with every default filled in, then exit.
     #[arg(long)]
     pub print_defaults: bool,
+    /// The renderer: `cpu` (the software rasterizer) or `gpu` (wgpu, feature `gpu`). The
+    /// GPU's pixels differ from the CPU's where its rasterizer rounds differently, so a
+    /// dataset is made with one backend throughout.
+    #[arg(long, default_value = "cpu")]
+    pub backend: workcell::render::Backend,
 }
 
 #[derive(Debug, clap::Args)]
@@ -44,11 +48,11 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
         .config
         .clone()
         .context("--config FILE is required (see configs/dataset.toml)")?;
-    let generator = Generator::from_file(&path)?;
+    let generator = Generator::from_file(&path)?.with_backend(args.backend);
     let n = generator.config.sequence_count();
-    let bar = ProgressBar::new(n as u64).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    let bar = super::progress_bar(
+        n as u64,
+        "{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})",
     );
     let start = Instant::now();
     let report = generator.generate(&args.out, &|done| bar.set_position(done as u64))?;

@@ -7,7 +7,6 @@ use std::process::ExitCode;
 use std::sync::Mutex;
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use workcell::evaluate::report::{
     Aggregate, SummaryContext, metrics_csv, summary_markdown, write_plots,
@@ -121,11 +120,9 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     };
     super::prepare_out(&args.out, args.force, &OUTPUTS)?;
 
-    let bar = ProgressBar::new((args.episodes * 100) as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {percent}% (eta {eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = super::progress_bar(
+        (args.episodes * 100) as u64,
+        "{spinner} {msg} [{bar:40}] {percent}% (eta {eta})",
     );
     bar.set_message(format!("{} episodes, filter {mode}", args.episodes));
     let first_error: Mutex<Option<anyhow::Error>> = Mutex::new(None);

@@ -35,7 +35,8 @@ pub fn prepare_out(out: &std::path::Path, force: bool, outputs: &[&str]) -> anyh
 pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
     indicatif::ProgressBar::new(len).with_style(
         indicatif::ProgressStyle::with_template(template)
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
     )
 }
 

@@ -7,7 +7,6 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 use workcell::plot::{Panel, WorldPath, svg_cell_views, svg_panels};
 use workcell::robots::RobotModel;
@@ -92,13 +91,9 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
     let mut log = Log::new(&model, path);
     log.record(&model, &state);
 
-    let bar = ProgressBar::new(steps);
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} simulating [{bar:40}] {pos}/{len} steps ({per_sec}, eta {eta})",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar())
-        .progress_chars("=> "),
+    let bar = super::progress_bar(
+        steps,
+        "{spinner} simulating [{bar:40}] {pos}/{len} steps ({per_sec}, eta {eta})",
     );
     let started = Instant::now();
     for k in 1..=steps {

@@ -12,29 +12,24 @@
 //!     true separation: exact robot link shapes against the true human capsules
 //! ```
 
+mod episode;
 pub mod perception;
 pub mod procnet;
 pub mod report;
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
-use workcell_robots::KinematicState;
-use workcell_safety::{
-    FilterConfig, FilterMode, FilterStatus, HumanEstimate, HumanGeometry, SafetyFilter,
-};
-use workcell_sim::{CellModel, CellState, RobotCommand, Scenario, step};
+use workcell_safety::FilterConfig;
+use workcell_sim::Scenario;
 
 use crate::error::{Error, Result};
 
+pub use episode::run_episode;
 pub use perception::{
     GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig, PerceptionInput,
     PerceptionKind,
 };
-
-/// A robot point slower than this counts as standing, m/s.
-const MOVING_M_S: f64 = 0.05;
 
 /// An evaluation file: the cell, the task, perception and the safety filter's settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -245,256 +240,36 @@ pub struct EpisodeTrace {
     pub perception_error_m: Vec<Option<f64>>,
 }
 
-/// One closed-loop episode of `evaluation` with `filter` and the perception of the
-/// evaluation file, seeded with `seed` (the cell's seed is replaced by it, so the robot's
-/// task and the human's motions differ per episode). `on_tick` gets the fraction done.
-///
-/// # Errors
-/// When the cell cannot be built or the physics refuses a command (a bug: commands are
-/// always finite).
-pub fn run_episode(
-    evaluation: &Evaluation,
-    mode: FilterMode,
-    episode: usize,
-    seed: u64,
-    perception: Option<Box<dyn HumanPerception>>,
-    mut on_tick: impl FnMut(f64),
-) -> Result<(EpisodeMetrics, EpisodeTrace)> {
-    let started = Instant::now();
-    let c = &evaluation.config;
-    let mut scenario = evaluation.scenario.clone();
-    scenario.seed = seed;
-    let model = CellModel::new(&scenario, &evaluation.scenario_path)?;
-    let mut state = CellState::new(&model)?;
-    let robot = &model.robot;
-    let dof = robot.dof();
-    let mut filter = SafetyFilter::new(robot, model.X_WR, mode, c.safety.clone())?;
-    let mut human_geometry = HumanGeometry::new(&model.human)?;
-    let mut perception = match perception {
-        Some(p) => p,
-        None => c.perception.build(seed, &scenario, &model)?,
-    };
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-    let dt_physics = model.time_step_s();
-    let substeps = (c.control_period_s / dt_physics).round().max(1.0) as usize;
-    let dt = substeps as f64 * dt_physics;
-    let timeout_s = c.task_s * c.timeout_factor;
-    let d_min = c.safety.d_min_m;
-
-    let mut human_kinematics = KinematicState::new(&model.human);
-    human_kinematics.X_WB = model.X_WH;
-    let mut robot_kinematics = KinematicState::new(robot);
-    robot_kinematics.X_WB = model.X_WR;
-    let mut truth = HumanEstimate::default();
-    let mut estimate = HumanEstimate::default();
-    let (mut q_ref, mut qd_ref, mut qdd_ref) = (vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]);
-    let mut qdot_nom = vec![0.0; dof];
-    let mut q_cmd = state.q().to_vec();
-    let mut jacobian = workcell_robots::Jacobian::zeros(dof);
-
-    let mut progress = 0.0_f64;
-    let mut metrics = EpisodeMetrics {
-        episode,
-        seed,
-        filter: mode.to_string(),
-        min_separation_m: f64::INFINITY,
-        closest: String::new(),
-        violation_s: 0.0,
-        violations: 0,
-        violation_moving_s: 0.0,
-        task_time_s: None,
-        nominal_task_s: c.task_s,
-        peak_speed_near_human_m_s: 0.0,
-        peak_approach_speed_m_s: 0.0,
-        peak_human_speed_m_s: 0.0,
-        ticks_pass: 0,
-        ticks_modified: 0,
-        ticks_relaxed: 0,
-        ticks_braking: 0,
-        braking_reasons: Vec::new(),
-        perception_error_m: 0.0,
-        simulated_s: 0.0,
-        wall_s: 0.0,
-    };
-    let mut trace = EpisodeTrace::default();
-    let mut below = false;
-    // Formatted once at the end: no allocation per tick.
-    let mut closest: Option<(workcell_robots::LinkId, workcell_safety::HumanPart, f64)> = None;
-    let mut braking: Vec<(workcell_safety::BrakeReason, usize)> = Vec::new();
-    let (mut error_sum, mut error_ticks) = (0.0, 0usize);
-
-    loop {
-        let t = state.time_s();
-        // Ground truth of the human, now.
-        model
-            .human
-            .forward_kinematics(state.human_q(), &mut human_kinematics)?;
-        human_geometry.estimate_into(
-            &model.human,
-            &human_kinematics,
-            state.human_qd(),
-            &mut truth,
+    /// Paths inside an evaluation file are relative to the file, wherever it is run from;
+    /// an error inside it names the file once and the key once.
+    #[test]
+    fn paths_in_an_evaluation_file_resolve_against_the_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let cell = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/default.toml");
+        let path = dir.path().join("eval.toml");
+        std::fs::write(
+            &path,
+            format!("cell = {cell:?}\n[perception]\nweights = \"nets/w.safetensors\"\n"),
+        )
+        .expect("write");
+        let evaluation = Evaluation::from_file(&path).expect("evaluation");
+        assert_eq!(
+            evaluation.config.perception.weights,
+            dir.path().join("nets/w.safetensors")
         );
-        for p in &truth.parts {
-            metrics.peak_human_speed_m_s = metrics
-                .peak_human_speed_m_s
-                .max(p.v_a_W.length())
-                .max(p.v_b_W.length());
-        }
-        robot.forward_kinematics(state.q(), &mut robot_kinematics)?;
+        assert_eq!(evaluation.scenario_path, std::path::PathBuf::from(cell));
 
-        // True separation and the robot's speed at the closest point.
-        if let Some(pair) = filter
-            .geometry()
-            .min_exact_distance(&robot_kinematics, &truth, 5.0)
-        {
-            let d = pair.distance_m;
-            if d < metrics.min_separation_m {
-                metrics.min_separation_m = d;
-                closest = Some((pair.link, pair.part, t));
-            }
-            let mut speed = 0.0;
-            if d < c.near_m.max(d_min) {
-                robot.point_jacobian(&robot_kinematics, pair.link, pair.p_WA, &mut jacobian);
-                let v = jacobian.linear_velocity(state.qd());
-                speed = v.length();
-                if d < c.near_m {
-                    metrics.peak_speed_near_human_m_s =
-                        metrics.peak_speed_near_human_m_s.max(speed);
-                    metrics.peak_approach_speed_m_s =
-                        metrics.peak_approach_speed_m_s.max(-pair.nhat_BA_W.dot(v));
-                }
-            }
-            if d < d_min {
-                if !below {
-                    metrics.violations += 1;
-                }
-                below = true;
-                metrics.violation_s += dt;
-                if speed > MOVING_M_S {
-                    metrics.violation_moving_s += dt;
-                }
-            } else {
-                below = false;
-            }
-            trace.separation_m.push(d);
-        } else {
-            trace.separation_m.push(f64::NAN);
-        }
-
-        if progress >= c.task_s || t >= timeout_s {
-            if progress >= c.task_s {
-                metrics.task_time_s = Some(t);
-            }
-            break;
-        }
-
-        // Nominal controller: track the task trajectory at the progress variable, which
-        // advances only as fast as the robot keeps up.
-        model
-            .robot_motion
-            .sample(progress, &mut q_ref, &mut qd_ref, &mut qdd_ref);
-        let error = q_ref
-            .iter()
-            .zip(&q_cmd)
-            .map(|(r, q)| (r - q).abs())
-            .fold(0.0, f64::max);
-        let rate = (1.0 - error / c.progress_tolerance_rad).clamp(0.0, 1.0);
-        for j in 0..dof {
-            qdot_nom[j] = rate * qd_ref[j] + c.tracking_gain_per_s * (q_ref[j] - q_cmd[j]);
-        }
-
-        perception.estimate(
-            &PerceptionInput {
-                t_s: t,
-                model: &model,
-                state: &state,
-                truth: &truth,
-            },
-            &mut estimate,
+        std::fs::write(&path, format!("cell = {cell:?}\ntask_s = -1.0\n")).expect("write");
+        let err = Evaluation::from_file(&path).unwrap_err();
+        let chain = format!("{:#}", anyhow::Error::new(err));
+        assert_eq!(chain.matches("eval.toml").count(), 1, "{chain}");
+        assert!(
+            chain.contains("task_s: must be finite and > 0, got -1"),
+            "{chain}"
         );
-        let mut tick_error = None;
-        if estimate.parts.len() == truth.parts.len() && !estimate.parts.is_empty() {
-            let e: f64 = estimate
-                .parts
-                .iter()
-                .zip(&truth.parts)
-                .map(|(e, t)| {
-                    0.5 * ((e.capsule.a_W - t.capsule.a_W).length()
-                        + (e.capsule.b_W - t.capsule.b_W).length())
-                })
-                .sum::<f64>()
-                / truth.parts.len() as f64;
-            error_sum += e;
-            error_ticks += 1;
-            tick_error = Some(e);
-        }
-
-        let out = filter.tick(robot, state.q(), &qdot_nom, &estimate, dt);
-        tracing::trace!(
-            episode,
-            t,
-            status = %out.status.label(),
-            seen_m = out.min_distance_m,
-            true_m = trace.separation_m.last().copied().unwrap_or(f64::NAN),
-            uncertainty_m = estimate.uncertainty_m,
-            pairs = out.active_pairs,
-            "tick"
-        );
-        match out.status {
-            FilterStatus::Pass => metrics.ticks_pass += 1,
-            FilterStatus::Modified => metrics.ticks_modified += 1,
-            FilterStatus::Relaxed => metrics.ticks_relaxed += 1,
-            FilterStatus::Braking(reason) => {
-                metrics.ticks_braking += 1;
-                match braking.iter_mut().find(|(r, _)| *r == reason) {
-                    Some((_, n)) => *n += 1,
-                    None => braking.push((reason, 1)),
-                }
-            }
-        }
-        let nominal_norm = qdot_nom.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let command_norm = filter.command().iter().map(|v| v * v).sum::<f64>().sqrt();
-        trace.t_s.push(t);
-        trace.perception_error_m.push(tick_error);
-        trace.speed_scale.push(if nominal_norm > 1e-6 {
-            (command_norm / nominal_norm).min(2.0)
-        } else {
-            1.0
-        });
-
-        // The robot is position-controlled with velocity feed-forward, as industrial arms
-        // are: the filtered velocity is integrated into the joint position command.
-        for _ in 0..substeps {
-            for (qc, v) in q_cmd.iter_mut().zip(filter.command()) {
-                *qc += v * dt_physics;
-            }
-            step(
-                &model,
-                &mut state,
-                &RobotCommand::Position {
-                    q: &q_cmd,
-                    qd: filter.command(),
-                },
-            )?;
-        }
-        progress = (progress + rate * dt).min(c.task_s);
-        on_tick((t / c.task_s).min(1.0));
     }
-    trace.separation_m.truncate(trace.t_s.len());
-    if let Some((link, part, t)) = closest {
-        metrics.closest = format!("{} / {part} at {t:.2} s", robot.links()[link].name);
-    }
-    metrics.braking_reasons = braking
-        .into_iter()
-        .map(|(r, n)| (r.to_string(), n))
-        .collect();
-    metrics.perception_error_m = if error_ticks > 0 {
-        error_sum / error_ticks as f64
-    } else {
-        f64::NAN
-    };
-    metrics.simulated_s = state.time_s();
-    metrics.wall_s = started.elapsed().as_secs_f64();
-    Ok((metrics, trace))
 }

@@ -67,7 +67,11 @@ impl ProcNetCamera {
         let arm = ArmModel::new(&model.human, &model.X_WH)?;
         let mut tracker = ArmTracker::new(arm, PoseConfig::default());
         if config.masks == MaskKind::Network {
-            tracker = tracker.with_network(ProcNet::load(&config.weights, Backend::Flex)?)?;
+            let net = ProcNet::load(&config.weights, Backend::Flex).map_err(|e| Error::At {
+                key: "perception.weights".into(),
+                source: Box::new(e.into()),
+            })?;
+            tracker = tracker.with_network(net)?;
         }
         Ok(Self {
             config: PerceptionConfig {

@@ -380,17 +380,35 @@ fn an_anchored_elbow_recovers_the_depth_up_to_the_wrist_s_mirror() {
     );
 }
 
-#[test]
-fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
-    use super::eval::{FrameResult, PoseError, PoseEvaluation, compare_markdown};
-    let frame = |i: usize, cm: Option<f64>| FrameResult {
+/// An evaluated frame of sequence 0 at short distance, for the report tests.
+fn frame_result(
+    frame: usize,
+    level: &str,
+    outcome: std::result::Result<super::eval::PoseError, NoPose>,
+) -> super::eval::FrameResult {
+    super::eval::FrameResult {
         sequence: 0,
-        frame: i,
+        frame,
         distance_class: "short".into(),
-        occlusion_level: "heavy".into(),
+        occlusion_level: level.into(),
         distance_m: 1.0,
         occlusion: 0.8,
-        outcome: cm
+        outcome,
+        reacquired: false,
+        f_m: 0.0,
+        gain: 0.0,
+        uncertainty_m: 0.0,
+        pose_ms: 0.0,
+        mask_ms: 0.0,
+        renders: 0,
+    }
+}
+
+#[test]
+fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
+    use super::eval::{PoseError, PoseEvaluation, compare_markdown};
+    let frame = |i: usize, cm: Option<f64>| {
+        let outcome = cm
             .map(|position_cm| PoseError {
                 position_cm,
                 yaw_deg: 0.0,
@@ -400,14 +418,8 @@ fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
                 spin_deg: 0.0,
                 flipped: false,
             })
-            .ok_or(NoPose::Empty),
-        reacquired: false,
-        f_m: 0.0,
-        gain: 0.0,
-        uncertainty_m: 0.0,
-        pose_ms: 0.0,
-        mask_ms: 0.0,
-        renders: 0,
+            .ok_or(NoPose::Empty);
+        frame_result(i, "heavy", outcome)
     };
     let eval = |frames: Vec<FrameResult>| PoseEvaluation {
         masks: String::new(),
@@ -442,4 +454,37 @@ fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
     // Evaluations of other frames are refused.
     let c = eval(vec![frame(0, Some(1.0))]);
     assert!(compare_markdown(&[("a", &a), ("c", &c)]).is_err());
+}
+
+/// A group whose frames all lack a pose has no angles to average: the table shows `-`,
+/// not 0.0 degrees, in every angle column (the position column says so too).
+#[test]
+fn a_group_without_a_pose_shows_no_angles() {
+    use super::eval::PoseEvaluation;
+    let frame = |i: usize, level: &str| frame_result(i, level, Err(NoPose::PoorFit));
+    let eval = PoseEvaluation {
+        masks: String::new(),
+        split: "test".into(),
+        sequences: 1,
+        roi: true,
+        anchored: true,
+        frames: vec![frame(1, "medium"), frame(2, "medium")],
+    };
+    let s = eval.summary(Some("short"), Some("medium"));
+    assert_eq!((s.frames, s.no_pose), (2, 2));
+    for v in [
+        s.position_cm,
+        s.yaw_deg,
+        s.pitch_deg,
+        s.roll_deg,
+        s.axis_deg,
+        s.spin_deg,
+    ] {
+        assert!(v.is_nan(), "{s:?}");
+    }
+    let md = eval.to_markdown();
+    assert!(
+        md.contains("| short | medium | - | - | - | - | - | 0 |"),
+        "{md}"
+    );
 }

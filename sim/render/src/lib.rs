@@ -170,6 +170,15 @@ pub enum Backend {
 }
 
 impl Backend {
+    /// `cpu` or `gpu`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Cpu => "cpu",
+            Backend::Gpu => "gpu",
+        }
+    }
+
     /// A new renderer of this backend.
     ///
     /// # Errors

@@ -592,7 +592,14 @@ impl Generator {
     fn manifest(&self, sequences: Vec<SequenceEntry>) -> Manifest {
         Manifest {
             format: FORMAT.into(),
-            generator: format!("workcell-sim {}", env!("CARGO_PKG_VERSION")),
+            generator: match self.backend {
+                Backend::Cpu => format!("workcell-sim {}", env!("CARGO_PKG_VERSION")),
+                other => format!(
+                    "workcell-sim {}, {} renderer",
+                    env!("CARGO_PKG_VERSION"),
+                    other.name()
+                ),
+            },
             config: self.config.to_toml(),
             scenario: self.scenario.to_toml(),
             classes: Class::ALL.to_vec(),
@@ -626,7 +633,10 @@ impl Generator {
         };
         std::fs::create_dir_all(out).map_err(io(out))?;
         let stamp = out.join("config.toml");
-        let config_text = self.config.to_toml() + "\n# scenario\n" + &self.scenario.to_toml();
+        let mut config_text = self.config.to_toml() + "\n# scenario\n" + &self.scenario.to_toml();
+        if self.backend != Backend::Cpu {
+            config_text += &format!("\n# renderer: {}\n", self.backend.name());
+        }
         match std::fs::read_to_string(&stamp) {
             Ok(existing) if existing != config_text => {
                 return Err(SimError::Dataset {

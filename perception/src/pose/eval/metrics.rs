@@ -129,7 +129,17 @@ impl Summary {
                 *v /= n;
             }
         } else {
-            s.position_cm = f64::NAN;
+            // No pose in the group: no error to average (not zero degrees).
+            for v in [
+                &mut s.position_cm,
+                &mut s.yaw_deg,
+                &mut s.pitch_deg,
+                &mut s.roll_deg,
+                &mut s.axis_deg,
+                &mut s.spin_deg,
+            ] {
+                *v = f64::NAN;
+            }
         }
         s
     }

@@ -139,6 +139,15 @@ pub fn compare_markdown(evals: &[(&str, &PoseEvaluation)]) -> Result<String> {
     Ok(md)
 }
 
+/// An angle with one decimal, `-` where there is none (a group without a pose).
+fn fmt_deg(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.1}")
+    } else {
+        "-".into()
+    }
+}
+
 fn finite(v: f64) -> Option<f64> {
     v.is_finite().then_some(v)
 }
@@ -245,14 +254,14 @@ impl PoseEvaluation {
             let s = self.summary(d, l);
             let _ = writeln!(
                 md,
-                "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} |",
                 d.unwrap_or("average"),
                 l.unwrap_or(""),
-                s.yaw_deg,
-                s.pitch_deg,
-                s.roll_deg,
-                s.axis_deg,
-                s.spin_deg,
+                fmt_deg(s.yaw_deg),
+                fmt_deg(s.pitch_deg),
+                fmt_deg(s.roll_deg),
+                fmt_deg(s.axis_deg),
+                fmt_deg(s.spin_deg),
                 s.flipped
             );
         }

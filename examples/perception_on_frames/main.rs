@@ -1,0 +1,109 @@
+//! Perception alone, on saved frames: PNG images from a camera whose calibration and pose are
+//! known, the human model, and the shipped ProcNet weights; out comes, per frame, the arm as
+//! capsules in the world with an uncertainty, or the reason there is none. No simulator: the
+//! same `ArmTracker` runs beside a real camera.
+//!
+//! `cargo run --release --example perception_on_frames -- out/dataset/seq_00000`
+//! (add `--true-masks` to feed the frames' ground-truth forearm pixels instead of ProcNet's).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use workcell::perception::pose::PoseConfig;
+use workcell::perception::{ArmModel, ArmTracker, Backend, ProcNet};
+use workcell::render::dataset::{FrameLabels, Manifest};
+use workcell::render::image::{PixelKind, read_png};
+use workcell::render::{Camera, Class};
+use workcell::robots::math::Pose;
+use workcell::robots::{PackageMap, RobotModel};
+
+fn main() -> anyhow::Result<()> {
+    let mut args = std::env::args().skip(1);
+    let dir = PathBuf::from(args.next().context(
+        "usage: perception_on_frames SEQUENCE_DIR [--true-masks] (a folder of \
+         frame_NNN_rgb.png with their frame_NNN.json, e.g. out/dataset/seq_00000)",
+    )?);
+    let true_masks = args.any(|a| a == "--true-masks");
+
+    // The human: its model and where it stands. A dataset's manifest records both; beside a
+    // real camera they come from the cell's set-up.
+    let path = dir.join("../manifest.json");
+    let manifest: Manifest = serde_json::from_slice(
+        &std::fs::read(&path).with_context(|| format!("{}", path.display()))?,
+    )
+    .with_context(|| format!("{}", path.display()))?;
+    let human = manifest
+        .human
+        .context("the manifest records no human: regenerate the dataset")?;
+    let model = RobotModel::load(&human.model, &PackageMap::from_env())?;
+    let X_WH = Pose::from(&human.X_WH);
+    let arm = ArmModel::new(&model, &X_WH)?;
+
+    let mut tracker = ArmTracker::new(arm, PoseConfig::default());
+    if !true_masks {
+        let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("perception/weights/procnet-cpu.safetensors");
+        tracker = tracker.with_network(ProcNet::load(&weights, Backend::Flex)?)?;
+    }
+
+    println!(
+        "frame | forearm pose error (cm) | upper arm (m)        | forearm (m)          | +- (m)"
+    );
+    for t in 0.. {
+        let image = dir.join(format!("frame_{t:03}_rgb.png"));
+        if !image.exists() {
+            if t == 0 {
+                bail!("{}: no frame_000_rgb.png here", dir.display());
+            }
+            break;
+        }
+        // The camera of this frame (a real camera's calibration and its pose in the cell).
+        let labels: FrameLabels =
+            serde_json::from_slice(&std::fs::read(dir.join(format!("frame_{t:03}.json")))?)?;
+        let camera = Camera::from(&labels.camera);
+        let outcome = if true_masks {
+            let (_, _, _, classes) = read_png(&dir.join(format!("frame_{t:03}_class.png")))?;
+            let mask: Vec<f32> = classes
+                .iter()
+                .map(|&c| f32::from(u8::from(c == Class::Forearm as u8)))
+                .collect();
+            tracker.track_mask(&camera, &mask)?
+        } else {
+            let (w, h, kind, rgb) = read_png(&image)?;
+            if kind != PixelKind::Rgb || (w, h) != (camera.width, camera.height) {
+                bail!("{}: not an RGB frame of the camera's size", image.display());
+            }
+            tracker.track(&camera, &rgb)?
+        };
+        match outcome {
+            Ok(estimate) => {
+                let error = labels
+                    .part(Class::Forearm)
+                    .map(|p| {
+                        let X_CF: Pose = (&p.X_CP).into();
+                        let X_WF = camera.X_WC * X_CF;
+                        format!(
+                            "{:.1}",
+                            100.0 * (estimate.X_WF.translation - X_WF.translation).length()
+                        )
+                    })
+                    .unwrap_or_else(|| "-".into());
+                let seg = |k: usize| {
+                    let p = &estimate.parts[k];
+                    format!(
+                        "{:.2},{:.2},{:.2}->{:.2},{:.2},{:.2}",
+                        p.a_W.x, p.a_W.y, p.a_W.z, p.b_W.x, p.b_W.y, p.b_W.z
+                    )
+                };
+                println!(
+                    "{t:5} | {error:>23} | {} | {} | {:.3}",
+                    seg(0),
+                    seg(1),
+                    estimate.uncertainty_m
+                );
+            }
+            Err(reason) => println!("{t:5} | no estimate: {reason}"),
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,388 @@
+//! One closed-loop episode, tick by tick: observe the truth, command, perceive, filter, step.
+
+use std::time::Instant;
+
+use workcell_robots::{Jacobian, KinematicState, LinkId};
+use workcell_safety::{
+    BrakeReason, FilterMode, FilterStatus, HumanEstimate, HumanGeometry, HumanPart, SafetyFilter,
+};
+use workcell_sim::{CellModel, CellState, RobotCommand, step};
+
+use super::{EpisodeMetrics, EpisodeTrace, Evaluation, EvaluationConfig};
+use super::{HumanPerception, PerceptionInput};
+use crate::error::Result;
+
+/// A robot point slower than this counts as standing, m/s.
+const MOVING_M_S: f64 = 0.05;
+
+/// One closed-loop episode of `evaluation` with `filter` and the perception of the
+/// evaluation file, seeded with `seed` (the cell's seed is replaced by it, so the robot's
+/// task and the human's motions differ per episode). `on_tick` gets the fraction done.
+///
+/// # Errors
+/// When the cell cannot be built or the physics refuses a command (a bug: commands are
+/// always finite).
+pub fn run_episode(
+    evaluation: &Evaluation,
+    mode: FilterMode,
+    episode: usize,
+    seed: u64,
+    perception: Option<Box<dyn HumanPerception>>,
+    mut on_tick: impl FnMut(f64),
+) -> Result<(EpisodeMetrics, EpisodeTrace)> {
+    let started = Instant::now();
+    let c = &evaluation.config;
+    let mut scenario = evaluation.scenario.clone();
+    scenario.seed = seed;
+    let model = CellModel::new(&scenario, &evaluation.scenario_path)?;
+    let perception = match perception {
+        Some(p) => p,
+        None => c.perception.build(seed, &scenario, &model)?,
+    };
+    let mut run = Run::new(c, model, mode, episode, seed, perception)?;
+    let dt_physics = run.model.time_step_s();
+    let substeps = (c.control_period_s / dt_physics).round().max(1.0) as usize;
+    let dt = substeps as f64 * dt_physics;
+    let timeout_s = c.task_s * c.timeout_factor;
+    loop {
+        let t = run.state.time_s();
+        run.observe(t, dt)?;
+        if run.progress >= c.task_s || t >= timeout_s {
+            if run.progress >= c.task_s {
+                run.metrics.task_time_s = Some(t);
+            }
+            break;
+        }
+        let rate = run.nominal();
+        run.perceive_and_filter(t, dt);
+        run.advance(substeps, dt_physics)?;
+        run.progress = (run.progress + rate * dt).min(c.task_s);
+        on_tick((t / c.task_s).min(1.0));
+    }
+    Ok(run.finish(started))
+}
+
+/// The state of an episode between ticks.
+struct Run<'a> {
+    c: &'a EvaluationConfig,
+    model: CellModel,
+    state: CellState,
+    filter: SafetyFilter,
+    human_geometry: HumanGeometry,
+    perception: Box<dyn HumanPerception>,
+    human_kinematics: KinematicState,
+    robot_kinematics: KinematicState,
+    truth: HumanEstimate,
+    estimate: HumanEstimate,
+    q_ref: Vec<f64>,
+    qd_ref: Vec<f64>,
+    qdd_ref: Vec<f64>,
+    qdot_nom: Vec<f64>,
+    /// The servos' position command: the filtered velocity integrated.
+    q_cmd: Vec<f64>,
+    jacobian: Jacobian,
+    /// How far along the task trajectory the robot is, s.
+    progress: f64,
+    metrics: EpisodeMetrics,
+    trace: EpisodeTrace,
+    /// Below d_min at the last tick.
+    below: bool,
+    /// The closest pair so far (formatted once at the end: no allocation per tick).
+    closest: Option<(LinkId, HumanPart, f64)>,
+    braking: Vec<(BrakeReason, usize)>,
+    error_sum: f64,
+    error_ticks: usize,
+}
+
+impl<'a> Run<'a> {
+    fn new(
+        c: &'a EvaluationConfig,
+        model: CellModel,
+        mode: FilterMode,
+        episode: usize,
+        seed: u64,
+        perception: Box<dyn HumanPerception>,
+    ) -> Result<Self> {
+        let state = CellState::new(&model)?;
+        let robot = &model.robot;
+        let dof = robot.dof();
+        let filter = SafetyFilter::new(robot, model.X_WR, mode, c.safety.clone())?;
+        let human_geometry = HumanGeometry::new(&model.human)?;
+        let mut human_kinematics = KinematicState::new(&model.human);
+        human_kinematics.X_WB = model.X_WH;
+        let mut robot_kinematics = KinematicState::new(robot);
+        robot_kinematics.X_WB = model.X_WR;
+        let q_cmd = state.q().to_vec();
+        let metrics = EpisodeMetrics {
+            episode,
+            seed,
+            filter: mode.to_string(),
+            min_separation_m: f64::INFINITY,
+            closest: String::new(),
+            violation_s: 0.0,
+            violations: 0,
+            violation_moving_s: 0.0,
+            task_time_s: None,
+            nominal_task_s: c.task_s,
+            peak_speed_near_human_m_s: 0.0,
+            peak_approach_speed_m_s: 0.0,
+            peak_human_speed_m_s: 0.0,
+            ticks_pass: 0,
+            ticks_modified: 0,
+            ticks_relaxed: 0,
+            ticks_braking: 0,
+            braking_reasons: Vec::new(),
+            perception_error_m: 0.0,
+            simulated_s: 0.0,
+            wall_s: 0.0,
+        };
+        Ok(Self {
+            c,
+            filter,
+            human_geometry,
+            perception,
+            human_kinematics,
+            robot_kinematics,
+            truth: HumanEstimate::default(),
+            estimate: HumanEstimate::default(),
+            q_ref: vec![0.0; dof],
+            qd_ref: vec![0.0; dof],
+            qdd_ref: vec![0.0; dof],
+            qdot_nom: vec![0.0; dof],
+            q_cmd,
+            jacobian: Jacobian::zeros(dof),
+            progress: 0.0,
+            metrics,
+            trace: EpisodeTrace::default(),
+            below: false,
+            closest: None,
+            braking: Vec::new(),
+            error_sum: 0.0,
+            error_ticks: 0,
+            model,
+            state,
+        })
+    }
+
+    /// The truth at time `t`: the human's parts, the robot's links, the true separation and
+    /// the robot's speed at the closest point; violations of d_min over the tick `dt`.
+    fn observe(&mut self, t: f64, dt: f64) -> Result<()> {
+        let (c, model, state) = (self.c, &self.model, &self.state);
+        let d_min = c.safety.d_min_m;
+        model
+            .human
+            .forward_kinematics(state.human_q(), &mut self.human_kinematics)?;
+        self.human_geometry.estimate_into(
+            &model.human,
+            &self.human_kinematics,
+            state.human_qd(),
+            &mut self.truth,
+        );
+        let metrics = &mut self.metrics;
+        for p in &self.truth.parts {
+            metrics.peak_human_speed_m_s = metrics
+                .peak_human_speed_m_s
+                .max(p.v_a_W.length())
+                .max(p.v_b_W.length());
+        }
+        model
+            .robot
+            .forward_kinematics(state.q(), &mut self.robot_kinematics)?;
+        let Some(pair) =
+            self.filter
+                .geometry()
+                .min_exact_distance(&self.robot_kinematics, &self.truth, 5.0)
+        else {
+            self.trace.separation_m.push(f64::NAN);
+            return Ok(());
+        };
+        let d = pair.distance_m;
+        if d < metrics.min_separation_m {
+            metrics.min_separation_m = d;
+            self.closest = Some((pair.link, pair.part, t));
+        }
+        let mut speed = 0.0;
+        if d < c.near_m.max(d_min) {
+            model.robot.point_jacobian(
+                &self.robot_kinematics,
+                pair.link,
+                pair.p_WA,
+                &mut self.jacobian,
+            );
+            let v = self.jacobian.linear_velocity(state.qd());
+            speed = v.length();
+            if d < c.near_m {
+                metrics.peak_speed_near_human_m_s = metrics.peak_speed_near_human_m_s.max(speed);
+                metrics.peak_approach_speed_m_s =
+                    metrics.peak_approach_speed_m_s.max(-pair.nhat_BA_W.dot(v));
+            }
+        }
+        if d < d_min {
+            if !self.below {
+                metrics.violations += 1;
+            }
+            self.below = true;
+            metrics.violation_s += dt;
+            if speed > MOVING_M_S {
+                metrics.violation_moving_s += dt;
+            }
+        } else {
+            self.below = false;
+        }
+        self.trace.separation_m.push(d);
+        Ok(())
+    }
+
+    /// The nominal controller: tracks the task trajectory at the progress variable, which
+    /// advances only as fast as the robot keeps up. Sets `qdot_nom`; returns the rate at
+    /// which progress advances.
+    fn nominal(&mut self) -> f64 {
+        let c = self.c;
+        self.model.robot_motion.sample(
+            self.progress,
+            &mut self.q_ref,
+            &mut self.qd_ref,
+            &mut self.qdd_ref,
+        );
+        let error = self
+            .q_ref
+            .iter()
+            .zip(&self.q_cmd)
+            .map(|(r, q)| (r - q).abs())
+            .fold(0.0, f64::max);
+        let rate = (1.0 - error / c.progress_tolerance_rad).clamp(0.0, 1.0);
+        for j in 0..self.qdot_nom.len() {
+            self.qdot_nom[j] =
+                rate * self.qd_ref[j] + c.tracking_gain_per_s * (self.q_ref[j] - self.q_cmd[j]);
+        }
+        rate
+    }
+
+    /// Perception's estimate at `t`, its error against the truth, and the filter's command.
+    fn perceive_and_filter(&mut self, t: f64, dt: f64) {
+        self.perception.estimate(
+            &PerceptionInput {
+                t_s: t,
+                model: &self.model,
+                state: &self.state,
+                truth: &self.truth,
+            },
+            &mut self.estimate,
+        );
+        let tick_error = perception_error(&self.estimate, &self.truth);
+        if let Some(e) = tick_error {
+            self.error_sum += e;
+            self.error_ticks += 1;
+        }
+        let out = self.filter.tick(
+            &self.model.robot,
+            self.state.q(),
+            &self.qdot_nom,
+            &self.estimate,
+            dt,
+        );
+        tracing::trace!(
+            episode = self.metrics.episode,
+            t,
+            status = %out.status.label(),
+            seen_m = out.min_distance_m,
+            true_m = self.trace.separation_m.last().copied().unwrap_or(f64::NAN),
+            uncertainty_m = self.estimate.uncertainty_m,
+            pairs = out.active_pairs,
+            "tick"
+        );
+        let metrics = &mut self.metrics;
+        match out.status {
+            FilterStatus::Pass => metrics.ticks_pass += 1,
+            FilterStatus::Modified => metrics.ticks_modified += 1,
+            FilterStatus::Relaxed => metrics.ticks_relaxed += 1,
+            FilterStatus::Braking(reason) => {
+                metrics.ticks_braking += 1;
+                match self.braking.iter_mut().find(|(r, _)| *r == reason) {
+                    Some((_, n)) => *n += 1,
+                    None => self.braking.push((reason, 1)),
+                }
+            }
+        }
+        let nominal_norm = self.qdot_nom.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let command_norm = self
+            .filter
+            .command()
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt();
+        self.trace.t_s.push(t);
+        self.trace.perception_error_m.push(tick_error);
+        self.trace.speed_scale.push(if nominal_norm > 1e-6 {
+            (command_norm / nominal_norm).min(2.0)
+        } else {
+            1.0
+        });
+    }
+
+    /// The physics steps of one control tick. The robot is position-controlled with velocity
+    /// feed-forward, as industrial arms are: the filtered velocity is integrated into the
+    /// joint position command.
+    fn advance(&mut self, substeps: usize, dt_physics: f64) -> Result<()> {
+        for _ in 0..substeps {
+            for (qc, v) in self.q_cmd.iter_mut().zip(self.filter.command()) {
+                *qc += v * dt_physics;
+            }
+            step(
+                &self.model,
+                &mut self.state,
+                &RobotCommand::Position {
+                    q: &self.q_cmd,
+                    qd: self.filter.command(),
+                },
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The metrics and the trace, with what is formatted once per episode.
+    fn finish(mut self, started: Instant) -> (EpisodeMetrics, EpisodeTrace) {
+        self.trace.separation_m.truncate(self.trace.t_s.len());
+        let metrics = &mut self.metrics;
+        if let Some((link, part, t)) = self.closest {
+            metrics.closest = format!(
+                "{} / {part} at {t:.2} s",
+                self.model.robot.links()[link].name
+            );
+        }
+        metrics.braking_reasons = self
+            .braking
+            .into_iter()
+            .map(|(r, n)| (r.to_string(), n))
+            .collect();
+        metrics.perception_error_m = if self.error_ticks > 0 {
+            self.error_sum / self.error_ticks as f64
+        } else {
+            f64::NAN
+        };
+        metrics.simulated_s = self.state.time_s();
+        metrics.wall_s = started.elapsed().as_secs_f64();
+        (self.metrics, self.trace)
+    }
+}
+
+/// The mean distance of the estimated parts' end points from the true ones, m; `None`
+/// when perception delivers no human (or other parts than the truth has).
+fn perception_error(estimate: &HumanEstimate, truth: &HumanEstimate) -> Option<f64> {
+    if estimate.parts.len() != truth.parts.len() || estimate.parts.is_empty() {
+        return None;
+    }
+    Some(
+        estimate
+            .parts
+            .iter()
+            .zip(&truth.parts)
+            .map(|(e, t)| {
+                0.5 * ((e.capsule.a_W - t.capsule.a_W).length()
+                    + (e.capsule.b_W - t.capsule.b_W).length())
+            })
+            .sum::<f64>()
+            / truth.parts.len() as f64,
+    )
+}
