@@ -13,6 +13,9 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
+    /// A figure could not be drawn or written.
+    #[error("{path}: {message}")]
+    Plot { path: PathBuf, message: String },
     /// A configuration file does not parse (syntax, unknown key, wrong type).
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },

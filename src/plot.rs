@@ -368,7 +368,11 @@ mod hull_tests {
 
 /// Rasterises an SVG document of this module to PNG (text in the system's sans-serif font;
 /// without any installed font the text is left out and the lines still drawn).
-pub fn svg_to_png(svg: &str, path: &std::path::Path) -> Result<(), String> {
+///
+/// # Errors
+/// [`crate::Error::Plot`] for a document resvg cannot read; [`crate::Error::Io`] when the
+/// file cannot be written.
+pub fn svg_to_png(svg: &str, path: &std::path::Path) -> crate::Result<()> {
     use resvg::{tiny_skia, usvg};
     let mut options = usvg::Options::default();
     let fonts = options.fontdb_mut();
@@ -389,13 +393,15 @@ pub fn svg_to_png(svg: &str, path: &std::path::Path) -> Result<(), String> {
         fonts.set_sans_serif_family(family.clone());
         options.font_family = family;
     }
-    let tree = usvg::Tree::from_str(svg, &options).map_err(|e| format!("SVG: {e}"))?;
+    let plot = |message: String| crate::Error::Plot {
+        path: path.to_path_buf(),
+        message,
+    };
+    let tree = usvg::Tree::from_str(svg, &options).map_err(|e| plot(format!("SVG: {e}")))?;
     let size = tree.size().to_int_size();
     let mut pixmap = tiny_skia::Pixmap::new(size.width(), size.height())
-        .ok_or_else(|| format!("empty image {}x{}", size.width(), size.height()))?;
+        .ok_or_else(|| plot(format!("empty image {}x{}", size.width(), size.height())))?;
     pixmap.fill(tiny_skia::Color::WHITE);
     resvg::render(&tree, tiny_skia::Transform::default(), &mut pixmap.as_mut());
-    pixmap
-        .save_png(path)
-        .map_err(|e| format!("{}: {e}", path.display()))
+    pixmap.save_png(path).map_err(|e| plot(e.to_string()))
 }

@@ -208,8 +208,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         &episodes,
         &traces,
         evaluation.config.safety.d_min_m,
-    )
-    .map_err(anyhow::Error::msg)?;
+    )?;
 
     let a = Aggregate::of(&episodes);
     // A closed pipe (`| head`) is not an error: the report is already written.

@@ -207,11 +207,11 @@ fn write_loss_curve(
         let val_path = path.with_file_name("validation_curve.svg");
         std::fs::write(&val_path, &val_svg)
             .with_context(|| format!("writing {}", val_path.display()))?;
-        svg_to_png(&val_svg, &val_path.with_extension("png")).map_err(anyhow::Error::msg)?;
+        svg_to_png(&val_svg, &val_path.with_extension("png"))?;
     }
     svg.push('\n');
     std::fs::write(path, &svg).with_context(|| format!("writing {}", path.display()))?;
-    svg_to_png(&svg, &path.with_extension("png")).map_err(anyhow::Error::msg)?;
+    svg_to_png(&svg, &path.with_extension("png"))?;
     Ok(())
 }
 

@@ -165,7 +165,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
     let svg = distance_plot(&kinds, &evaluations);
     write("pose_error_vs_distance.svg", &svg)?;
     let png = args.out.join("pose_error_vs_distance.png");
-    svg_to_png(&svg, &png).map_err(anyhow::Error::msg)?;
+    svg_to_png(&svg, &png)?;
     println!(
         "\nwrote {}/{}, {}",
         args.out.display(),

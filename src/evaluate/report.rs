@@ -297,7 +297,7 @@ pub fn write_plots(
     episodes: &[EpisodeMetrics],
     traces: &[EpisodeTrace],
     d_min_m: f64,
-) -> Result<Vec<String>, String> {
+) -> crate::Result<Vec<String>> {
     let mut order: Vec<usize> = (0..episodes.len()).collect();
     order.sort_by(|&a, &b| {
         episodes[a]
@@ -378,7 +378,10 @@ pub fn write_plots(
     ] {
         let svg = svg_panels(&x, "time [s]", &[panel]);
         let svg_path = out.join(format!("{name}.svg"));
-        std::fs::write(&svg_path, &svg).map_err(|e| format!("{}: {e}", svg_path.display()))?;
+        std::fs::write(&svg_path, &svg).map_err(|source| crate::Error::Io {
+            path: svg_path.clone(),
+            source,
+        })?;
         let png_path = out.join(format!("{name}.png"));
         svg_to_png(&svg, &png_path)?;
         written.push(format!("{name}.svg"));

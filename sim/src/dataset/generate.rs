@@ -115,6 +115,15 @@ struct Episode {
     ticks: Vec<Tick>,
 }
 
+/// Which sequence is made: its index, seed, distance class and occlusion level.
+#[derive(Debug, Clone, Copy)]
+struct Plan {
+    index: usize,
+    seed: u64,
+    d_class: usize,
+    level: usize,
+}
+
 /// The occluder of a sequence before it is sized per frame (drawn once per sequence).
 #[derive(Debug, Clone, Copy)]
 struct SequenceOcclusion {
@@ -133,6 +142,7 @@ struct SequenceOcclusion {
 /// One camera draw of a sequence: its start, camera and unoccluded frames with the
 /// forearm's amodal masks.
 struct Draw {
+    plan: Plan,
     attempts: usize,
     first_tick: usize,
     camera: Camera,
@@ -267,16 +277,20 @@ impl Generator {
             path: self.scenario_path.clone(),
             message: "the human model has no link named forearm".into(),
         })?;
-        let draw = self.draw(&episode, &mut cell, forearm, seed, d_class, level, renderer)?;
+        let plan = Plan {
+            index,
+            seed,
+            d_class,
+            level,
+        };
+        let draw = self.draw(&episode, &mut cell, forearm, plan, renderer)?;
         timing.render += t.elapsed();
 
         let t = Instant::now();
         let occlusion = self.occlusion(seed, level);
         let mut out = Vec::with_capacity(c.frames);
         for f in 0..draw.frames.len() {
-            let frame = self.occluded_frame(
-                &episode, &mut cell, &draw, &occlusion, index, d_class, level, f, renderer,
-            )?;
+            let frame = self.occluded_frame(&episode, &mut cell, &draw, &occlusion, f, renderer)?;
             out.push(frame);
         }
         timing.occlusion += t.elapsed();
@@ -303,18 +317,21 @@ impl Generator {
     /// Draws the sequence's start and camera until the forearm is in view and not too hidden
     /// by the scene in every frame (or keeps the best of `attempts` draws), rendering its
     /// unoccluded frames and the forearm's amodal masks.
-    #[allow(clippy::too_many_arguments)]
     fn draw(
         &self,
         episode: &Episode,
         cell: &mut CellScene,
         forearm: usize,
-        seed: u64,
-        d_class: usize,
-        level: usize,
+        plan: Plan,
         renderer: &mut dyn Renderer,
     ) -> Result<Draw> {
         let c = &self.config;
+        let Plan {
+            seed,
+            d_class,
+            level,
+            ..
+        } = plan;
         let model = &episode.model;
         // The cell centre: between the robot's base and the human's shoulder.
         let shoulder = cell
@@ -386,6 +403,7 @@ impl Generator {
             let better = best.as_ref().is_none_or(|b| failing < b.failing);
             if better {
                 best = Some(Draw {
+                    plan,
                     attempts: attempt + 1,
                     first_tick,
                     camera,
@@ -433,20 +451,22 @@ impl Generator {
     }
 
     /// Frame `f` of a draw with its occluder fitted to the target occlusion, and its labels.
-    #[allow(clippy::too_many_arguments)]
     fn occluded_frame(
         &self,
         episode: &Episode,
         cell: &mut CellScene,
         draw: &Draw,
         occlusion: &SequenceOcclusion,
-        index: usize,
-        d_class: usize,
-        level: usize,
         f: usize,
         renderer: &mut dyn Renderer,
     ) -> Result<GeneratedFrame> {
         let c = &self.config;
+        let Plan {
+            index,
+            d_class,
+            level,
+            ..
+        } = draw.plan;
         let model = &episode.model;
         let forearm = cell.forearm_object().unwrap_or(0);
         let range = c.occlusion_levels[level].range;
@@ -631,6 +651,8 @@ impl Generator {
                 source,
             }
         };
+        // A backend that cannot start fails before anything is written.
+        drop(self.backend.renderer()?);
         std::fs::create_dir_all(out).map_err(io(out))?;
         let stamp = out.join("config.toml");
         let mut config_text = self.config.to_toml() + "\n# scenario\n" + &self.scenario.to_toml();
