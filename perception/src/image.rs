@@ -22,7 +22,7 @@ pub fn resample(src: &[f32], planes: usize, w: usize, h: usize, ow: usize, oh: u
         return src[..planes * w * h].to_vec();
     }
     if ow <= w && oh <= h {
-        if w % ow == 0 && h % oh == 0 && w / ow == h / oh {
+        if w.is_multiple_of(ow) && h.is_multiple_of(oh) && w / ow == h / oh {
             return block_mean(src, planes, w, h, w / ow);
         }
         return area_mean(src, planes, w, h, ow, oh);
