@@ -406,7 +406,7 @@ fn frame_result(
 
 #[test]
 fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
-    use super::eval::{PoseError, PoseEvaluation, compare_markdown};
+    use super::eval::{FrameResult, PoseError, PoseEvaluation, compare_markdown};
     let frame = |i: usize, cm: Option<f64>| {
         let outcome = cm
             .map(|position_cm| PoseError {
