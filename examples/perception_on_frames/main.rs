@@ -47,7 +47,7 @@ fn main() -> anyhow::Result<()> {
     }
 
     println!(
-        "frame | forearm pose error (cm) | upper arm (m)        | forearm (m)          | +- (m)"
+        "frame | elbow error (cm) | upper arm axis (world, m)      | forearm axis (world, m)        | inflate by (m)"
     );
     for t in 0.. {
         let image = dir.join(format!("frame_{t:03}_rgb.png"));
@@ -96,7 +96,7 @@ fn main() -> anyhow::Result<()> {
                     )
                 };
                 println!(
-                    "{t:5} | {error:>23} | {} | {} | {:.3}",
+                    "{t:5} | {error:>16} | {} | {} | {:.3}",
                     seg(0),
                     seg(1),
                     estimate.uncertainty_m

@@ -1,11 +1,12 @@
 //! The safety filter alone, as it runs beside a real robot: no simulator, no camera. A UR5e
-//! (the catalogue's kinematic model) sweeps its shoulder joint at full speed while a human
-//! forearm, reported by "perception" as a capsule with a velocity and an uncertainty, reaches
-//! into its path. Each control tick hands the filter the joint positions, the nominal joint
+//! (the catalogue's kinematic model) sweeps its base joint at 1 rad/s while a human forearm,
+//! reported by "perception" as a capsule with a velocity and an uncertainty, reaches into
+//! its path and stays there. Each control tick hands the filter the joint positions, the nominal joint
 //! velocity and the human estimate, and integrates the command it returns.
 //!
 //! `cargo run --release --example safety_filter`
 
+use anyhow::Context as _;
 use workcell::robots::RobotModel;
 use workcell::robots::math::{Pose, Vector};
 use workcell::safety::{
@@ -25,18 +26,30 @@ fn main() -> anyhow::Result<()> {
     // The nominal motion: the base joint turns at 1 rad/s, the rest hold.
     let mut qdot_nom = vec![0.0; robot.dof()];
     qdot_nom[0] = 1.0;
-    // The human: a forearm 0.26 m long, 4.5 cm in radius, 0.7 m from the base, reaching
-    // towards the robot at 0.3 m/s; perception is 2 cm unsure of it.
-    let (r, speed) = (0.045, 0.3);
-    let mut elbow = Vector::new(0.1, 0.7, 0.35);
-    let towards_robot = Vector::new(0.0, -1.0, 0.0);
-    let v = towards_robot * speed;
+    // The human: a forearm 0.26 m long, 4.5 cm in radius, reaching in at 0.3 m/s for one
+    // second and then holding still with its wrist where the tool will pass when the base
+    // joint reaches 1.2 rad; perception is 2 cm unsure of it.
+    let tool = robot
+        .link_id("tool0")
+        .context("the catalogue arm has a tool0")?;
+    let mut q_hit = q.clone();
+    q_hit[0] = 1.2;
+    let p_hit = robot.fk(X_WR, &q_hit)?.link_pose(tool).translation;
+    let outward = Vector::new(p_hit.x, p_hit.y, 0.0).normalize();
+    let (r, forearm_m) = (0.045, 0.26);
+    let reach = -0.3 * outward; // m/s
+    let mut elbow = p_hit + (forearm_m + 0.3) * outward;
 
     println!("   t (s) | base joint (rad) | command / nominal | closest seen (m) | status");
     let mut closest = f64::INFINITY;
-    for k in 0..500 {
+    for k in 0..750 {
+        let v = if k as f64 * dt < 1.0 {
+            reach
+        } else {
+            Vector::ZERO
+        };
         elbow += v * dt;
-        let wrist = elbow + Vector::new(0.26, 0.0, 0.0);
+        let wrist = elbow - forearm_m * outward;
         let human = HumanEstimate {
             parts: vec![PartEstimate {
                 part: HumanPart::Forearm,
