@@ -61,7 +61,7 @@ impl CellModel {
     /// robot, or the motion cannot be planned (unreachable waypoint, no waypoint above
     /// `min_height_m`).
     pub fn new(scenario: &Scenario, scenario_path: &Path) -> Result<Self> {
-        scenario.validate(scenario_path)?;
+        scenario.validate().map_err(|e| e.in_file(scenario_path))?;
         let load = |key: &str, model: &str| {
             let name = Scenario::resolve_model_path(model, scenario_path);
             RobotModel::load(&name, &PackageMap::from_env()).map_err(|source| SimError::Robot {
@@ -73,7 +73,7 @@ impl CellModel {
         let robot = load("robot.model", &scenario.robot.model)?;
         let human = load("human.model", &scenario.human.model)?;
         let invalid = |key: &str, message: String| SimError::Invalid {
-            path: scenario_path.to_path_buf(),
+            path: Some(scenario_path.to_path_buf()),
             key: key.to_string(),
             message,
         };

@@ -18,10 +18,12 @@ pub enum SimError {
     /// The scenario is not valid TOML for a scenario (syntax, unknown key, wrong type).
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },
-    /// A scenario value is out of range; `key` is its dotted path (e.g. `robot.base.xyz`).
-    #[error("{path}: {key}: {message}")]
+    /// A value is out of range; `key` is its dotted path (e.g. `robot.base.xyz`), `path` the
+    /// file it came from (`None` from `validate`, which sees no file; the loader adds it with
+    /// [`SimError::in_file`]).
+    #[error("{}{key}: {message}", file_prefix(.path.as_deref()))]
     Invalid {
-        path: PathBuf,
+        path: Option<PathBuf>,
         key: String,
         message: String,
     },
@@ -56,6 +58,30 @@ pub enum SimError {
     /// A dataset being generated cannot be written where it is asked to be.
     #[error("{path}: {message}")]
     Dataset { path: PathBuf, message: String },
+}
+
+impl SimError {
+    /// The error as found in the file at `path`: a value error without a file gets its name.
+    #[must_use]
+    pub fn in_file(self, path: &std::path::Path) -> Self {
+        match self {
+            SimError::Invalid {
+                path: None,
+                key,
+                message,
+            } => SimError::Invalid {
+                path: Some(path.to_path_buf()),
+                key,
+                message,
+            },
+            other => other,
+        }
+    }
+}
+
+/// `"path: "`, or nothing without a file.
+fn file_prefix(path: Option<&std::path::Path>) -> String {
+    path.map_or_else(String::new, |p| format!("{}: ", p.display()))
 }
 
 /// Result alias of this crate.

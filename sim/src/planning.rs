@@ -97,7 +97,7 @@ pub(crate) fn plan_robot_motion(
                     Some(q) => points.push(q),
                     None => {
                         return Err(SimError::Invalid {
-                            path: path.to_path_buf(),
+                            path: Some(path.to_path_buf()),
                             key: "robot.motion".into(),
                             message: format!(
                                 "no random waypoint keeps every link above {min_height_m} m and {clearance_m} m \

@@ -353,7 +353,7 @@ impl Scenario {
     /// As [`Scenario::from_file`].
     pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
         let scenario: Scenario = parse_toml(text, path)?;
-        scenario.validate(path)?;
+        scenario.validate().map_err(|e| e.in_file(path))?;
         Ok(scenario)
     }
 
@@ -367,9 +367,9 @@ impl Scenario {
     ///
     /// # Errors
     /// [`SimError::Invalid`] naming the first bad key.
-    pub fn validate(&self, path: &Path) -> Result<()> {
+    pub fn validate(&self) -> Result<()> {
         let bad = |key: &str, message: String| SimError::Invalid {
-            path: path.to_path_buf(),
+            path: None,
             key: key.to_string(),
             message,
         };

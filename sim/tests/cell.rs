@@ -305,6 +305,18 @@ fn scenario_errors_name_the_key() {
         matches!(size, SimError::Invalid { ref key, .. } if key == "clutter[0].size_m"),
         "{size}"
     );
+    // validate() sees no file: the key and the message; the loader adds the file's name.
+    let bad = Scenario {
+        time_step_s: -1.0,
+        ..Scenario::default()
+    };
+    let err = bad.validate().expect_err("negative dt");
+    assert!(err.to_string().starts_with("time_step_s: "), "{err}");
+    let err = err.in_file(path);
+    assert!(
+        err.to_string().starts_with("bad.toml: time_step_s: "),
+        "{err}"
+    );
     let kind = Scenario::from_toml("[human]\nmotions = [\"dance\"]\n", path).expect_err("kind");
     assert!(kind.to_string().contains("dance"), "{kind}");
     let q = Scenario::from_toml("[robot]\ninitial_q = [0.0, 1.0]\n", path).expect("parses");

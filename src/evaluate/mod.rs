@@ -109,7 +109,7 @@ impl Evaluation {
         if let Some(speed) = config.human_speed_scale {
             scenario.human.speed_scale = speed;
             scenario
-                .validate(&scenario_path)
+                .validate()
                 .map_err(|e| Error::config("human_speed_scale", e.to_string()).in_file(path))?;
         }
         let this = Self {

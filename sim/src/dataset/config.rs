@@ -126,7 +126,7 @@ impl DatasetConfig {
     /// As [`DatasetConfig::from_file`].
     pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
         let config: Self = parse_toml(text, path)?;
-        config.validate(path)?;
+        config.validate().map_err(|e| e.in_file(path))?;
         Ok(config)
     }
 
@@ -146,10 +146,10 @@ impl DatasetConfig {
     ///
     /// # Errors
     /// [`SimError::Invalid`] naming the first bad key.
-    pub fn validate(&self, path: &Path) -> Result<()> {
+    pub fn validate(&self) -> Result<()> {
         let invalid = |key: &str, message: String| {
             Err(SimError::Invalid {
-                path: path.to_path_buf(),
+                path: None,
                 key: key.into(),
                 message,
             })

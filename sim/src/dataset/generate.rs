@@ -165,7 +165,7 @@ impl Generator {
     /// # Errors
     /// [`SimError`] when the scenario cannot be read or the configuration is invalid.
     pub fn new(config: DatasetConfig, config_path: &Path) -> Result<Self> {
-        config.validate(config_path)?;
+        config.validate().map_err(|e| e.in_file(config_path))?;
         let scenario_path = config_path
             .parent()
             .unwrap_or(Path::new("."))
