@@ -18,7 +18,7 @@ use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{HumanPart, JointKind, LinkId, PackageMap, RobotModel};
 
 use crate::error::{PerceptionError, Result};
-use crate::image::{planar_rgb, resample};
+use crate::image::planar_rgb;
 use crate::infer::ProcNet;
 use crate::pose::{Anchor, NoPose, PoseConfig, PoseEstimate, PoseEstimator, RigidModel};
 
@@ -342,14 +342,7 @@ impl ArmTracker {
         let net = self.net.as_mut().ok_or_else(|| PerceptionError::Input {
             message: "this tracker has no network; give it masks with track_mask".into(),
         })?;
-        let s = net.config().input_size;
-        let masks = net.segment(&resample(&planar_rgb(rgb, w, h), 3, w, h, s, s))?;
-        let forearm = masks
-            .class(Class::Forearm)
-            .ok_or_else(|| PerceptionError::Input {
-                message: "the network has no forearm class".into(),
-            })?;
-        Ok(resample(forearm, 1, s, s, w, h))
+        net.forearm(&planar_rgb(rgb, w, h), w, h)
     }
 
     /// One frame: interleaved sRGB bytes (`width * height * 3`, row-major from the top left)

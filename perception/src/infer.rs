@@ -8,6 +8,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use crate::backend::Backend;
 use crate::config::ProcNetConfig;
 use crate::error::{PerceptionError, Result};
+use crate::image::resample;
 use crate::model::{ProcNetModel, ProcNetState};
 use crate::weights;
 
@@ -88,6 +89,26 @@ impl ProcNet {
     #[must_use]
     pub fn frames(&self) -> usize {
         self.state.as_ref().map_or(0, |s| s.frames)
+    }
+
+    /// The forearm's probabilities of a planar RGB frame of any size (`[3, height, width]`
+    /// in [0, 1]): the frame resampled to the input, segmented (the stream's state advances),
+    /// and the mask resampled back to `width x height`.
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when the network has no forearm class; network failures.
+    pub fn forearm(&mut self, planar: &[f32], width: usize, height: usize) -> Result<Vec<f32>> {
+        let s = self.config.input_size;
+        let masks = self.segment(&resample(planar, 3, width, height, s, s))?;
+        let forearm = masks
+            .class(Class::Forearm)
+            .ok_or_else(|| PerceptionError::Input {
+                message: format!(
+                    "the network has no forearm class (it has {:?})",
+                    masks.classes
+                ),
+            })?;
+        Ok(resample(forearm, 1, s, s, width, height))
     }
 
     /// Forgets the stream (a new camera, a cut): the next frame starts from a zero state.

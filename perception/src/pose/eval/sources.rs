@@ -3,8 +3,7 @@
 use workcell_render::Class;
 use workcell_render::dataset::Sequence;
 
-use crate::error::{PerceptionError, Result};
-use crate::image::resample;
+use crate::error::Result;
 use crate::infer::ProcNet;
 
 /// Where the forearm masks come from.
@@ -73,18 +72,7 @@ impl MaskSource for NetworkMasks {
         self.net.reset();
     }
     fn forearm(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
-        let s = self.net.config().input_size;
         let (w, h) = (sequence.width as usize, sequence.height as usize);
-        let rgb = resample(sequence.rgb_frame(t), 3, w, h, s, s);
-        let masks = self.net.segment(&rgb)?;
-        let forearm = masks
-            .class(Class::Forearm)
-            .ok_or_else(|| PerceptionError::Input {
-                message: format!(
-                    "the network has no forearm class (it has {:?})",
-                    masks.classes
-                ),
-            })?;
-        Ok(resample(forearm, 1, s, s, w, h))
+        self.net.forearm(sequence.rgb_frame(t), w, h)
     }
 }
