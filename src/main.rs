@@ -68,6 +68,9 @@ enum DatasetCommand {
     Generate(cli::dataset::GenerateArgs),
     /// Write a contact sheet PNG of a dataset (frames, masks, occlusion) and summarise it.
     Show(cli::dataset::ShowArgs),
+    /// Measure what a dataset gives a network: the forearm's pixels and width in the stored
+    /// frames and the Dice loss of a perfect network, per source, distance class and crop.
+    Stats(cli::dataset::StatsArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -120,6 +123,9 @@ fn main() -> ExitCode {
         Command::Dataset {
             command: DatasetCommand::Show(a),
         } => cli::dataset::show(&a),
+        Command::Dataset {
+            command: DatasetCommand::Stats(a),
+        } => cli::dataset::stats(&a),
         Command::Train(a) => cli::perception::train(&a),
         Command::Bench(a) => cli::perception::bench(&a),
         Command::Eval {

@@ -12,6 +12,7 @@
 use std::sync::Arc;
 
 use workcell_render::dataset::Dataset;
+use workcell_render::roi::{self, Roi};
 use workcell_render::{Camera, Class, CpuRenderer, RenderMesh};
 use workcell_robots::collision::link_bounding_capsule;
 use workcell_robots::math::{Pose, Vector};
@@ -165,7 +166,9 @@ impl ArmModel {
                     dataset.root.join("manifest.json").display()
                 ),
             })?;
-        let model = RobotModel::load(&human.model, &PackageMap::from_env())?;
+        let mut model = RobotModel::load(&human.model, &PackageMap::from_env())?;
+        let look = human.look;
+        model.retain_visuals(|g| look.shows(g.name.as_deref()));
         Self::new(&model, &Pose::from(&human.X_WH))
     }
 
@@ -178,6 +181,19 @@ impl ArmModel {
             radius_m: r,
             sigma_m: 0.02,
         })
+    }
+
+    /// How far the wrist can be from the shoulder: the upper arm's length plus the forearm
+    /// capsule's far end from the elbow (`None` without a fixed shoulder).
+    #[must_use]
+    pub fn reach_m(&self) -> Option<f64> {
+        let forearm = self.parts.iter().find_map(|(part, placement, _)| match placement {
+            Placement::Rigid { a_F, b_F } if *part == HumanPart::Forearm => {
+                Some(a_F.length().max(b_F.length()))
+            }
+            _ => None,
+        })?;
+        self.shoulder_W.map(|(_, upper)| upper + forearm)
     }
 
     /// The arm's capsules in the world with the forearm link's frame at `X_WF`.
@@ -272,6 +288,23 @@ pub struct ArmTracker {
     arm: ArmModel,
     estimator: PoseEstimator<CpuRenderer>,
     net: Option<ProcNet>,
+    /// The last estimate's shoulder, elbow and wrist: the next region of interest follows
+    /// them.
+    joints_W: Option<[Vector; 3]>,
+}
+
+/// The side of the region of interest's image for a tracker without a network (the input of
+/// the networks this project trains).
+pub const DEFAULT_INPUT_PX: usize = 128;
+
+/// A frame's forearm as the tracker's network sees it: the region of interest, the camera
+/// that sees exactly that region at the network's input, and the mask there.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoiMask {
+    pub roi: Roi,
+    pub camera: Camera,
+    /// Forearm probabilities, `camera.width x camera.height`.
+    pub mask: Vec<f32>,
 }
 
 impl ArmTracker {
@@ -283,6 +316,7 @@ impl ArmTracker {
             arm,
             estimator,
             net: None,
+            joints_W: None,
         }
     }
 
@@ -318,41 +352,83 @@ impl ArmTracker {
     /// Forgets the track and the network's state (a new camera stream).
     pub fn reset(&mut self) {
         self.estimator.reset();
+        self.joints_W = None;
         if let Some(net) = &mut self.net {
             net.reset();
         }
     }
 
-    /// The forearm's probability mask of a frame at the camera's resolution: the frame
-    /// resampled to the network's input, segmented, and the mask resampled back.
+    /// The side of the region of interest's image: the network's input, or
+    /// [`DEFAULT_INPUT_PX`] without a network.
+    #[must_use]
+    pub fn input_px(&self) -> usize {
+        self.net
+            .as_ref()
+            .map_or(DEFAULT_INPUT_PX, |n| n.config().input_size)
+    }
+
+    /// The region of `camera`'s image the next frame is read through: around the last
+    /// estimate's shoulder, elbow and wrist ([`Roi::of_joints`], the middle of
+    /// [`roi::TRACKED_MARGIN`]) while there is one, else the sphere the forearm can reach
+    /// ([`Roi::of_sphere`]), else the whole frame.
+    #[must_use]
+    pub fn roi(&self, camera: &Camera) -> Roi {
+        let margin = 0.5 * (roi::TRACKED_MARGIN[0] + roi::TRACKED_MARGIN[1]);
+        self.joints_W
+            .and_then(|joints| Roi::of_joints(camera, &joints, margin, roi::TRACKED_MIN_M))
+            .or_else(|| {
+                let (shoulder, _) = self.arm.shoulder_W?;
+                Roi::of_sphere(camera, shoulder, self.arm.reach_m()?, roi::WORKSPACE_MARGIN)
+            })
+            .unwrap_or(Roi::frame(camera.width, camera.height))
+    }
+
+    /// The forearm's probability mask of a frame: the region of interest ([`ArmTracker::roi`])
+    /// resampled to the network's input and segmented.
     ///
     /// # Errors
     /// No network ([`ArmTracker::with_network`]), a frame of the wrong size, a network failure.
-    pub fn forearm_mask(&mut self, camera: &Camera, rgb: &[u8]) -> Result<Vec<f32>> {
+    pub fn forearm_mask(&mut self, camera: &Camera, rgb: &[u8]) -> Result<RoiMask> {
         let (w, h) = (camera.width as usize, camera.height as usize);
-        if rgb.len() != 3 * w * h {
-            return Err(PerceptionError::Input {
-                message: format!(
-                    "expected an sRGB frame of {w}x{h}x3 = {} bytes for the camera, got {}",
-                    3 * w * h,
-                    rgb.len()
-                ),
-            });
-        }
+        check_len("an sRGB frame", rgb.len(), 3 * w * h, camera)?;
+        let roi = self.roi(camera);
         let net = self.net.as_mut().ok_or_else(|| PerceptionError::Input {
             message: "this tracker has no network; give it masks with track_mask".into(),
         })?;
-        net.forearm(&planar_rgb(rgb, w, h), w, h)
+        let s = net.config().input_size;
+        let input = roi.resample(&planar_rgb(rgb, w, h), 3, w, h, s);
+        let mask = net.forearm(&input, s, s)?;
+        Ok(RoiMask {
+            roi,
+            camera: roi.camera(camera, s as u32)?,
+            mask,
+        })
     }
 
     /// One frame: interleaved sRGB bytes (`width * height * 3`, row-major from the top left)
-    /// from `camera`, whose pose in the world is known.
+    /// from `camera`, whose pose in the world is known. The network reads the frame's region
+    /// of interest and the pose search renders that region's camera.
     ///
     /// # Errors
     /// As [`ArmTracker::forearm_mask`] and [`ArmTracker::track_mask`].
     pub fn track(&mut self, camera: &Camera, rgb: &[u8]) -> Result<ArmOutcome> {
-        let mask = self.forearm_mask(camera, rgb)?;
-        self.track_mask(camera, &mask)
+        let RoiMask { camera, mask, .. } = self.forearm_mask(camera, rgb)?;
+        self.track_mask(&camera, &mask)
+    }
+
+    /// One frame given as the forearm's mask at the camera's resolution (values in [0, 1]),
+    /// read through the region of interest as [`ArmTracker::track`] reads a frame: the
+    /// region resampled to [`ArmTracker::input_px`], then [`ArmTracker::track_mask`].
+    ///
+    /// # Errors
+    /// As [`ArmTracker::track_mask`].
+    pub fn track_frame_mask(&mut self, camera: &Camera, mask: &[f32]) -> Result<ArmOutcome> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        check_len("a mask", mask.len(), w * h, camera)?;
+        let roi = self.roi(camera);
+        let s = self.input_px();
+        let crop = roi.resample(mask, 1, w, h, s);
+        self.track_mask(&roi.camera(camera, s as u32)?, &crop)
     }
 
     /// One frame given as the forearm's mask (values in [0, 1], `width * height`).
@@ -363,11 +439,20 @@ impl ArmTracker {
         self.estimator.set_anchor(self.arm.anchor(&camera.X_WC));
         let pose = match self.estimator.estimate(camera, mask)? {
             Ok(pose) => pose,
-            Err(reason) => return Ok(Err(NoEstimate::NoPose(reason))),
+            Err(reason) => {
+                self.joints_W = None;
+                return Ok(Err(NoEstimate::NoPose(reason)));
+            }
         };
         let X_WF = camera.X_WC * pose.X_CO;
+        let parts = self.arm.parts(&X_WF);
+        let end = |part: HumanPart| parts.iter().find(|p| p.part == part);
+        self.joints_W = match (end(HumanPart::UpperArm), end(HumanPart::Forearm)) {
+            (Some(upper), Some(forearm)) => Some([upper.a_W, X_WF.translation, forearm.b_W]),
+            _ => None,
+        };
         Ok(Ok(ArmEstimate {
-            parts: self.arm.parts(&X_WF),
+            parts,
             uncertainty_m: pose.uncertainty_m,
             X_WF,
             pose,
@@ -375,13 +460,30 @@ impl ArmTracker {
     }
 }
 
+/// A frame or mask of `len` values where the camera needs `expected`.
+fn check_len(what: &str, len: usize, expected: usize, camera: &Camera) -> Result<()> {
+    if len == expected {
+        return Ok(());
+    }
+    Err(PerceptionError::Input {
+        message: format!(
+            "expected {what} of {} values for the {}x{} camera, got {len}",
+            expected, camera.width, camera.height
+        ),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use workcell_render::Renderer as _;
     use workcell_robots::math::pose_from_xyz_rpy;
 
+    /// The built-in human in its default (flesh) look.
     fn human() -> RobotModel {
-        RobotModel::from_catalogue("human_arm").expect("catalogue human")
+        let mut human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+        human.retain_visuals(|g| workcell_robots::HumanLook::Flesh.shows(g.name.as_deref()));
+        human
     }
 
     #[test]
@@ -458,7 +560,7 @@ mod tests {
         )
         .expect("camera");
         let err = tracker.track(&camera, &[0; 10]).unwrap_err();
-        assert!(err.to_string().contains("64x48x3"), "{err}");
+        assert!(err.to_string().contains("9216 values for the 64x48"), "{err}");
         let err = tracker.track(&camera, &vec![0; 64 * 48 * 3]).unwrap_err();
         assert!(err.to_string().contains("no network"), "{err}");
         // An empty mask is no estimate, with its reason.
@@ -466,5 +568,58 @@ mod tests {
             .track_mask(&camera, &vec![0.0; 64 * 48])
             .expect("no error");
         assert_eq!(outcome, Err(NoEstimate::NoPose(NoPose::Empty)));
+        let err = tracker.track_frame_mask(&camera, &[0.0; 7]).unwrap_err();
+        assert!(err.to_string().contains("3072 values"), "{err}");
+    }
+
+    /// The region of interest: the reach sphere without an estimate, the arm's joints with
+    /// one, the whole frame without a fixed shoulder.
+    #[test]
+    fn the_region_follows_the_estimate_and_falls_back_to_the_workspace() {
+        let human = human();
+        let arm = ArmModel::new(&human, &Pose::IDENTITY).expect("arm");
+        let (shoulder, upper) = arm.shoulder_W.expect("fixed shoulder");
+        // Upper arm 0.3255 m and forearm 0.2555 m in the built-in model (generate.py).
+        let reach = arm.reach_m().expect("reach");
+        assert!((upper - 0.3255).abs() < 1e-9 && (reach - 0.581).abs() < 1e-9, "{reach}");
+        let camera = Camera::look_at(
+            (shoulder + Vector::new(3.0, 0.0, 0.0)).to_array(),
+            shoulder.to_array(),
+            [0.0, 0.0, 1.0],
+            640,
+            480,
+            40.0,
+        )
+        .expect("camera");
+        let mut tracker = ArmTracker::new(arm.clone(), PoseConfig::default());
+        assert_eq!(
+            tracker.roi(&camera),
+            Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).expect("in view")
+        );
+        // The forearm's true mask: the tracker finds it and then crops around the arm.
+        let X_WF = Pose::from_translation(shoulder - Vector::new(0.0, 0.0, upper));
+        let X_CF = camera.X_WC.inverse() * X_WF;
+        let mut batch = workcell_render::MaskBatch::new();
+        CpuRenderer::new()
+            .render_masks(&arm.forearm.mesh, &camera, &[X_CF], &mut batch)
+            .expect("render");
+        let mask: Vec<f32> = batch.mask(0).iter().map(|&v| f32::from(v)).collect();
+        let estimate = tracker
+            .track_frame_mask(&camera, &mask)
+            .expect("track")
+            .expect("an estimate");
+        let tracked = tracker.roi(&camera);
+        let workspace = Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).unwrap();
+        assert!(tracked.size < workspace.size, "{tracked:?} vs {workspace:?}");
+        // The crop holds the estimated elbow.
+        let [u, v] = camera
+            .project(camera.X_WC.inverse() * estimate.X_WF.translation)
+            .expect("in front");
+        let inside = |x: f64, x0: i64| x >= x0 as f64 && x <= (x0 + i64::from(tracked.size)) as f64;
+        assert!(inside(u, tracked.x0) && inside(v, tracked.y0));
+        // A lost track falls back to the workspace.
+        let outcome = tracker.track_mask(&camera, &vec![0.0; 640 * 480]).expect("no error");
+        assert!(outcome.is_err());
+        assert_eq!(tracker.roi(&camera), workspace);
     }
 }

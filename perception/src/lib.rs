@@ -23,7 +23,9 @@ pub mod pose;
 pub mod train;
 pub mod weights;
 
-pub use arm::{ArmEstimate, ArmModel, ArmOutcome, ArmTracker, NoEstimate, PartCapsule};
+pub use arm::{
+    ArmEstimate, ArmModel, ArmOutcome, ArmTracker, DEFAULT_INPUT_PX, NoEstimate, PartCapsule, RoiMask,
+};
 pub use backend::Backend;
 pub use config::{Activation, CellKind, ProcNetConfig};
 pub use error::{PerceptionError, Result};

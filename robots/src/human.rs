@@ -80,6 +80,67 @@ impl std::str::FromStr for HumanPart {
     }
 }
 
+/// How a human model looks to a camera: which of its visuals are drawn. Visuals named
+/// `bone/*` belong to the skeletal look, `flesh/*` to the flesh look; unnamed (or otherwise
+/// named) visuals are drawn in both, so any human URDF has at least one look.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HumanLook {
+    /// Soft tissue: a torso with chest, shoulders, neck and head; tapered limbs and a hand.
+    #[default]
+    Flesh,
+    /// The paper's bones (thin rods), kept for the paper's tables.
+    Skeletal,
+}
+
+impl HumanLook {
+    /// Both looks, flesh first.
+    pub const ALL: [HumanLook; 2] = [HumanLook::Flesh, HumanLook::Skeletal];
+
+    /// Lower-case name as in files.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            HumanLook::Flesh => "flesh",
+            HumanLook::Skeletal => "skeletal",
+        }
+    }
+
+    /// Whether a visual named `name` is drawn in this look.
+    #[must_use]
+    pub fn shows(self, name: Option<&str>) -> bool {
+        let name = name.unwrap_or("");
+        match self {
+            HumanLook::Flesh => !name.starts_with("bone/"),
+            HumanLook::Skeletal => !name.starts_with("flesh/"),
+        }
+    }
+
+    /// What a flesh visual is dressed in: the second part of its name, `skin`, `sleeve` or
+    /// `shirt` (`flesh/sleeve/upper_arm`), else `None`.
+    #[must_use]
+    pub fn role(name: Option<&str>) -> Option<&str> {
+        name?.strip_prefix("flesh/")?.split('/').next()
+    }
+}
+
+impl std::fmt::Display for HumanLook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for HumanLook {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        HumanLook::ALL
+            .into_iter()
+            .find(|l| l.name() == s)
+            .ok_or_else(|| format!("unknown look {s:?} (flesh or skeletal)"))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -98,5 +159,19 @@ mod tests {
         );
         assert_eq!(HumanPart::of_link_name("pelvis"), None);
         assert!("elbow".parse::<HumanPart>().is_err());
+    }
+
+    #[test]
+    fn looks_split_named_visuals_and_share_the_rest() {
+        let (flesh, bone) = (Some("flesh/skin/forearm"), Some("bone/forearm"));
+        assert!(HumanLook::Flesh.shows(flesh) && !HumanLook::Flesh.shows(bone));
+        assert!(HumanLook::Skeletal.shows(bone) && !HumanLook::Skeletal.shows(flesh));
+        for look in HumanLook::ALL {
+            assert!(look.shows(None) && look.shows(Some("visor")));
+            assert_eq!(look.name().parse::<HumanLook>(), Ok(look));
+        }
+        assert_eq!(HumanLook::role(flesh), Some("skin"));
+        assert_eq!(HumanLook::role(bone), None);
+        assert_eq!(HumanLook::default(), HumanLook::Flesh);
     }
 }

@@ -36,7 +36,7 @@ pub use catalogue::{
     CATALOGUE, CatalogueEntry, ROBOT_PATH_VAR, RobotSource, added_robots, robot_library,
 };
 pub use error::{Result, RobotError};
-pub use human::HumanPart;
+pub use human::{HumanLook, HumanPart};
 pub use kinematics::{Jacobian, KinematicState};
 pub use mesh::{DECODER_CRATE, TriMesh};
 pub use model::{

@@ -71,6 +71,14 @@ impl RobotModel {
     pub fn actuated_joints(&self) -> &[JointId] {
         &self.actuated
     }
+    /// Keeps the visuals for which `keep` is true (a human model in one look:
+    /// `model.retain_visuals(|g| look.shows(g.name.as_deref()))`).
+    pub fn retain_visuals(&mut self, mut keep: impl FnMut(&Geometry) -> bool) {
+        for link in &mut self.links {
+            link.visuals.retain(&mut keep);
+        }
+    }
+
     /// A link by name.
     #[must_use]
     pub fn link_id(&self, name: &str) -> Option<LinkId> {

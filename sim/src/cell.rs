@@ -71,7 +71,9 @@ impl CellModel {
             })
         };
         let robot = load("robot.model", &scenario.robot.model)?;
-        let human = load("human.model", &scenario.human.model)?;
+        let mut human = load("human.model", &scenario.human.model)?;
+        let look = scenario.human.look;
+        human.retain_visuals(|g| look.shows(g.name.as_deref()));
         let invalid = |key: &str, message: String| SimError::Invalid {
             path: Some(scenario_path.to_path_buf()),
             key: key.to_string(),

@@ -21,6 +21,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use workcell_robots::HumanLook;
 use workcell_robots::math::{Pose, pose_from_xyz_rpy};
 
 use crate::error::{Result, SimError};
@@ -202,6 +203,9 @@ impl Default for RobotMotionConfig {
 pub struct HumanConfig {
     /// Catalogue name or URDF path of the human arm model. Default `human_arm`.
     pub model: String,
+    /// What the camera sees of it: `flesh` (default) or `skeletal` (the paper's bones).
+    /// Collisions and the safety layer use the model's collision envelopes in both.
+    pub look: HumanLook,
     /// Pose of the torso (pelvis centre, z up, facing +x) in the world.
     pub base: PoseConfig,
     /// The motions the human cycles through; the seed picks durations and targets.
@@ -218,6 +222,7 @@ impl Default for HumanConfig {
     fn default() -> Self {
         Self {
             model: "human_arm".into(),
+            look: HumanLook::Flesh,
             base: PoseConfig::default(),
             motions: vec![
                 HumanMotionKind::Rest,
@@ -299,8 +304,8 @@ impl Default for CameraConfig {
             eye: [2.0, 0.0, 1.5],
             target: [0.5, 0.0, 0.9],
             up: [0.0, 0.0, 1.0],
-            width_px: 128,
-            height_px: 128,
+            width_px: 640,
+            height_px: 480,
             fov_y_deg: 60.0,
             rate_hz: 30.0,
         }

@@ -4,13 +4,100 @@
 use std::sync::Arc;
 
 use workcell_render::{Class, RenderMesh, Scene, SceneObject, human_classes, link_objects};
-use workcell_robots::LinkId;
+use rand::Rng;
+use workcell_robots::{HumanLook, LinkId};
 use workcell_robots::math::{Pose, Vector};
 
 use crate::cell::{CellModel, CellState};
 
 /// Texture amplitude of floor, walls, shelves and boxes.
 const TEXTURE: f32 = 0.35;
+
+/// Skin tones from light to dark, sRGB (a spread of the Fitzpatrick types I-VI).
+const SKIN_SRGB: [[u8; 3]; 6] = [
+    [243, 214, 190],
+    [226, 185, 152],
+    [198, 148, 110],
+    [161, 110, 75],
+    [112, 72, 48],
+    [72, 46, 32],
+];
+
+/// What the human wears: the colours of the flesh look's roles (linear RGB, as meshes take
+/// them) and the texture of the clothes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Appearance {
+    pub skin: [f32; 3],
+    /// Shirt and sleeves.
+    pub cloth: [f32; 3],
+    /// Value-noise amplitude on clothed links (0 plain).
+    pub cloth_texture: f32,
+    /// Sleeves down to the wrist: the forearm is dressed in `cloth`.
+    pub long_sleeves: bool,
+}
+
+impl Default for Appearance {
+    /// The model's own colours: mid skin, a blue shirt, short sleeves.
+    fn default() -> Self {
+        Self {
+            skin: [0.85, 0.68, 0.55],
+            cloth: [0.2, 0.35, 0.55],
+            cloth_texture: 0.0,
+            long_sleeves: false,
+        }
+    }
+}
+
+impl Appearance {
+    /// A person drawn from `rng`: one of six skin tones (lightness varied by 10 %), a shirt
+    /// of any hue, saturation and lightness, plain or textured, with long sleeves three
+    /// times in ten.
+    pub fn random(rng: &mut impl Rng) -> Self {
+        let linear = |c: f64| ((c + 0.055) / 1.055).powf(2.4) as f32;
+        let tone = SKIN_SRGB[rng.random_range(0..SKIN_SRGB.len())];
+        let k = rng.random_range(0.9..=1.1);
+        let skin = tone.map(|c| linear((f64::from(c) / 255.0 * k).min(1.0)));
+        let (hue, sat, val) = (
+            rng.random_range(0.0..6.0),
+            rng.random_range(0.0..=0.85),
+            rng.random_range(0.12..=0.95),
+        );
+        // HSV to RGB.
+        let c = val * sat;
+        let x = c * (1.0 - (hue % 2.0 - 1.0f64).abs());
+        let (r, g, b) = match hue as u32 {
+            0 => (c, x, 0.0),
+            1 => (x, c, 0.0),
+            2 => (0.0, c, x),
+            3 => (0.0, x, c),
+            4 => (x, 0.0, c),
+            _ => (c, 0.0, x),
+        };
+        let m = val - c;
+        Self {
+            skin,
+            cloth: [r + m, g + m, b + m].map(linear),
+            cloth_texture: if rng.random_bool(0.5) {
+                rng.random_range(0.1..=0.5)
+            } else {
+                0.0
+            },
+            long_sleeves: rng.random_bool(0.3),
+        }
+    }
+
+    /// The colour of a flesh visual's role (`skin`, `sleeve`, `shirt`, `forearm`); `None`
+    /// for other visuals (they keep their own colour).
+    #[must_use]
+    pub fn colour(&self, role: &str) -> Option<[f32; 3]> {
+        match role {
+            "skin" => Some(self.skin),
+            "sleeve" | "shirt" => Some(self.cloth),
+            "forearm" => Some(if self.long_sleeves { self.cloth } else { self.skin }),
+            _ => None,
+        }
+    }
+}
 
 /// The scene of a cell: a room (floor, two walls), the clutter, the robot's and the human's
 /// links. [`CellScene::update`] poses the links from a [`CellState`].
@@ -110,6 +197,34 @@ impl CellScene {
             .unwrap_or_default();
         out.set_link_poses(&robot, &human);
         out
+    }
+
+    /// Dresses the human's flesh in `appearance`: its links' meshes are rebuilt with the
+    /// colours of their visuals' roles (see [`HumanLook::role`]) and its clothed links get
+    /// the cloth's texture. Visuals without a role keep their colours.
+    pub fn dress(&mut self, model: &CellModel, appearance: &Appearance) {
+        for (link, object) in model.human.links().iter().zip(&self.human_objects) {
+            let Some(k) = *object else { continue };
+            let mut mesh = RenderMesh::default();
+            let mut clothed = false;
+            for g in &link.visuals {
+                let role = HumanLook::role(g.name.as_deref());
+                clothed |= matches!(role, Some("sleeve" | "shirt"))
+                    || (role == Some("forearm") && appearance.long_sleeves);
+                let colour = role.and_then(|r| appearance.colour(r));
+                let g = workcell_robots::Geometry {
+                    rgba: colour.map_or(g.rgba, |_| None),
+                    ..g.clone()
+                };
+                mesh.append(
+                    &RenderMesh::from_geometry(&g, colour.unwrap_or([0.85, 0.72, 0.62])),
+                    &Pose::IDENTITY,
+                );
+            }
+            let object = &mut self.scene.objects[k];
+            object.mesh = Arc::new(mesh);
+            object.texture = if clothed { appearance.cloth_texture } else { 0.0 };
+        }
     }
 
     /// Poses the links as in `state`.

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use workcell::render::image::{PixelKind, write_png};
+use workcell::render::dataset::forearm_stats;
 use workcell::sim::dataset::{Dataset, DatasetConfig, Generator, Split, contact_sheet};
 
 #[derive(Debug, clap::Args)]
@@ -39,6 +40,83 @@ pub struct ShowArgs {
     pub columns: usize,
 }
 
+#[derive(Debug, clap::Args)]
+pub struct StatsArgs {
+    /// A dataset folder.
+    pub dir: PathBuf,
+    /// For datasets of format 1 (whole frames): the network input the ceiling is measured
+    /// at (the shipped network reads 64x64). Format 2 datasets record theirs.
+    #[arg(long, default_value_t = 64)]
+    pub input: u32,
+}
+
+/// `workcell dataset stats DIR`.
+pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
+    let dataset = Dataset::open(&args.dir)?;
+    if !(4..=4096).contains(&args.input) {
+        anyhow::bail!("--input {} is not in 4..=4096", args.input);
+    }
+    let m = &dataset.manifest;
+    let bar = super::progress_bar(m.sequences.len() as u64, "{bar:40} {pos}/{len} sequences");
+    let rows = forearm_stats(&dataset, args.input, &|k| bar.set_position(k as u64))?;
+    bar.finish_and_clear();
+    let frames: usize = m.sequences.iter().map(|s| s.frames).sum();
+    let look = m.human.as_ref().map_or("unknown", |h| h.look.name());
+    println!(
+        "{}: {} ({} sequences, {frames} frames of {}x{} px, {look} human)",
+        args.dir.display(),
+        m.format,
+        m.sequences.len(),
+        m.width_px,
+        m.height_px
+    );
+    if m.format.ends_with("/1") {
+        println!(
+            "  format 1: the stored frame is the camera's image; ceiling at a {0}x{0} input",
+            args.input
+        );
+    }
+    println!(
+        "  {:<14} {:<8} {:<9} {:>7} {:>8} {:>10} {:>21} {:>23}",
+        "source",
+        "distance",
+        "crop",
+        "frames",
+        "forearm",
+        "forearm px",
+        "forearm width px",
+        "perfect-network Dice"
+    );
+    println!(
+        "  {:<14} {:<8} {:<9} {:>7} {:>8} {:>10} {:>21} {:>23}",
+        "", "", "", "", "in view", "(median)", "median [p10, p90]", "loss mean (median)"
+    );
+    for r in &rows {
+        println!(
+            "  {:<14} {:<8} {:<9} {:>7} {:>8} {:>10.0} {:>8.1} [{:>4.1}, {:>4.1}] {:>13.3} ({:.3})",
+            r.source,
+            r.distance_class,
+            r.roi,
+            r.frames,
+            r.with_forearm,
+            r.pixels_median,
+            r.width_px[1],
+            r.width_px[0],
+            r.width_px[2],
+            r.perfect_dice_loss[0],
+            r.perfect_dice_loss[1]
+        );
+    }
+    println!(
+        "  width: sqrt(12 x the smaller eigenvalue of the mask's pixel covariance) (a bar's width);"
+    );
+    println!(
+        "  perfect network: the truth averaged to the stored grid, resampled back bilinearly, \
+         thresholded at 1/2"
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
 pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     if args.print_defaults {
         print!("{}", DatasetConfig::default().to_toml());
@@ -49,7 +127,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
         .clone()
         .context("--config FILE is required (see configs/dataset.toml)")?;
     let generator = Generator::from_file(&path)?.with_backend(args.backend);
-    let n = generator.config.sequence_count();
+    let n = generator.sequence_count();
     let bar = super::progress_bar(
         n as u64,
         "{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})",
@@ -108,27 +186,37 @@ pub fn show(args: &ShowArgs) -> Result<ExitCode> {
         m.width_px,
         m.height_px
     );
-    let mut pairs: Vec<(String, String, usize, f64)> = Vec::new();
+    let mut pairs: Vec<(String, String, String, usize, f64)> = Vec::new();
     for s in &m.sequences {
         let o = s.mean_forearm_occlusion.unwrap_or(f64::NAN);
-        match pairs
-            .iter_mut()
-            .find(|p| p.0 == s.distance_class && p.1 == s.occlusion_level)
-        {
+        match pairs.iter_mut().find(|p| {
+            p.0 == s.source && p.1 == s.distance_class && p.2 == s.occlusion_level
+        }) {
             Some(p) => {
-                p.2 += 1;
-                p.3 += o;
+                p.3 += 1;
+                p.4 += o;
             }
-            None => pairs.push((s.distance_class.clone(), s.occlusion_level.clone(), 1, o)),
+            None => pairs.push((
+                s.source.clone(),
+                s.distance_class.clone(),
+                s.occlusion_level.clone(),
+                1,
+                o,
+            )),
         }
     }
+    pairs.sort_by(|a, b| (&a.0, &a.1).cmp(&(&b.0, &b.1)));
     println!(
-        "  {:<8} {:<8} {:>9} {:>22}",
-        "distance", "level", "sequences", "mean forearm occlusion"
+        "  {:<14} {:<8} {:<8} {:>9} {:>22}",
+        "source", "distance", "level", "sequences", "mean forearm occlusion"
     );
-    for (d, l, k, o) in pairs {
-        println!("  {d:<8} {l:<8} {k:>9} {:>21.0}%", 100.0 * o / k as f64);
+    for (src, d, l, k, o) in pairs {
+        println!(
+            "  {src:<14} {d:<8} {l:<8} {k:>9} {:>21.0}%",
+            100.0 * o / k as f64
+        );
     }
+    println!("measure it: workcell dataset stats {}", args.dir.display());
     println!("contact sheet: {}", out.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -111,7 +111,7 @@ impl ProcNetCamera {
                 .iter()
                 .map(|&o| f32::from(u8::from(o == id)))
                 .collect();
-            self.tracker.track_mask(&self.camera, &mask)?
+            self.tracker.track_frame_mask(&self.camera, &mask)?
         };
         Ok(outcome.ok().map(|estimate| Measured {
             parts: estimate
@@ -211,11 +211,12 @@ mod tests {
                 .expect("render");
             let mask: Vec<f32> = batch.mask(0).iter().map(|&v| f32::from(v)).collect();
             let estimate = tracker
-                .track_mask(&camera, &mask)
+                .track_frame_mask(&camera, &mask)
                 .expect("track")
                 .expect("an estimate");
-            // The elbow, 2.3 m from the camera: within 10 cm (a forearm 18 pixels long
-            // leaves depth to a few centimetres even when anchored; see docs/perception.md).
+            // The elbow, 2.3 m from the camera: within 10 cm (the mask read through the
+            // workspace crop at 128x128 leaves depth to a few centimetres when anchored; see
+            // docs/perception.md).
             let err = (estimate.X_WF.translation - X_WO.translation).length();
             assert!(err < 0.10, "elbow {err} m off");
             // The upper arm ends at the estimated elbow.

@@ -1,16 +1,17 @@
 use std::sync::Arc;
 
 use workcell_render::{Camera, CpuRenderer, MaskBatch, RenderMesh, Renderer};
-use workcell_robots::RobotModel;
+use workcell_robots::{HumanLook, RobotModel};
 use workcell_robots::math::{Pose, Rotation, Vector, pose_from_xyz_rpy};
 
 use super::image::blobs;
 use super::*;
 use crate::error::PerceptionError;
 
-/// The forearm of the built-in human arm (two bones, 25 cm).
+/// The forearm of the built-in human arm in its skeletal look (two bones, 25 cm).
 fn forearm() -> RigidModel {
-    let human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+    let mut human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+    human.retain_visuals(|g| HumanLook::Skeletal.shows(g.name.as_deref()));
     let forearm = human
         .link_id("forearm")
         .expect("the human arm has a forearm");

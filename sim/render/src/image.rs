@@ -13,6 +13,8 @@ pub enum PixelKind {
     Gray,
     /// 8-bit sRGB.
     Rgb,
+    /// 16-bit grey, two big-endian bytes per pixel (depth in mm).
+    Gray16,
 }
 
 impl PixelKind {
@@ -20,6 +22,7 @@ impl PixelKind {
         match self {
             PixelKind::Gray => 1,
             PixelKind::Rgb => 3,
+            PixelKind::Gray16 => 2,
         }
     }
 }
@@ -50,10 +53,14 @@ pub fn encode_png(width: u32, height: u32, kind: PixelKind, data: &[u8]) -> Resu
     {
         let mut encoder = png::Encoder::new(&mut out, width, height);
         encoder.set_color(match kind {
-            PixelKind::Gray => png::ColorType::Grayscale,
+            PixelKind::Gray | PixelKind::Gray16 => png::ColorType::Grayscale,
             PixelKind::Rgb => png::ColorType::Rgb,
         });
-        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_depth(if kind == PixelKind::Gray16 {
+            png::BitDepth::Sixteen
+        } else {
+            png::BitDepth::Eight
+        });
         encoder.set_compression(png::Compression::Fast);
         let mut writer = encoder
             .write_header()
@@ -69,6 +76,15 @@ pub fn encode_png(width: u32, height: u32, kind: PixelKind, data: &[u8]) -> Resu
     Ok(out)
 }
 
+/// Depth in m as 16-bit PNG bytes in mm (0 = nothing seen, saturating at 65.535 m).
+#[must_use]
+pub fn depth_mm_bytes(depth_m: &[f32]) -> Vec<u8> {
+    depth_m
+        .iter()
+        .flat_map(|&d| ((f64::from(d) * 1000.0).round().clamp(0.0, 65535.0) as u16).to_be_bytes())
+        .collect()
+}
+
 /// Decodes an 8-bit grey or RGB PNG into `(width, height, kind, pixels)`.
 ///
 /// # Errors
@@ -82,6 +98,7 @@ pub fn decode_png(bytes: &[u8], path: &Path) -> Result<(u32, u32, PixelKind, Vec
     let kind = match (info.color_type, info.bit_depth) {
         (png::ColorType::Grayscale, png::BitDepth::Eight) => PixelKind::Gray,
         (png::ColorType::Rgb, png::BitDepth::Eight) => PixelKind::Rgb,
+        (png::ColorType::Grayscale, png::BitDepth::Sixteen) => PixelKind::Gray16,
         (c, d) => {
             return Err(dataset_error(
                 path,

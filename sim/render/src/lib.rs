@@ -30,6 +30,7 @@ mod gpu;
 pub mod image;
 mod mesh;
 pub mod occlusion;
+pub mod roi;
 mod preview;
 mod scene;
 

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Result, SimError};
 use crate::scenario::{parse_toml, read_text};
 use workcell_render::occlusion::OccluderKind;
+use workcell_render::roi;
 
 /// A camera distance class: cameras between `range_m` from the cell centre, with a field of
 /// view that narrows with distance like a zoom lens (the cell stays in frame but looks
@@ -27,6 +28,62 @@ pub struct OcclusionLevel {
     pub range: [f64; 2],
 }
 
+/// The cell's own cameras as a second camera source: each of the scenario's `[[cameras]]`
+/// at its own resolution, its pose and field of view jittered per sequence.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CellCameras {
+    /// Whether the scenario's cameras are a source (each is then a class beside the
+    /// distance classes, with `sequences_per_pair` sequences per occlusion level).
+    pub enabled: bool,
+    /// Eye and target move up to this far along each axis, m.
+    pub position_jitter_m: f64,
+    /// The field of view scales by up to this fraction either way.
+    pub fov_jitter: f64,
+}
+
+impl Default for CellCameras {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            position_jitter_m: 0.15,
+            fov_jitter: 0.1,
+        }
+    }
+}
+
+/// The regions of interest the frames are cut from (see `workcell_render::roi`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RoiConfig {
+    /// Fraction of the sequences cut around the arm as a tracker would (the rest show the
+    /// fixed workspace crop).
+    pub tracked_fraction: f64,
+    /// The workspace crop: the sphere the forearm can reach around the shoulder, projected,
+    /// grown by this factor.
+    pub workspace_margin: f64,
+    /// The tracked crop: the box around the shoulder, the elbow and the wrist grown by a
+    /// factor drawn per sequence from this range ...
+    pub tracked_margin: [f64; 2],
+    /// ... at least this wide (m at the forearm's depth), so that a foreshortened forearm
+    /// keeps its context ...
+    pub tracked_min_m: f64,
+    /// ... around an estimate this far off the true elbow and wrist (uniform per axis, m).
+    pub tracked_error_m: f64,
+}
+
+impl Default for RoiConfig {
+    fn default() -> Self {
+        Self {
+            tracked_fraction: 0.5,
+            workspace_margin: roi::WORKSPACE_MARGIN,
+            tracked_margin: roi::TRACKED_MARGIN,
+            tracked_min_m: roi::TRACKED_MIN_M,
+            tracked_error_m: 0.03,
+        }
+    }
+}
+
 /// How datasets are made; every key has the paper's default.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -37,10 +94,20 @@ pub struct DatasetConfig {
     pub seed: u64,
     /// Sequences per (distance class, occlusion level) pair.
     pub sequences_per_pair: usize,
+    /// Sequences cut from one simulated episode (different start times, cameras and
+    /// people): simulating is most of the cost of a sequence otherwise.
+    pub sequences_per_episode: usize,
     /// Frames per sequence.
     pub frames: usize,
+    /// The paper's cameras' native resolution (the cell's cameras have their own).
     pub width_px: u32,
     pub height_px: u32,
+    /// Side of the stored frames: the region of interest resampled to the network's input.
+    pub input_px: u32,
+    /// Vary the human's skin, clothes and sleeves per sequence (flesh look).
+    pub vary_appearance: bool,
+    pub cell_cameras: CellCameras,
+    pub roi: RoiConfig,
     /// Frames per second.
     pub rate_hz: f64,
     /// The episode is simulated this long (uniform in the range) before the first frame, s.
@@ -82,12 +149,17 @@ impl Default for DatasetConfig {
         Self {
             scenario: "default.toml".into(),
             seed: 1,
-            sequences_per_pair: 10,
-            frames: 20,
-            width_px: 128,
-            height_px: 128,
+            sequences_per_pair: 84,
+            sequences_per_episode: 6,
+            frames: 30,
+            width_px: 640,
+            height_px: 480,
+            input_px: 128,
+            vary_appearance: true,
+            cell_cameras: CellCameras::default(),
+            roi: RoiConfig::default(),
             rate_hz: 30.0,
-            start_s: [0.5, 6.0],
+            start_s: [0.5, 24.0],
             azimuth_deg: [10.0, 100.0],
             elevation_deg: [10.0, 40.0],
             // The paper's classes, lens to cell centre: short 0-3 m, medium 3-6 m, large 6-10 m.
@@ -136,10 +208,17 @@ impl DatasetConfig {
         toml::to_string(self).unwrap_or_default()
     }
 
-    /// Number of sequences.
+    /// Number of sequences: per occlusion level, `sequences_per_pair` for each distance class
+    /// and each of the cell's `cameras` (when they are a source).
     #[must_use]
-    pub fn sequence_count(&self) -> usize {
-        self.sequences_per_pair * self.distances.len() * self.occlusion_levels.len()
+    pub fn sequence_count(&self, cameras: usize) -> usize {
+        self.sequences_per_pair * self.camera_classes(cameras) * self.occlusion_levels.len()
+    }
+
+    /// Distance classes plus the cell's cameras when they are a source.
+    #[must_use]
+    pub fn camera_classes(&self, cameras: usize) -> usize {
+        self.distances.len() + if self.cell_cameras.enabled { cameras } else { 0 }
     }
 
     /// Checks every value.
@@ -167,9 +246,51 @@ impl DatasetConfig {
         if self.sequences_per_pair == 0 {
             return invalid("sequences_per_pair", "must be at least 1".into());
         }
-        for (key, v) in [("width_px", self.width_px), ("height_px", self.height_px)] {
+        for (key, v) in [
+            ("width_px", self.width_px),
+            ("height_px", self.height_px),
+            ("input_px", self.input_px),
+        ] {
             if !(16..=4096).contains(&v) {
                 return invalid(key, format!("{v} px is not in 16..=4096"));
+            }
+        }
+        if self.sequences_per_episode == 0 {
+            return invalid("sequences_per_episode", "must be at least 1".into());
+        }
+        let cc = &self.cell_cameras;
+        if !(cc.position_jitter_m.is_finite() && (0.0..=2.0).contains(&cc.position_jitter_m)) {
+            return invalid(
+                "cell_cameras.position_jitter_m",
+                format!("{} is not in [0, 2]", cc.position_jitter_m),
+            );
+        }
+        if !(cc.fov_jitter.is_finite() && (0.0..0.9).contains(&cc.fov_jitter)) {
+            return invalid(
+                "cell_cameras.fov_jitter",
+                format!("{} is not in [0, 0.9)", cc.fov_jitter),
+            );
+        }
+        let roi = &self.roi;
+        if !(0.0..=1.0).contains(&roi.tracked_fraction) {
+            return invalid(
+                "roi.tracked_fraction",
+                format!("{} is not in [0, 1]", roi.tracked_fraction),
+            );
+        }
+        if !(roi.workspace_margin.is_finite() && (1.0..=4.0).contains(&roi.workspace_margin)) {
+            return invalid(
+                "roi.workspace_margin",
+                format!("{} is not in [1, 4]", roi.workspace_margin),
+            );
+        }
+        range("roi.tracked_margin", roi.tracked_margin, 1.0, 4.0)?;
+        for (key, v) in [
+            ("roi.tracked_min_m", roi.tracked_min_m),
+            ("roi.tracked_error_m", roi.tracked_error_m),
+        ] {
+            if !(v.is_finite() && (0.0..=2.0).contains(&v)) {
+                return invalid(key, format!("{v} is not in [0, 2]"));
             }
         }
         if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 1000.0) {

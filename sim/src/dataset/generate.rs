@@ -10,18 +10,19 @@ use rayon::prelude::*;
 use workcell_robots::math::{Pose, Vector};
 
 use workcell_render::dataset::{
-    CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, SequenceEntry,
-    Split, frame_files, sequence_dir,
+    CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, RoiLabel,
+    SequenceEntry, Split, frame_files, sequence_dir,
 };
-use workcell_render::image::{PixelKind, encode_png, write_atomic};
+use workcell_render::image::{PixelKind, depth_mm_bytes, encode_png, write_atomic};
 use workcell_render::occlusion::{Occluder, OccluderKind, PartPixels, fit_occluder};
+use workcell_render::roi::{Roi, RoiKind, mask_width, perfect_dice_loss, resample};
 use workcell_render::{Backend, Camera, Class, Frame, MaskBatch, RenderError, Renderer};
 
 use crate::cell::{CellModel, CellState, RobotCommand, step};
 use crate::dataset::config::DatasetConfig;
 use crate::error::{Result, SimError};
 use crate::scenario::Scenario;
-use crate::scene::CellScene;
+use crate::scene::{Appearance, CellScene};
 
 /// The classes stored per frame, in the order of [`FrameLabels::parts`].
 const PARTS: [Class; 5] = [
@@ -45,6 +46,8 @@ pub struct GeneratedFrame {
     pub occluder: Vec<u8>,
     /// 1 where the forearm rendered alone covers.
     pub amodal_forearm: Vec<u8>,
+    /// Depth along the optical axis, m (0 where nothing is seen).
+    pub depth_m: Vec<f32>,
     pub labels: FrameLabels,
 }
 
@@ -115,13 +118,28 @@ struct Episode {
     ticks: Vec<Tick>,
 }
 
-/// Which sequence is made: its index, seed, distance class and occlusion level.
+/// Which sequence is made: its index, seed (of its own draws), camera class (a distance
+/// class, then the cell's cameras) and occlusion level.
 #[derive(Debug, Clone, Copy)]
 struct Plan {
     index: usize,
     seed: u64,
     d_class: usize,
     level: usize,
+}
+
+/// One frame of a draw at the stored size: the region of interest of the camera's image
+/// resampled, with the forearm's amodal mask and what it keeps at this size.
+struct Shot {
+    roi: Roi,
+    /// The region's camera at the stored size.
+    camera: Camera,
+    rgb: Vec<u8>,
+    classes: Vec<u8>,
+    depth_m: Vec<f32>,
+    amodal_forearm: Vec<u8>,
+    forearm_width_px: Option<f64>,
+    forearm_dice_loss: Option<f64>,
 }
 
 /// The occluder of a sequence before it is sized per frame (drawn once per sequence).
@@ -145,10 +163,13 @@ struct Draw {
     plan: Plan,
     attempts: usize,
     first_tick: usize,
+    /// The camera at its native resolution.
     camera: Camera,
+    roi_kind: RoiKind,
     failing: usize,
     distance_m: f64,
-    frames: Vec<(Frame, Vec<u8>)>,
+    distance_class: String,
+    frames: Vec<Shot>,
 }
 
 /// A 64-bit mix (splitmix64's finaliser) to derive seeds.
@@ -195,10 +216,33 @@ impl Generator {
         Self::new(DatasetConfig::from_file(path)?, path)
     }
 
-    /// The scenario seed of sequence `index`.
+    /// The scenario seed of the episode that sequence `index` is cut from (consecutive
+    /// sequences share an episode, `sequences_per_episode` at a time).
     #[must_use]
     pub fn sequence_seed(&self, index: usize) -> u64 {
-        mix(self.config.seed ^ mix(index as u64 + 1))
+        let episode = index / self.config.sequences_per_episode;
+        mix(self.config.seed ^ mix(episode as u64 + 1))
+    }
+
+    /// The seed of sequence `index`'s own draws (camera, start, region, occluder, person).
+    fn draw_seed(&self, index: usize) -> u64 {
+        mix(self.sequence_seed(index) ^ mix(index as u64 + 0xd7a3))
+    }
+
+    /// Number of sequences.
+    #[must_use]
+    pub fn sequence_count(&self) -> usize {
+        self.config.sequence_count(self.scenario.cameras.len())
+    }
+
+    /// Name of camera class `d`: a distance class, then `camera:<name>` for the cell's.
+    fn source(&self, d: usize) -> String {
+        let n = self.config.distances.len();
+        if d < n {
+            "paper".into()
+        } else {
+            format!("camera:{}", self.scenario.cameras[d - n].name)
+        }
     }
 
     /// Distance class, occlusion level and split of sequence `index`: the pairs cycle so
@@ -207,7 +251,7 @@ impl Generator {
     #[must_use]
     pub fn plan(&self, index: usize) -> (usize, usize, Split) {
         let c = &self.config;
-        let pairs = c.distances.len() * c.occlusion_levels.len();
+        let pairs = c.camera_classes(self.scenario.cameras.len()) * c.occlusion_levels.len();
         let (pair, k) = (index % pairs, index / pairs);
         let n = c.sequences_per_pair as f64;
         let train = (c.splits[0] * n).round() as usize;
@@ -255,7 +299,8 @@ impl Generator {
         Ok(Episode { model, ticks })
     }
 
-    /// Generates sequence `index` in memory, rendering with `renderer`.
+    /// Generates sequence `index` in memory, rendering with `renderer` (simulating its
+    /// episode; [`Generator::generate`] simulates each episode once for all its sequences).
     ///
     /// # Errors
     /// [`SimError`] from the simulation or the renderer.
@@ -265,14 +310,29 @@ impl Generator {
         renderer: &mut dyn Renderer,
         timing: &mut Timing,
     ) -> Result<GeneratedSequence> {
+        let t = Instant::now();
+        let episode = self.episode(self.sequence_seed(index))?;
+        timing.simulate += t.elapsed();
+        self.sequence_of(&episode, index, renderer, timing)
+    }
+
+    /// Sequence `index` cut from its simulated `episode`.
+    fn sequence_of(
+        &self,
+        episode: &Episode,
+        index: usize,
+        renderer: &mut dyn Renderer,
+        timing: &mut Timing,
+    ) -> Result<GeneratedSequence> {
         let c = &self.config;
-        let seed = self.sequence_seed(index);
+        let seed = self.draw_seed(index);
         let (d_class, level, split) = self.plan(index);
         let t = Instant::now();
-        let episode = self.episode(seed)?;
-        timing.simulate += t.elapsed();
-        let t = Instant::now();
         let mut cell = CellScene::new(&episode.model);
+        if c.vary_appearance {
+            let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0xd1e55));
+            cell.dress(&episode.model, &Appearance::random(&mut rng));
+        }
         let forearm = cell.forearm_object().ok_or_else(|| SimError::Dataset {
             path: self.scenario_path.clone(),
             message: "the human model has no link named forearm".into(),
@@ -283,14 +343,14 @@ impl Generator {
             d_class,
             level,
         };
-        let draw = self.draw(&episode, &mut cell, forearm, plan, renderer)?;
+        let draw = self.draw(episode, &mut cell, forearm, plan, renderer)?;
         timing.render += t.elapsed();
 
         let t = Instant::now();
         let occlusion = self.occlusion(seed, level);
         let mut out = Vec::with_capacity(c.frames);
         for f in 0..draw.frames.len() {
-            let frame = self.occluded_frame(&episode, &mut cell, &draw, &occlusion, f, renderer)?;
+            let frame = self.occluded_frame(episode, &mut cell, &draw, &occlusion, f, renderer)?;
             out.push(frame);
         }
         timing.occlusion += t.elapsed();
@@ -301,10 +361,11 @@ impl Generator {
         let entry = SequenceEntry {
             index,
             dir: sequence_dir(index),
-            seed,
+            seed: self.sequence_seed(index),
             attempts: draw.attempts,
-            distance_class: c.distances[d_class].name.clone(),
+            distance_class: draw.distance_class.clone(),
             occlusion_level: c.occlusion_levels[level].name.clone(),
+            source: self.source(d_class),
             split,
             frames: c.frames,
             mean_forearm_occlusion: (!forearm_occlusion.is_empty())
@@ -314,9 +375,87 @@ impl Generator {
         Ok(GeneratedSequence { entry, frames: out })
     }
 
-    /// Draws the sequence's start and camera until the forearm is in view and not too hidden
-    /// by the scene in every frame (or keeps the best of `attempts` draws), rendering its
-    /// unoccluded frames and the forearm's amodal masks.
+    /// A camera of class `d_class` drawn from `rng` around the cell's `centre`, and its
+    /// distance to it: a distance class places it on a sphere about the centre looking near
+    /// `target`; a cell camera is that camera, jittered.
+    fn camera(
+        &self,
+        d_class: usize,
+        centre: Vector,
+        target: Vector,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(Camera, f64)> {
+        let c = &self.config;
+        let n = c.distances.len();
+        let (eye, target, up, size, fov) = if d_class < n {
+            let distance = &c.distances[d_class];
+            let d = rng.random_range(distance.range_m[0]..=distance.range_m[1]);
+            let az = rng
+                .random_range(c.azimuth_deg[0]..=c.azimuth_deg[1])
+                .to_radians();
+            let el = rng
+                .random_range(c.elevation_deg[0]..=c.elevation_deg[1])
+                .to_radians();
+            let eye = centre + d * Vector::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+            let jitter = 0.03 * d.sqrt();
+            let target = target
+                + Vector::new(
+                    rng.random_range(-jitter..=jitter),
+                    rng.random_range(-jitter..=jitter),
+                    rng.random_range(-jitter..=jitter),
+                );
+            (
+                eye,
+                target,
+                Vector::Z,
+                (c.width_px, c.height_px),
+                distance.fov_y_deg,
+            )
+        } else {
+            let cam = &self.scenario.cameras[d_class - n];
+            let j = c.cell_cameras.position_jitter_m;
+            let mut shake = || {
+                Vector::new(
+                    rng.random_range(-j..=j),
+                    rng.random_range(-j..=j),
+                    rng.random_range(-j..=j),
+                )
+            };
+            let (de, dt) = (shake(), shake());
+            let k = c.cell_cameras.fov_jitter;
+            let fov = cam.fov_y_deg * rng.random_range(1.0 - k..=1.0 + k);
+            (
+                Vector::from_array(cam.eye) + de,
+                Vector::from_array(cam.target) + dt,
+                Vector::from_array(cam.up),
+                (cam.width_px, cam.height_px),
+                fov.min(170.0),
+            )
+        };
+        let camera = Camera::look_at(
+            eye.to_array(),
+            target.to_array(),
+            up.to_array(),
+            size.0,
+            size.1,
+            fov,
+        )?;
+        Ok((camera, (eye - centre).length()))
+    }
+
+    /// The distance class whose range holds `d` (the nearest one otherwise).
+    fn distance_class(&self, d: f64) -> String {
+        let classes = &self.config.distances;
+        let gap = |r: [f64; 2]| (r[0] - d).max(d - r[1]).max(0.0);
+        classes
+            .iter()
+            .min_by(|a, b| gap(a.range_m).total_cmp(&gap(b.range_m)))
+            .map_or_else(String::new, |c| c.name.clone())
+    }
+
+    /// Draws the sequence's start, camera and region of interest until the forearm is in
+    /// view and not too hidden by the scene in every frame (or keeps the best of `attempts`
+    /// draws), rendering its frames without the occluder.
     fn draw(
         &self,
         episode: &Episode,
@@ -333,72 +472,89 @@ impl Generator {
             ..
         } = plan;
         let model = &episode.model;
+        let links = model.human.links();
+        let link = |name: &str| links.iter().position(|l| l.name == name);
+        let (Some(upper), Some(fl), Some(hand)) = (
+            link(Class::UpperArm.name()),
+            cell.forearm_link,
+            link(Class::Hand.name()),
+        ) else {
+            return Err(SimError::Dataset {
+                path: self.scenario_path.clone(),
+                message: "the human model needs links upper_arm, forearm and hand".into(),
+            });
+        };
+        // The shoulder (the upper arm's origin) and how far the wrist can be from it.
+        let at = |k: usize, l: usize| episode.ticks[k].human[l].translation;
+        let shoulder = at(0, upper);
+        let reach = (at(0, fl) - shoulder).length() + (at(0, hand) - at(0, fl)).length();
         // The cell centre: between the robot's base and the human's shoulder.
-        let shoulder = cell
-            .human_objects
-            .iter()
-            .zip(&episode.ticks[0].human)
-            .find(|(o, _)| o.is_some_and(|k| cell.scene.objects[k].class == Class::UpperArm))
-            .map_or(model.X_WH.translation, |(_, X)| X.translation);
         let centre = 0.5 * (model.X_WR.translation + shoulder);
-        let distance = &c.distances[d_class];
         let range = c.occlusion_levels[level].range;
-        let mut frame = Frame::new();
-        let mut masks = MaskBatch::new();
+        let roi_kind = {
+            let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0x0201));
+            if rng.random_bool(c.roi.tracked_fraction) {
+                RoiKind::Tracked
+            } else {
+                RoiKind::Workspace
+            }
+        };
         let mut best: Option<Draw> = None;
         for attempt in 0..c.attempts {
             let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ mix(attempt as u64 + 0x5eed)));
             let first_tick = ((rng.random_range(c.start_s[0]..=c.start_s[1]) * c.rate_hz).round()
                 as usize)
                 .min(episode.ticks.len() - c.frames);
-            let d = rng.random_range(distance.range_m[0]..=distance.range_m[1]);
-            let az = rng
-                .random_range(c.azimuth_deg[0]..=c.azimuth_deg[1])
-                .to_radians();
-            let el = rng
-                .random_range(c.elevation_deg[0]..=c.elevation_deg[1])
-                .to_radians();
-            let eye = centre + d * Vector::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
             // Look at the forearm's mean position, a little off.
-            let fl = cell.forearm_link.unwrap_or(0);
             let mean = (0..c.frames)
-                .map(|f| episode.ticks[first_tick + f].human[fl].translation)
+                .map(|f| at(first_tick + f, fl))
                 .fold(Vector::ZERO, |a, b| a + b)
                 / c.frames as f64;
-            let jitter = 0.03 * d.sqrt();
-            let target = mean
-                + Vector::new(
-                    rng.random_range(-jitter..=jitter),
-                    rng.random_range(-jitter..=jitter),
-                    rng.random_range(-jitter..=jitter),
-                );
-            let camera = Camera::look_at(
-                eye.to_array(),
-                target.to_array(),
-                [0.0, 0.0, 1.0],
-                c.width_px,
-                c.height_px,
-                distance.fov_y_deg,
-            )?;
+            let (camera, distance_m) = self.camera(d_class, centre, mean, &mut rng)?;
+            let workspace = Roi::of_sphere(&camera, shoulder, reach, c.roi.workspace_margin);
+            let margin = rng.random_range(c.roi.tracked_margin[0]..=c.roi.tracked_margin[1]);
+            let e = c.roi.tracked_error_m;
+            let mut error = || {
+                Vector::new(
+                    rng.random_range(-e..=e),
+                    rng.random_range(-e..=e),
+                    rng.random_range(-e..=e),
+                )
+            };
+            let bias = [error(), error(), error()];
             let mut frames = Vec::with_capacity(c.frames);
             let mut failing = 0;
             for f in 0..c.frames {
                 let tick = &episode.ticks[first_tick + f];
-                let (robot, human) = (&tick.robot, &tick.human);
-                cell.set_link_poses(robot, human);
-                renderer.render(&cell.scene, &camera, &mut frame)?;
-                let amodal = amodal_mask(cell, &camera, &[forearm], renderer, &mut masks)?;
-                let shown: Vec<bool> = frame
-                    .object
+                let roi = match roi_kind {
+                    RoiKind::Tracked => {
+                        // The tracker's estimate of the shoulder, the elbow and the wrist:
+                        // off by a bias per sequence and noise per frame.
+                        let k = first_tick + f;
+                        let joints: Vec<Vector> = [shoulder, at(k, fl), at(k, hand)]
+                            .iter()
+                            .zip(bias)
+                            .map(|(p, b)| *p + b + 0.3 * error())
+                            .collect();
+                        Roi::of_joints(&camera, &joints, margin, c.roi.tracked_min_m)
+                    }
+                    _ => workspace,
+                }
+                .unwrap_or(Roi::frame(camera.width, camera.height));
+                cell.set_link_poses(&tick.robot, &tick.human);
+                let shot = self.shot(cell, &camera, roi, forearm, renderer)?;
+                let shown: Vec<bool> = shot
+                    .classes
                     .iter()
-                    .map(|&o| usize::from(o) == forearm + 1)
+                    .map(|&k| k == Class::Forearm as u8)
                     .collect();
-                let p = PartPixels::count(&amodal, &shown, &vec![0; amodal.len()]);
+                let n = shot.amodal_forearm.len();
+                let p = PartPixels::count(&shot.amodal_forearm, &shown, &vec![0; n]);
                 let natural = p.natural_occlusion().unwrap_or(1.0);
                 if p.amodal < c.min_forearm_px || natural > range[1].min(c.max_natural_occlusion) {
                     failing += 1;
                 }
-                frames.push((frame.clone(), amodal));
+                frames.push(shot);
             }
             let better = best.as_ref().is_none_or(|b| failing < b.failing);
             if better {
@@ -407,8 +563,10 @@ impl Generator {
                     attempts: attempt + 1,
                     first_tick,
                     camera,
+                    roi_kind,
                     failing,
-                    distance_m: d,
+                    distance_m,
+                    distance_class: self.distance_class(distance_m),
                     frames,
                 });
             }
@@ -419,6 +577,92 @@ impl Generator {
         best.ok_or_else(|| SimError::Dataset {
             path: self.scenario_path.clone(),
             message: "no attempt was made".into(),
+        })
+    }
+
+    /// One frame through `roi`: the scene rendered at the camera's own pixel density over
+    /// the region (black past the image's edges) and resampled to the stored size; the
+    /// forearm rendered alone the same way, measured at the native density.
+    fn shot(
+        &self,
+        cell: &CellScene,
+        camera: &Camera,
+        roi: Roi,
+        forearm: usize,
+        renderer: &mut dyn Renderer,
+    ) -> Result<Shot> {
+        let input = self.config.input_px as usize;
+        let native = roi.camera(camera, roi.size)?;
+        let mut frame = Frame::new();
+        renderer.render(&cell.scene, &native, &mut frame)?;
+        let size = roi.size as usize;
+        let inside = |p: usize| {
+            let (x, y) = (roi.x0 + (p % size) as i64, roi.y0 + (p / size) as i64);
+            x >= 0 && y >= 0 && x < i64::from(camera.width) && y < i64::from(camera.height)
+        };
+        let n = size * size;
+        // sRGB bytes and classes as planes (a camera sees nothing past its edges).
+        let mut rgb = vec![0f32; 3 * n];
+        let mut one_hot = vec![0f32; Class::ALL.len() * n];
+        let classes = frame.classes(&cell.scene);
+        for p in (0..n).filter(|&p| inside(p)) {
+            for ch in 0..3 {
+                rgb[ch * n + p] = f32::from(frame.rgb[3 * p + ch]);
+            }
+            one_hot[usize::from(classes[p]) * n + p] = 1.0;
+        }
+        for p in (0..n).filter(|&p| !inside(p)) {
+            one_hot[p] = 1.0;
+        }
+        let rgb_in = resample(&rgb, 3, size, size, input, input);
+        let mut rgb_out = vec![0u8; 3 * input * input];
+        let m = input * input;
+        for p in 0..m {
+            for ch in 0..3 {
+                rgb_out[3 * p + ch] = rgb_in[ch * m + p].round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        // The class covering most of each stored pixel.
+        let shares = resample(&one_hot, Class::ALL.len(), size, size, input, input);
+        let classes_out: Vec<u8> = (0..m)
+            .map(|p| {
+                (0..Class::ALL.len())
+                    .max_by(|&a, &b| shares[a * m + p].total_cmp(&shares[b * m + p]))
+                    .unwrap_or(0) as u8
+            })
+            .collect();
+        // Depth at the nearest pixel of each stored pixel's centre.
+        let depth_out: Vec<f32> = (0..m)
+            .map(|p| {
+                let (x, y) = (p % input, p / input);
+                let sx = ((x as f64 + 0.5) * size as f64 / input as f64) as usize;
+                let sy = ((y as f64 + 0.5) * size as f64 / input as f64) as usize;
+                let q = sy.min(size - 1) * size + sx.min(size - 1);
+                if inside(q) { frame.depth_m[q] } else { 0.0 }
+            })
+            .collect();
+        let mut masks = MaskBatch::new();
+        let mut amodal = amodal_mask(cell, &native, &[forearm], renderer, &mut masks)?;
+        for (p, a) in amodal.iter_mut().enumerate() {
+            if !inside(p) {
+                *a = 0;
+            }
+        }
+        let amodal_f: Vec<f32> = amodal.iter().map(|&v| f32::from(v)).collect();
+        let amodal_out: Vec<u8> = resample(&amodal_f, 1, size, size, input, input)
+            .iter()
+            .map(|&v| u8::from(v >= 0.5))
+            .collect();
+        let scale = input as f64 / size as f64;
+        Ok(Shot {
+            roi,
+            camera: roi.camera(camera, self.config.input_px)?,
+            rgb: rgb_out,
+            classes: classes_out,
+            depth_m: depth_out,
+            amodal_forearm: amodal_out,
+            forearm_width_px: mask_width(&amodal, size).map(|w| w * scale),
+            forearm_dice_loss: perfect_dice_loss(&amodal, size, size, input, input),
         })
     }
 
@@ -468,9 +712,8 @@ impl Generator {
             ..
         } = draw.plan;
         let model = &episode.model;
-        let forearm = cell.forearm_object().unwrap_or(0);
         let range = c.occlusion_levels[level].range;
-        let (w, h) = (c.width_px, c.height_px);
+        let (w, h) = (c.input_px, c.input_px);
         let n = w as usize * h as usize;
         let SequenceOcclusion {
             kind,
@@ -482,8 +725,8 @@ impl Generator {
             offset_len,
             drift_dir,
         } = *occlusion;
-        let camera = &draw.camera;
-        let (frame, amodal) = &draw.frames[f];
+        let shot = &draw.frames[f];
+        let (camera, amodal) = (&shot.camera, &shot.amodal_forearm);
         let mut masks = MaskBatch::new();
         let Tick {
             time_s,
@@ -493,10 +736,10 @@ impl Generator {
             human_q,
         } = &episode.ticks[draw.first_tick + f];
         cell.set_link_poses(robot, human);
-        let shown: Vec<bool> = frame
-            .object
+        let shown: Vec<bool> = shot
+            .classes
             .iter()
-            .map(|&o| usize::from(o) == forearm + 1)
+            .map(|&k| k == Class::Forearm as u8)
             .collect();
         let (centroid, extent) = centroid_extent(amodal, w);
         let progress = if c.frames > 1 {
@@ -538,8 +781,8 @@ impl Generator {
         }
         let occluder = fitted.0;
         let occluder_mask = occluder.mask(w, h);
-        let classes = frame.classes(&cell.scene);
-        let mut rgb = frame.rgb.clone();
+        let classes = shot.classes.clone();
+        let mut rgb = shot.rgb.clone();
         let mut visible = classes.clone();
         for p in 0..n {
             if occluder_mask[p] != 0 {
@@ -558,12 +801,9 @@ impl Generator {
             } else {
                 amodal_mask(cell, camera, &objects, renderer, &mut masks)?
             };
-            let shown: Vec<bool> = frame
-                .object
-                .iter()
-                .map(|&o| o != 0 && cell.scene.objects[usize::from(o) - 1].class == class)
-                .collect();
+            let shown: Vec<bool> = classes.iter().map(|&k| k == class as u8).collect();
             let pixels = PartPixels::count(&amodal, &shown, &occluder_mask);
+            let is_forearm = class == Class::Forearm;
             let (link, X_WP) = part_frame(cell, model, class, robot, human);
             parts.push(PartLabel {
                 class,
@@ -574,26 +814,26 @@ impl Generator {
                 pixels_visible: pixels.visible,
                 occlusion: pixels.occlusion(),
                 natural_occlusion: pixels.natural_occlusion(),
+                width_px: shot.forearm_width_px.filter(|_| is_forearm),
+                perfect_dice_loss: shot.forearm_dice_loss.filter(|_| is_forearm),
             });
         }
         let labels = FrameLabels {
             sequence: index,
             frame: f,
             time_s: *time_s,
-            distance_class: c.distances[d_class].name.clone(),
+            distance_class: draw.distance_class.clone(),
             distance_m: draw.distance_m,
             occlusion_level: c.occlusion_levels[level].name.clone(),
+            source: self.source(d_class),
+            roi: Some(RoiLabel {
+                kind: draw.roi_kind,
+                native: camera_label(&draw.camera),
+                roi: shot.roi,
+            }),
             target_occlusion: target,
             occluder,
-            camera: CameraLabel {
-                width_px: w,
-                height_px: h,
-                fx: camera.fx,
-                fy: camera.fy,
-                cx: camera.cx,
-                cy: camera.cy,
-                X_WC: PoseLabel::from(&camera.X_WC),
-            },
+            camera: camera_label(camera),
             parts,
             robot_q: robot_q.clone(),
             human_q: human_q.clone(),
@@ -604,6 +844,7 @@ impl Generator {
             visible,
             occluder: occluder_mask,
             amodal_forearm: amodal.clone(),
+            depth_m: shot.depth_m.clone(),
             labels,
         })
     }
@@ -629,9 +870,10 @@ impl Generator {
                     &self.scenario_path,
                 ),
                 X_WH: PoseLabel::from(&self.scenario.human.base.to_pose()),
+                look: self.scenario.human.look,
             }),
-            width_px: self.config.width_px,
-            height_px: self.config.height_px,
+            width_px: self.config.input_px,
+            height_px: self.config.input_px,
             sequences,
         }
     }
@@ -671,34 +913,54 @@ impl Generator {
             Err(_) => write_atomic(&stamp, config_text.as_bytes())?,
         }
         let done = std::sync::atomic::AtomicUsize::new(0);
-        let results: Vec<Result<(SequenceEntry, Timing, bool)>> = (0..self.config.sequence_count())
+        let count = self.sequence_count();
+        let per = self.config.sequences_per_episode;
+        // One task per episode: it is simulated once (if any of its sequences is missing)
+        // and cut into its sequences.
+        let results: Vec<Vec<Result<(SequenceEntry, Timing, bool)>>> = (0..count.div_ceil(per))
             .into_par_iter()
             .map_init(
                 || self.backend.renderer().map_err(|e| e.to_string()),
-                |renderer, index| {
-                    let dir = out.join(sequence_dir(index));
-                    let entry_path = dir.join("sequence.json");
-                    let result = if entry_path.exists() {
-                        read_entry(&entry_path).map(|e| (e, Timing::default(), false))
-                    } else {
-                        let mut timing = Timing::default();
-                        match renderer {
-                            Ok(renderer) => self
-                                .sequence(index, renderer.as_mut(), &mut timing)
-                                .and_then(|s| {
-                                    write_sequence(out, &s, &mut timing)
-                                        .map(|()| (s.entry, timing, true))
+                |renderer, e| {
+                    let indices = e * per..((e + 1) * per).min(count);
+                    let mut episode: Option<Result<Episode>> = None;
+                    let mut out_e = Vec::with_capacity(per);
+                    for index in indices {
+                        let entry_path = out.join(sequence_dir(index)).join("sequence.json");
+                        let result = if entry_path.exists() {
+                            read_entry(&entry_path).map(|e| (e, Timing::default(), false))
+                        } else {
+                            let mut timing = Timing::default();
+                            let episode = episode.get_or_insert_with(|| {
+                                let t = Instant::now();
+                                let ep = self.episode(self.sequence_seed(index));
+                                timing.simulate += t.elapsed();
+                                ep
+                            });
+                            match (renderer.as_mut(), episode) {
+                                (Ok(renderer), Ok(episode)) => self
+                                    .sequence_of(episode, index, renderer.as_mut(), &mut timing)
+                                    .and_then(|s| {
+                                        write_sequence(out, &s, &mut timing)
+                                            .map(|()| (s.entry, timing, true))
+                                    }),
+                                (Err(message), _) => Err(SimError::Render(RenderError::Gpu {
+                                    message: message.clone(),
+                                })),
+                                (_, Err(err)) => Err(SimError::Dataset {
+                                    path: self.scenario_path.clone(),
+                                    message: format!("simulating episode {e}: {err}"),
                                 }),
-                            Err(message) => Err(SimError::Render(RenderError::Gpu {
-                                message: message.clone(),
-                            })),
-                        }
-                    };
-                    progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
-                    result
+                            }
+                        };
+                        progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
+                        out_e.push(result);
+                    }
+                    out_e
                 },
             )
             .collect();
+        let results: Vec<_> = results.into_iter().flatten().collect();
         let mut entries = Vec::with_capacity(results.len());
         let (mut timing, mut generated) = (Timing::default(), 0);
         for r in results {
@@ -768,6 +1030,7 @@ fn write_sequence(out: &Path, s: &GeneratedSequence, timing: &mut Timing) -> Res
                 path: partial.clone(),
                 message: e.to_string(),
             })?,
+            encode_png(w, h, PixelKind::Gray16, &depth_mm_bytes(&frame.depth_m))?,
         ];
         timing.encode += t.elapsed();
         let t = Instant::now();
@@ -784,6 +1047,19 @@ fn write_sequence(out: &Path, s: &GeneratedSequence, timing: &mut Timing) -> Res
     let path = partial.join("sequence.json");
     std::fs::write(&path, entry).map_err(io(&path))?;
     std::fs::rename(&partial, &dir).map_err(io(&dir))
+}
+
+/// The label of a camera.
+fn camera_label(camera: &Camera) -> CameraLabel {
+    CameraLabel {
+        width_px: camera.width,
+        height_px: camera.height,
+        fx: camera.fx,
+        fy: camera.fy,
+        cx: camera.cx,
+        cy: camera.cy,
+        X_WC: PoseLabel::from(&camera.X_WC),
+    }
 }
 
 /// Union of the masks of `objects` (indices into the scene) rendered alone.

@@ -5,9 +5,15 @@ use workcell_robots::math::{Pose, Rotation, Vector, pose_to_xyz_rpy};
 
 use crate::Class;
 use crate::occlusion::Occluder;
+use crate::roi::{Roi, RoiKind};
+use workcell_robots::HumanLook;
 
 /// The layout version written into manifests.
-pub const FORMAT: &str = "workcell-dataset/1";
+pub const FORMAT: &str = "workcell-dataset/2";
+
+/// Formats this version reads: 1 (whole 128x128 frames, skeletal human, no regions of
+/// interest or depth) and 2.
+pub const READS: [&str; 2] = ["workcell-dataset/1", FORMAT];
 
 /// A pose as stored: position, roll-pitch-yaw (URDF convention) and the quaternion.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -86,6 +92,26 @@ pub struct PartLabel {
     pub occlusion: Option<f64>,
     /// Hidden by other objects only.
     pub natural_occlusion: Option<f64>,
+    /// Width of the part rendered alone in the stored frame, px (`roi::mask_width` of its
+    /// mask at the camera's resolution, scaled to the frame's); absent in format 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub width_px: Option<f64>,
+    /// The Dice loss of a perfect network at the stored frame's size
+    /// (`roi::perfect_dice_loss` of the part's mask at the camera's resolution); absent in
+    /// format 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub perfect_dice_loss: Option<f64>,
+}
+
+/// Where a stored frame comes from in its camera's image: the camera at its own resolution
+/// and the region of interest that was resampled to the stored frame ([`FrameLabels::camera`]
+/// is the region's camera).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RoiLabel {
+    pub kind: RoiKind,
+    /// The camera at its native resolution.
+    pub native: CameraLabel,
+    pub roi: Roi,
 }
 
 /// The labels of one frame.
@@ -99,6 +125,14 @@ pub struct FrameLabels {
     /// Lens to cell centre, m.
     pub distance_m: f64,
     pub occlusion_level: String,
+    /// The camera source: `paper` (the paper's distance classes) or `camera:<name>` (a
+    /// camera of the cell, jittered). `paper` in format 1.
+    #[serde(default = "paper")]
+    pub source: String,
+    /// The region of the native camera's image this frame shows (absent in format 1: the
+    /// frame is the whole image).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roi: Option<RoiLabel>,
     /// The forearm occlusion the occluder was sized for.
     pub target_occlusion: f64,
     pub occluder: Occluder,
@@ -147,6 +181,17 @@ pub struct HumanLabel {
     pub model: String,
     /// The human's base frame H in the world.
     pub X_WH: PoseLabel,
+    /// What the frames show of it (format 1 datasets are skeletal).
+    #[serde(default = "skeletal")]
+    pub look: HumanLook,
+}
+
+fn skeletal() -> HumanLook {
+    HumanLook::Skeletal
+}
+
+fn paper() -> String {
+    "paper".into()
 }
 
 /// One sequence as the manifest lists it.
@@ -161,6 +206,9 @@ pub struct SequenceEntry {
     pub attempts: usize,
     pub distance_class: String,
     pub occlusion_level: String,
+    /// As [`FrameLabels::source`].
+    #[serde(default = "paper")]
+    pub source: String,
     pub split: Split,
     pub frames: usize,
     /// Mean forearm occlusion over the frames that show it.
@@ -184,6 +232,7 @@ pub struct Manifest {
     /// datasets written before it was recorded: regenerate them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub human: Option<HumanLabel>,
+    /// Size of the stored frames (the network's input in format 2).
     pub width_px: u32,
     pub height_px: u32,
     pub sequences: Vec<SequenceEntry>,

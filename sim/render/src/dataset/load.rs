@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use crate::Class;
 use crate::dataset::frame_files;
-use crate::dataset::labels::{FORMAT, FrameLabels, Manifest, SequenceEntry, Split};
+use crate::dataset::labels::{READS, FrameLabels, Manifest, SequenceEntry, Split};
 use crate::error::{RenderError, Result};
 use crate::image::{PixelKind, read_png};
 
@@ -93,12 +93,13 @@ impl Dataset {
             )
         })?;
         let manifest: Manifest = serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))?;
-        if manifest.format != FORMAT {
+        if !READS.contains(&manifest.format.as_str()) {
             return Err(invalid(
                 &path,
                 format!(
-                    "format {:?}; this version reads {FORMAT:?}",
-                    manifest.format
+                    "format {:?}; this version reads {}",
+                    manifest.format,
+                    READS.join(", ")
                 ),
             ));
         }
@@ -121,19 +122,55 @@ impl Dataset {
         self.entries(split).map(|e| self.load(e))
     }
 
-    /// Loads one sequence and checks it against the manifest.
+    /// The labels of one sequence's frames, without its images.
     ///
     /// # Errors
-    /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file that is missing, corrupt or
-    /// of the wrong size.
-    pub fn load(&self, entry: &SequenceEntry) -> Result<Sequence> {
+    /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file.
+    pub fn labels(&self, entry: &SequenceEntry) -> Result<Vec<FrameLabels>> {
+        let dir = self.sequence_dir(entry)?;
+        (0..entry.frames)
+            .map(|f| {
+                let path = dir.join(&frame_files(f)[5]);
+                let bytes = std::fs::read(&path).map_err(|source| RenderError::Io {
+                    path: path.clone(),
+                    source,
+                })?;
+                serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))
+            })
+            .collect()
+    }
+
+    /// The forearm's amodal mask of frame `f` of a sequence (1 where it covers).
+    ///
+    /// # Errors
+    /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file.
+    pub fn amodal_forearm(&self, entry: &SequenceEntry, f: usize) -> Result<Vec<u8>> {
+        let path = self.sequence_dir(entry)?.join(&frame_files(f)[4]);
+        let (w, h, kind, data) = read_png(&path)?;
+        if (w, h, kind) != (self.manifest.width_px, self.manifest.height_px, PixelKind::Gray) {
+            return Err(invalid(&path, "not a grey mask of the manifest's size"));
+        }
+        Ok(data.iter().map(|&v| u8::from(v >= 128)).collect())
+    }
+
+    /// The folder of a sequence (refusing one that leaves the dataset).
+    fn sequence_dir(&self, entry: &SequenceEntry) -> Result<PathBuf> {
         if entry.dir.contains("..") || Path::new(&entry.dir).is_absolute() {
             return Err(invalid(
                 &self.root.join("manifest.json"),
                 format!("bad folder {:?}", entry.dir),
             ));
         }
-        let dir = self.root.join(&entry.dir);
+        Ok(self.root.join(&entry.dir))
+    }
+
+    /// Loads one sequence and checks it against the manifest.
+    ///
+    /// # Errors
+    /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file that is missing, corrupt or
+    /// of the wrong size.
+    pub fn load(&self, entry: &SequenceEntry) -> Result<Sequence> {
+        let dir = self.sequence_dir(entry)?;
         let (w, h) = (self.manifest.width_px, self.manifest.height_px);
         let n = w as usize * h as usize;
         let mut s = Sequence {

@@ -21,13 +21,15 @@
 mod labels;
 mod load;
 mod sheet;
+mod stats;
 
 pub use labels::{
-    CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, SequenceEntry,
-    Split,
+    CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, READS,
+    RoiLabel, SequenceEntry, Split,
 };
 pub use load::{Dataset, Sequence};
 pub use sheet::contact_sheet;
+pub use stats::{ForearmStats, forearm_stats};
 
 /// The folder of sequence `index`.
 #[must_use]
@@ -35,9 +37,10 @@ pub fn sequence_dir(index: usize) -> String {
     format!("seq_{index:05}")
 }
 
-/// The file names of frame `f`: rgb, class, visible, occluder, amodal PNGs and the labels.
+/// The file names of frame `f`: rgb, class, visible, occluder, amodal PNGs, the labels and
+/// the depth PNG (16-bit, mm; format 2).
 #[must_use]
-pub fn frame_files(f: usize) -> [String; 6] {
+pub fn frame_files(f: usize) -> [String; 7] {
     [
         "rgb.png",
         "class.png",
@@ -45,6 +48,7 @@ pub fn frame_files(f: usize) -> [String; 6] {
         "occluder.png",
         "amodal.png",
         "json",
+        "depth.png",
     ]
     .map(|s| {
         if s == "json" {
