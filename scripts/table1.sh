@@ -3,7 +3,7 @@
 # prediction loss, each trained by configs/train.toml's recipe (seed, losses, schedule) for
 # STEPS steps (default 1000) at half the cpu preset's channels (8, 16, 32), and evaluated on
 # the test split. Writes out/table1/<variant>/ and out/table1/table1.md.
-#   scripts/table1.sh [STEPS]        (needs out/dataset and a release build)
+#   scripts/table1.sh [STEPS]        (needs out/dataset-paper and a release build)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 STEPS="${1:-1000}"
@@ -17,12 +17,12 @@ for cell in hgru convlstm conv; do
         cfg="$OUT/$name.toml"
         sed -e "s/^cell = .*/cell = \"$cell\"/" \
             -e "s/^prediction_loss = .*/prediction_loss = $pred/" \
-            -e "s|^dataset = .*|dataset = \"../dataset\"|" \
+            -e "s|^dataset = .*|dataset = \"../dataset-paper\"|" \
             -e "s/^steps = .*/steps = $STEPS/" \
             -e "s/^repr_channels = .*/repr_channels = [8, 16, 32]/" \
             -e "s/^input_channels = .*/input_channels = [3, 8, 16]/" configs/train.toml > "$cfg"
         "$BIN" train --config "$cfg" --out "$OUT/$name" | tail -3
-        "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" --dataset out/dataset \
+        "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" --dataset out/dataset-paper \
             --split test --out "$OUT/$name/test.md" > /dev/null
         ROWS+=("$name")
     done

@@ -195,7 +195,7 @@ fn dataset_generate_then_show_writes_a_contact_sheet() {
     std::fs::write(
         &config,
         format!(
-            "scenario = {:?}\nsequences_per_pair = 1\nframes = 2\nwidth_px = 64\nheight_px = 64\nstart_s = [0.5, 1.0]\n",
+            "scenario = {:?}\nsequences_per_pair = 1\nframes = 2\nwidth_px = 64\nheight_px = 64\ninput_px = 32\nstart_s = [0.5, 1.0]\n",
             scenario.display().to_string()
         ),
     )
@@ -208,12 +208,24 @@ fn dataset_generate_then_show_writes_a_contact_sheet() {
     let run = workcell(&["dataset", "generate", "--config", config, "--out", out]);
     assert!(run.status.success(), "{}", text(&run.stderr));
     assert!(
-        text(&run.stdout).contains("9 sequences (9 new), 18 frames"),
+        text(&run.stdout).contains("12 sequences (12 new), 24 frames of 32x32 px"),
         "{}",
         text(&run.stdout)
     );
     let show = workcell(&["dataset", "show", out]);
     assert!(show.status.success(), "{}", text(&show.stderr));
+    // Both camera sources; the stats table has a row per source, distance class and crop.
+    let shown = text(&show.stdout);
+    assert!(shown.contains("camera:front") && shown.contains("paper"), "{shown}");
+    let stats = workcell(&["dataset", "stats", out]);
+    assert!(stats.status.success(), "{}", text(&stats.stderr));
+    let table = text(&stats.stdout);
+    assert!(table.contains("workcell-dataset/2 (12 sequences, 24 frames of 32x32 px, flesh human)"), "{table}");
+    for row in ["paper          short    all", "camera:front"] {
+        assert!(table.contains(row), "{row}: {table}");
+    }
+    let bad = workcell(&["dataset", "stats", out, "--input", "1"]);
+    assert!(text(&bad.stderr).contains("--input 1"), "{}", text(&bad.stderr));
     let sheet = Path::new(out).join("contact_sheet.png");
     let bytes = std::fs::read(&sheet).expect("contact sheet");
     assert!(bytes.starts_with(b"\x89PNG"));
@@ -248,7 +260,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     std::fs::write(
         &data_cfg,
         format!(
-            "scenario = {:?}\nsequences_per_pair = 2\nframes = 4\nwidth_px = 32\nheight_px = 32\nstart_s = [0.5, 1.0]\nsplits = [0.5, 0.0, 0.5]\n",
+            "scenario = {:?}\nsequences_per_pair = 2\nframes = 4\nwidth_px = 32\nheight_px = 32\ninput_px = 32\nstart_s = [0.5, 1.0]\nsplits = [0.5, 0.0, 0.5]\n[cell_cameras]\nenabled = false\n",
             scenario.display().to_string()
         ),
     )

@@ -35,7 +35,9 @@ fn main() -> anyhow::Result<()> {
     let human = manifest
         .human
         .context("the manifest records no human: regenerate the dataset")?;
-    let model = RobotModel::load(&human.model, &PackageMap::from_env())?;
+    let mut model = RobotModel::load(&human.model, &PackageMap::from_env())?;
+    // What the frames show of it: its flesh, or the paper's bones.
+    model.retain_visuals(|g| human.look.shows(g.name.as_deref()));
     let X_WH = Pose::from(&human.X_WH);
     let arm = ArmModel::new(&model, &X_WH)?;
 

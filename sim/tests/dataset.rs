@@ -1,24 +1,30 @@
-//! The dataset: determinism, labels consistent with the stored masks, occlusion in the
-//! targeted level, resuming after a killed run, and bad input.
+//! The dataset: determinism, labels consistent with the stored masks, regions of interest
+//! consistent with their cameras, depth, occlusion in the targeted level, resuming after a
+//! killed run, and bad input.
 
 use std::path::{Path, PathBuf};
 
 use workcell_sim::SimError;
 use workcell_sim::dataset::{Dataset, DatasetConfig, Generator, Split};
-use workcell_sim::render::Class;
+use workcell_sim::render::image::PixelKind;
+use workcell_robots::math::Pose;
+use workcell_sim::render::{Camera, Class, CpuRenderer, MaskBatch, RenderMesh, Renderer};
 
 fn scenario() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/default.toml")
 }
 
-/// A small dataset of the default cell: one sequence per pair, 3 frames of 96x96.
+/// A small dataset of the default cell: one sequence per pair (3 distance classes and the
+/// cell's camera, 3 levels: 12), three to an episode, 3 frames of 160x120 read at 64x64.
 fn small_config(dir: &Path) -> PathBuf {
     let config = DatasetConfig {
         scenario: scenario(),
         sequences_per_pair: 1,
+        sequences_per_episode: 3,
         frames: 3,
-        width_px: 96,
-        height_px: 96,
+        width_px: 160,
+        height_px: 120,
+        input_px: 64,
         start_s: [0.5, 1.5],
         ..DatasetConfig::default()
     };
@@ -54,32 +60,45 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
     let generator = Generator::from_file(&config).unwrap();
     let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
     let report = generator.generate(&a, &|_| {}).unwrap();
-    assert_eq!(report.generated, 9);
+    assert_eq!(report.generated, 12);
     generator.generate(&b, &|_| {}).unwrap();
     let (fa, fb) = (files(&a), files(&b));
-    assert_eq!(fa.len(), 2 + 9 * (1 + 3 * 6));
+    assert_eq!(fa.len(), 2 + 12 * (1 + 3 * 7));
     assert!(fa == fb, "two runs of one configuration differ");
 
     let dataset = Dataset::open(&a).unwrap();
     let m = &dataset.manifest;
-    // Every (distance, level) pair once; with one sequence per pair, all go to training.
+    assert_eq!((m.width_px, m.height_px), (64, 64));
+    // Every (source, distance, level) once; with one sequence per pair, all go to training.
     let mut pairs: Vec<_> = m
         .sequences
         .iter()
-        .map(|s| (s.distance_class.clone(), s.occlusion_level.clone()))
+        .map(|s| (s.source.clone(), s.distance_class.clone(), s.occlusion_level.clone()))
         .collect();
     pairs.sort();
     pairs.dedup();
-    assert_eq!(pairs.len(), 9);
-    assert_eq!(dataset.entries(Some(Split::Train)).count(), 9);
+    assert_eq!(pairs.len(), 12);
+    let cell = pairs.iter().filter(|p| p.0 == "camera:front").count();
+    assert_eq!(cell, 3, "{pairs:?}");
+    assert_eq!(dataset.entries(Some(Split::Train)).count(), 12);
+    // Three sequences to an episode.
+    let seeds: Vec<u64> = m.sequences.iter().map(|s| s.seed).collect();
+    assert!(seeds[0] == seeds[2] && seeds[2] != seeds[3], "{seeds:?}");
 
     let config = &generator.config;
     let forearm = Class::Forearm as u8;
+    // The forearm as the frames show it: the built-in human in the default (flesh) look.
+    let mut human = workcell_robots::RobotModel::from_catalogue("human_arm").unwrap();
+    human.retain_visuals(|g| workcell_robots::HumanLook::Flesh.shows(g.name.as_deref()));
+    let mut forearm_mesh = RenderMesh::default();
+    for g in &human.links()[human.link_id("forearm").unwrap()].visuals {
+        forearm_mesh.append(&RenderMesh::from_geometry(g, [0.8; 3]), &Pose::IDENTITY);
+    }
     let (mut frames, mut in_level) = (0, 0);
     for s in dataset.sequences(None) {
         let s = s.unwrap();
         assert_eq!(s.len(), 3);
-        assert_eq!(s.rgb.len(), 3 * 3 * 96 * 96);
+        assert_eq!(s.rgb.len(), 3 * 3 * 64 * 64);
         assert!(s.rgb.iter().all(|v| (0.0..=1.0).contains(v)));
         let n = s.pixels();
         let level = config
@@ -134,12 +153,69 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
             }
             // The forearm's pose is in front of the camera.
             assert!(label.X_CP.xyz_m[2] > 0.0);
+            // The stored frame's camera sees the region of interest of the native camera
+            // at the stored size (workcell_render::roi::Roi::camera).
+            let labels = &s.labels[t];
+            let roi = labels.roi.expect("format 2 frames record their region");
+            let native = Camera::from(&roi.native);
+            let expected = roi.roi.camera(&native, 64).unwrap();
+            assert_eq!(Camera::from(&labels.camera), expected);
+            if labels.source == "paper" {
+                assert_eq!((native.width, native.height), (160, 120));
+            } else {
+                assert_eq!(labels.source, "camera:front");
+                assert_eq!((native.width, native.height), (640, 480));
+            }
+            // Depth: 16-bit mm, and the forearm's pixels lie within a forearm's length of
+            // its link frame's depth.
+            let depth_png = dataset
+                .root
+                .join(&s.entry.dir)
+                .join(&workcell_sim::render::dataset::frame_files(t)[6]);
+            let (dw, dh, kind, bytes) = workcell_sim::render::image::read_png(&depth_png).unwrap();
+            assert_eq!((dw, dh, kind), (64, 64, PixelKind::Gray16));
+            // (interior pixels: at a boundary the nearest native pixel may be behind it)
+            let side = 64;
+            let interior = |p: usize| {
+                let (x, y) = (p % side, p / side);
+                x > 0
+                    && y > 0
+                    && x + 1 < side
+                    && y + 1 < side
+                    && [p - 1, p + 1, p - side, p + side]
+                        .iter()
+                        .all(|&q| classes[q] == forearm)
+            };
+            for p in (0..n).filter(|&p| classes[p] == forearm && interior(p)) {
+                let mm = u16::from_be_bytes([bytes[2 * p], bytes[2 * p + 1]]);
+                let d = f64::from(mm) / 1000.0;
+                assert!((d - label.X_CP.xyz_m[2]).abs() < 0.35, "depth {d} vs {:?}", label.X_CP);
+            }
+            // The stored forearm is the forearm rendered at its label's pose by the frame's
+            // camera (the region's camera): labels, crop and resampling agree.
+            if all > 40 {
+                let mut batch = MaskBatch::new();
+                let X_CP = Pose::from(&label.X_CP);
+                CpuRenderer::new()
+                    .render_masks(&forearm_mesh, &Camera::from(&labels.camera), &[X_CP], &mut batch)
+                    .unwrap();
+                let rendered = batch.mask(0);
+                let both = (0..n).filter(|&p| rendered[p] != 0 && amodal[p] == 1).count();
+                let either = (0..n).filter(|&p| rendered[p] != 0 || amodal[p] == 1).count();
+                let iou = both as f64 / either as f64;
+                assert!(iou > 0.85, "seq {} frame {t}: IoU {iou} of {all} px", s.entry.index);
+            }
+            // The forearm's width and perfect-network ceiling are recorded when in view.
+            if all > 0 {
+                assert!(label.width_px.is_some_and(|w| w > 0.5));
+                assert!(label.perfect_dice_loss.is_some_and(|d| (0.0..=1.0).contains(&d)));
+            }
         }
     }
     // The occluder is sized per frame; a few pixels of a thin forearm can still jump a level.
     assert!(
-        frames >= 24,
-        "forearm in view in only {frames} of 27 frames"
+        frames >= 32,
+        "forearm in view in only {frames} of 36 frames"
     );
     eprintln!("{in_level} of {frames} frames in their level");
     assert!(

@@ -116,9 +116,11 @@ fn a_sequence_rendered_on_the_gpu_matches_the_cpu_s() {
     let config = DatasetConfig {
         scenario: std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/default.toml"),
         sequences_per_pair: 1,
+        sequences_per_episode: 3,
         frames: 3,
-        width_px: 96,
-        height_px: 96,
+        width_px: 160,
+        height_px: 120,
+        input_px: 64,
         start_s: [0.5, 1.5],
         ..DatasetConfig::default()
     };

@@ -8,6 +8,7 @@ use crate::error::{Result, SimError};
 use crate::scenario::{parse_toml, read_text};
 use workcell_render::occlusion::OccluderKind;
 use workcell_render::roi;
+use workcell_robots::HumanLook;
 
 /// A camera distance class: cameras between `range_m` from the cell centre, with a field of
 /// view that narrows with distance like a zoom lens (the cell stays in frame but looks
@@ -56,6 +57,9 @@ impl Default for CellCameras {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RoiConfig {
+    /// Every frame is the camera's whole image (its centred square): the paper's protocol,
+    /// for the paper's tables. The other keys are then unused.
+    pub whole_frame: bool,
     /// Fraction of the sequences cut around the arm as a tracker would (the rest show the
     /// fixed workspace crop).
     pub tracked_fraction: f64,
@@ -75,6 +79,7 @@ pub struct RoiConfig {
 impl Default for RoiConfig {
     fn default() -> Self {
         Self {
+            whole_frame: false,
             tracked_fraction: 0.5,
             workspace_margin: roi::WORKSPACE_MARGIN,
             tracked_margin: roi::TRACKED_MARGIN,
@@ -106,6 +111,9 @@ pub struct DatasetConfig {
     pub input_px: u32,
     /// Vary the human's skin, clothes and sleeves per sequence (flesh look).
     pub vary_appearance: bool,
+    /// The human's look in the frames, `flesh` or `skeletal` (default: the scenario's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub look: Option<HumanLook>,
     pub cell_cameras: CellCameras,
     pub roi: RoiConfig,
     /// Frames per second.
@@ -149,13 +157,14 @@ impl Default for DatasetConfig {
         Self {
             scenario: "default.toml".into(),
             seed: 1,
-            sequences_per_pair: 84,
+            sequences_per_pair: 105,
             sequences_per_episode: 6,
             frames: 30,
             width_px: 640,
             height_px: 480,
             input_px: 128,
             vary_appearance: true,
+            look: None,
             cell_cameras: CellCameras::default(),
             roi: RoiConfig::default(),
             rate_hz: 30.0,

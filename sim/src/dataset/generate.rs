@@ -191,7 +191,10 @@ impl Generator {
             .parent()
             .unwrap_or(Path::new("."))
             .join(&config.scenario);
-        let scenario = Scenario::from_file(&scenario_path)?;
+        let mut scenario = Scenario::from_file(&scenario_path)?;
+        if let Some(look) = config.look {
+            scenario.human.look = look;
+        }
         Ok(Self {
             config,
             backend: Backend::Cpu,
@@ -493,7 +496,9 @@ impl Generator {
         let range = c.occlusion_levels[level].range;
         let roi_kind = {
             let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0x0201));
-            if rng.random_bool(c.roi.tracked_fraction) {
+            if c.roi.whole_frame {
+                RoiKind::Frame
+            } else if rng.random_bool(c.roi.tracked_fraction) {
                 RoiKind::Tracked
             } else {
                 RoiKind::Workspace
@@ -538,7 +543,8 @@ impl Generator {
                             .collect();
                         Roi::of_joints(&camera, &joints, margin, c.roi.tracked_min_m)
                     }
-                    _ => workspace,
+                    RoiKind::Frame => None,
+                    RoiKind::Workspace => workspace,
                 }
                 .unwrap_or(Roi::frame(camera.width, camera.height));
                 cell.set_link_poses(&tick.robot, &tick.human);
@@ -649,9 +655,12 @@ impl Generator {
             }
         }
         let amodal_f: Vec<f32> = amodal.iter().map(|&v| f32::from(v)).collect();
+        // Covered at least half, or the majority class there (so that the forearm the
+        // scene shows is always inside the forearm alone).
         let amodal_out: Vec<u8> = resample(&amodal_f, 1, size, size, input, input)
             .iter()
-            .map(|&v| u8::from(v >= 0.5))
+            .zip(&classes_out)
+            .map(|(&v, &k)| u8::from(v >= 0.5 || k == Class::Forearm as u8))
             .collect();
         let scale = input as f64 / size as f64;
         Ok(Shot {

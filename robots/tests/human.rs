@@ -1,0 +1,109 @@
+//! The built-in human's two looks against its collision envelopes: what the camera sees of
+//! the flesh lies inside what the safety layer keeps away from, and its sizes are the cited
+//! circumferences (robots/urdf/generate.py: the StatLib `bodyfat` means).
+
+use workcell_robots::collision::link_bounding_capsule;
+use workcell_robots::math::Vector;
+use workcell_robots::{HumanLook, HumanPart, RobotModel, Shape};
+
+/// Points on the surface of a visual (spheres: 26 directions; cylinders: the rims at 64
+/// angles and 5 rings along the side), in the link frame.
+fn surface(shape: &Shape, X: &workcell_robots::math::Pose) -> Vec<Vector> {
+    let mut out = Vec::new();
+    match shape {
+        Shape::Sphere { radius_m } => {
+            for i in -1..=1 {
+                for j in -1..=1 {
+                    for k in -1..=1 {
+                        let d = Vector::new(f64::from(i), f64::from(j), f64::from(k));
+                        if d.length() > 0.0 {
+                            out.push(X.transform_point(d.normalize() * *radius_m));
+                        }
+                    }
+                }
+            }
+        }
+        Shape::Cylinder { radius_m, length_m } => {
+            for a in 0..64 {
+                let t = std::f64::consts::TAU * f64::from(a) / 64.0;
+                for z in 0..5 {
+                    let z = length_m * (f64::from(z) / 4.0 - 0.5);
+                    out.push(X.transform_point(Vector::new(radius_m * t.cos(), radius_m * t.sin(), z)));
+                }
+            }
+        }
+        Shape::Box { size_m } => {
+            for c in 0..8 {
+                let s = |bit: i32| if c & bit == 0 { -0.5 } else { 0.5 };
+                out.push(X.transform_point(Vector::new(
+                    s(1) * size_m[0],
+                    s(2) * size_m[1],
+                    s(4) * size_m[2],
+                )));
+            }
+        }
+        other => panic!("unexpected visual {other:?}"),
+    }
+    out
+}
+
+fn distance_to_segment(p: Vector, a: Vector, b: Vector) -> f64 {
+    let ab = b - a;
+    let t = ((p - a).dot(ab) / ab.length_squared().max(1e-18)).clamp(0.0, 1.0);
+    (p - (a + t * ab)).length()
+}
+
+#[test]
+fn the_flesh_of_the_arm_lies_inside_its_collision_envelope() {
+    let human = RobotModel::from_catalogue("human_arm").unwrap();
+    for part in HumanPart::ARM {
+        let l = human.link_id(part.link_name()).unwrap();
+        let capsule = link_bounding_capsule(&human, l).unwrap();
+        let flesh: Vec<_> = human.links()[l]
+            .visuals
+            .iter()
+            .filter(|g| HumanLook::role(g.name.as_deref()).is_some())
+            .collect();
+        assert!(!flesh.is_empty(), "{part} has no flesh");
+        for g in flesh {
+            for p in surface(&g.shape, &g.X_LG) {
+                let d = distance_to_segment(p, capsule.a_L, capsule.b_L);
+                assert!(
+                    d <= capsule.radius_m + 1e-9,
+                    "{part}: flesh point {p} is {d} m from the axis, envelope {}",
+                    capsule.radius_m
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn each_look_draws_its_own_visuals_and_the_flesh_has_the_cited_girths() {
+    let human = RobotModel::from_catalogue("human_arm").unwrap();
+    let forearm = human.link_id("forearm").unwrap();
+    let radii = |look: HumanLook| -> Vec<f64> {
+        let mut model = human.clone();
+        model.retain_visuals(|g| look.shows(g.name.as_deref()));
+        model.links()[forearm]
+            .visuals
+            .iter()
+            .filter_map(|g| match g.shape {
+                Shape::Sphere { radius_m } | Shape::Cylinder { radius_m, .. } => Some(radius_m),
+                _ => None,
+            })
+            .collect()
+    };
+    // Flesh: from the forearm's girth (28.66 cm) at the elbow to the wrist's (18.23 cm).
+    let flesh = radii(HumanLook::Flesh);
+    let max = flesh.iter().copied().fold(0.0, f64::max);
+    let min = flesh.iter().copied().fold(1.0, f64::min);
+    assert!((max - 0.2866 / std::f64::consts::TAU).abs() < 1e-6, "{max}");
+    assert!((min - 0.1823 / std::f64::consts::TAU).abs() < 1e-6, "{min}");
+    // Skeletal: the two bones, 8 and 9 mm.
+    let bones = radii(HumanLook::Skeletal);
+    assert!(bones.iter().all(|&r| r == 0.008 || r == 0.009), "{bones:?}");
+    // Every visual is in exactly one look or in both: none is lost.
+    let all = human.links()[forearm].visuals.len();
+    assert_eq!(flesh.len() + bones.len(), all);
+}
