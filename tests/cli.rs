@@ -216,16 +216,26 @@ fn dataset_generate_then_show_writes_a_contact_sheet() {
     assert!(show.status.success(), "{}", text(&show.stderr));
     // Both camera sources; the stats table has a row per source, distance class and crop.
     let shown = text(&show.stdout);
-    assert!(shown.contains("camera:front") && shown.contains("paper"), "{shown}");
+    assert!(
+        shown.contains("camera:front") && shown.contains("paper"),
+        "{shown}"
+    );
     let stats = workcell(&["dataset", "stats", out]);
     assert!(stats.status.success(), "{}", text(&stats.stderr));
     let table = text(&stats.stdout);
-    assert!(table.contains("workcell-dataset/2 (12 sequences, 24 frames of 32x32 px, flesh human)"), "{table}");
+    assert!(
+        table.contains("workcell-dataset/2 (12 sequences, 24 frames of 32x32 px, flesh human)"),
+        "{table}"
+    );
     for row in ["paper          short    all", "camera:front"] {
         assert!(table.contains(row), "{row}: {table}");
     }
     let bad = workcell(&["dataset", "stats", out, "--input", "1"]);
-    assert!(text(&bad.stderr).contains("--input 1"), "{}", text(&bad.stderr));
+    assert!(
+        text(&bad.stderr).contains("--input 1"),
+        "{}",
+        text(&bad.stderr)
+    );
     let sheet = Path::new(out).join("contact_sheet.png");
     let bytes = std::fs::read(&sheet).expect("contact sheet");
     assert!(bytes.starts_with(b"\x89PNG"));

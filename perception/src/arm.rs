@@ -187,12 +187,15 @@ impl ArmModel {
     /// capsule's far end from the elbow (`None` without a fixed shoulder).
     #[must_use]
     pub fn reach_m(&self) -> Option<f64> {
-        let forearm = self.parts.iter().find_map(|(part, placement, _)| match placement {
-            Placement::Rigid { a_F, b_F } if *part == HumanPart::Forearm => {
-                Some(a_F.length().max(b_F.length()))
-            }
-            _ => None,
-        })?;
+        let forearm = self
+            .parts
+            .iter()
+            .find_map(|(part, placement, _)| match placement {
+                Placement::Rigid { a_F, b_F } if *part == HumanPart::Forearm => {
+                    Some(a_F.length().max(b_F.length()))
+                }
+                _ => None,
+            })?;
         self.shoulder_W.map(|(_, upper)| upper + forearm)
     }
 
@@ -560,7 +563,10 @@ mod tests {
         )
         .expect("camera");
         let err = tracker.track(&camera, &[0; 10]).unwrap_err();
-        assert!(err.to_string().contains("9216 values for the 64x48"), "{err}");
+        assert!(
+            err.to_string().contains("9216 values for the 64x48"),
+            "{err}"
+        );
         let err = tracker.track(&camera, &vec![0; 64 * 48 * 3]).unwrap_err();
         assert!(err.to_string().contains("no network"), "{err}");
         // An empty mask is no estimate, with its reason.
@@ -581,7 +587,10 @@ mod tests {
         let (shoulder, upper) = arm.shoulder_W.expect("fixed shoulder");
         // Upper arm 0.3255 m and forearm 0.2555 m in the built-in model (generate.py).
         let reach = arm.reach_m().expect("reach");
-        assert!((upper - 0.3255).abs() < 1e-9 && (reach - 0.581).abs() < 1e-9, "{reach}");
+        assert!(
+            (upper - 0.3255).abs() < 1e-9 && (reach - 0.581).abs() < 1e-9,
+            "{reach}"
+        );
         let camera = Camera::look_at(
             (shoulder + Vector::new(3.0, 0.0, 0.0)).to_array(),
             shoulder.to_array(),
@@ -610,7 +619,10 @@ mod tests {
             .expect("an estimate");
         let tracked = tracker.roi(&camera);
         let workspace = Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).unwrap();
-        assert!(tracked.size < workspace.size, "{tracked:?} vs {workspace:?}");
+        assert!(
+            tracked.size < workspace.size,
+            "{tracked:?} vs {workspace:?}"
+        );
         // The crop holds the estimated elbow.
         let [u, v] = camera
             .project(camera.X_WC.inverse() * estimate.X_WF.translation)
@@ -618,7 +630,9 @@ mod tests {
         let inside = |x: f64, x0: i64| x >= x0 as f64 && x <= (x0 + i64::from(tracked.size)) as f64;
         assert!(inside(u, tracked.x0) && inside(v, tracked.y0));
         // A lost track falls back to the workspace.
-        let outcome = tracker.track_mask(&camera, &vec![0.0; 640 * 480]).expect("no error");
+        let outcome = tracker
+            .track_mask(&camera, &vec![0.0; 640 * 480])
+            .expect("no error");
         assert!(outcome.is_err());
         assert_eq!(tracker.roi(&camera), workspace);
     }

@@ -24,7 +24,8 @@ pub mod train;
 pub mod weights;
 
 pub use arm::{
-    ArmEstimate, ArmModel, ArmOutcome, ArmTracker, DEFAULT_INPUT_PX, NoEstimate, PartCapsule, RoiMask,
+    ArmEstimate, ArmModel, ArmOutcome, ArmTracker, DEFAULT_INPUT_PX, NoEstimate, PartCapsule,
+    RoiMask,
 };
 pub use backend::Backend;
 pub use config::{Activation, CellKind, ProcNetConfig};

@@ -28,7 +28,11 @@ fn surface(shape: &Shape, X: &workcell_robots::math::Pose) -> Vec<Vector> {
                 let t = std::f64::consts::TAU * f64::from(a) / 64.0;
                 for z in 0..5 {
                     let z = length_m * (f64::from(z) / 4.0 - 0.5);
-                    out.push(X.transform_point(Vector::new(radius_m * t.cos(), radius_m * t.sin(), z)));
+                    out.push(X.transform_point(Vector::new(
+                        radius_m * t.cos(),
+                        radius_m * t.sin(),
+                        z,
+                    )));
                 }
             }
         }

@@ -3,10 +3,10 @@
 
 use std::sync::Arc;
 
-use workcell_render::{Class, RenderMesh, Scene, SceneObject, human_classes, link_objects};
 use rand::Rng;
-use workcell_robots::{HumanLook, LinkId};
+use workcell_render::{Class, RenderMesh, Scene, SceneObject, human_classes, link_objects};
 use workcell_robots::math::{Pose, Vector};
+use workcell_robots::{HumanLook, LinkId};
 
 use crate::cell::{CellModel, CellState};
 
@@ -93,7 +93,11 @@ impl Appearance {
         match role {
             "skin" => Some(self.skin),
             "sleeve" | "shirt" => Some(self.cloth),
-            "forearm" => Some(if self.long_sleeves { self.cloth } else { self.skin }),
+            "forearm" => Some(if self.long_sleeves {
+                self.cloth
+            } else {
+                self.skin
+            }),
             _ => None,
         }
     }
@@ -223,7 +227,11 @@ impl CellScene {
             }
             let object = &mut self.scene.objects[k];
             object.mesh = Arc::new(mesh);
-            object.texture = if clothed { appearance.cloth_texture } else { 0.0 };
+            object.texture = if clothed {
+                appearance.cloth_texture
+            } else {
+                0.0
+            };
         }
     }
 

@@ -4,10 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+use workcell_robots::math::Pose;
 use workcell_sim::SimError;
 use workcell_sim::dataset::{Dataset, DatasetConfig, Generator, Split};
 use workcell_sim::render::image::PixelKind;
-use workcell_robots::math::Pose;
 use workcell_sim::render::{Camera, Class, CpuRenderer, MaskBatch, RenderMesh, Renderer};
 
 fn scenario() -> PathBuf {
@@ -73,7 +73,13 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
     let mut pairs: Vec<_> = m
         .sequences
         .iter()
-        .map(|s| (s.source.clone(), s.distance_class.clone(), s.occlusion_level.clone()))
+        .map(|s| {
+            (
+                s.source.clone(),
+                s.distance_class.clone(),
+                s.occlusion_level.clone(),
+            )
+        })
         .collect();
     pairs.sort();
     pairs.dedup();
@@ -189,7 +195,11 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
             for p in (0..n).filter(|&p| classes[p] == forearm && interior(p)) {
                 let mm = u16::from_be_bytes([bytes[2 * p], bytes[2 * p + 1]]);
                 let d = f64::from(mm) / 1000.0;
-                assert!((d - label.X_CP.xyz_m[2]).abs() < 0.35, "depth {d} vs {:?}", label.X_CP);
+                assert!(
+                    (d - label.X_CP.xyz_m[2]).abs() < 0.35,
+                    "depth {d} vs {:?}",
+                    label.X_CP
+                );
             }
             // The stored forearm is the forearm rendered at its label's pose by the frame's
             // camera (the region's camera): labels, crop and resampling agree.
@@ -197,18 +207,35 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
                 let mut batch = MaskBatch::new();
                 let X_CP = Pose::from(&label.X_CP);
                 CpuRenderer::new()
-                    .render_masks(&forearm_mesh, &Camera::from(&labels.camera), &[X_CP], &mut batch)
+                    .render_masks(
+                        &forearm_mesh,
+                        &Camera::from(&labels.camera),
+                        &[X_CP],
+                        &mut batch,
+                    )
                     .unwrap();
                 let rendered = batch.mask(0);
-                let both = (0..n).filter(|&p| rendered[p] != 0 && amodal[p] == 1).count();
-                let either = (0..n).filter(|&p| rendered[p] != 0 || amodal[p] == 1).count();
+                let both = (0..n)
+                    .filter(|&p| rendered[p] != 0 && amodal[p] == 1)
+                    .count();
+                let either = (0..n)
+                    .filter(|&p| rendered[p] != 0 || amodal[p] == 1)
+                    .count();
                 let iou = both as f64 / either as f64;
-                assert!(iou > 0.85, "seq {} frame {t}: IoU {iou} of {all} px", s.entry.index);
+                assert!(
+                    iou > 0.85,
+                    "seq {} frame {t}: IoU {iou} of {all} px",
+                    s.entry.index
+                );
             }
             // The forearm's width and perfect-network ceiling are recorded when in view.
             if all > 0 {
                 assert!(label.width_px.is_some_and(|w| w > 0.5));
-                assert!(label.perfect_dice_loss.is_some_and(|d| (0.0..=1.0).contains(&d)));
+                assert!(
+                    label
+                        .perfect_dice_loss
+                        .is_some_and(|d| (0.0..=1.0).contains(&d))
+                );
             }
         }
     }

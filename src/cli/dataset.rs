@@ -5,8 +5,8 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use workcell::render::image::{PixelKind, write_png};
 use workcell::render::dataset::forearm_stats;
+use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::{Dataset, DatasetConfig, Generator, Split, contact_sheet};
 
 #[derive(Debug, clap::Args)]
@@ -189,9 +189,10 @@ pub fn show(args: &ShowArgs) -> Result<ExitCode> {
     let mut pairs: Vec<(String, String, String, usize, f64)> = Vec::new();
     for s in &m.sequences {
         let o = s.mean_forearm_occlusion.unwrap_or(f64::NAN);
-        match pairs.iter_mut().find(|p| {
-            p.0 == s.source && p.1 == s.distance_class && p.2 == s.occlusion_level
-        }) {
+        match pairs
+            .iter_mut()
+            .find(|p| p.0 == s.source && p.1 == s.distance_class && p.2 == s.occlusion_level)
+        {
             Some(p) => {
                 p.3 += 1;
                 p.4 += o;

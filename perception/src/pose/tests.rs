@@ -1,8 +1,8 @@
 use std::sync::Arc;
 
 use workcell_render::{Camera, CpuRenderer, MaskBatch, RenderMesh, Renderer};
-use workcell_robots::{HumanLook, RobotModel};
 use workcell_robots::math::{Pose, Rotation, Vector, pose_from_xyz_rpy};
+use workcell_robots::{HumanLook, RobotModel};
 
 use super::image::blobs;
 use super::*;

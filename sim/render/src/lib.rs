@@ -30,8 +30,8 @@ mod gpu;
 pub mod image;
 mod mesh;
 pub mod occlusion;
-pub mod roi;
 mod preview;
+pub mod roi;
 mod scene;
 
 pub use camera::Camera;

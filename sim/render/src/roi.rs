@@ -169,7 +169,9 @@ impl Roi {
     /// The square of side `side_px` (rounded, at least 1 px) centred at `centre_px`.
     #[must_use]
     pub fn square(centre_px: [f64; 2], side_px: f64) -> Self {
-        let size = side_px.round().clamp(1.0, f64::from(crate::camera::MAX_SIDE_PX));
+        let size = side_px
+            .round()
+            .clamp(1.0, f64::from(crate::camera::MAX_SIDE_PX));
         Self {
             x0: (centre_px[0] - size / 2.0).round() as i64,
             y0: (centre_px[1] - size / 2.0).round() as i64,
@@ -216,7 +218,12 @@ impl Roi {
     /// (shoulder, elbow, wrist) grown by `margin`, at least `min_m` wide at the depth of the
     /// second joint (the elbow); `None` when no joint is in front of the camera.
     #[must_use]
-    pub fn of_joints(camera: &Camera, joints_W: &[Vector], margin: f64, min_m: f64) -> Option<Self> {
+    pub fn of_joints(
+        camera: &Camera,
+        joints_W: &[Vector],
+        margin: f64,
+        min_m: f64,
+    ) -> Option<Self> {
         let X_CW = camera.X_WC.inverse();
         let points: Vec<[f64; 2]> = joints_W
             .iter()
@@ -372,7 +379,11 @@ pub fn mask_width(mask: &[u8], w: usize) -> Option<f64> {
     }
     let (mx, my) = (sx / n, sy / n);
     // Pixels are unit squares: each adds 1/12 of variance along both axes.
-    let (a, b, c) = (sxx / n - mx * mx + 1.0 / 12.0, syy / n - my * my + 1.0 / 12.0, sxy / n - mx * my);
+    let (a, b, c) = (
+        sxx / n - mx * mx + 1.0 / 12.0,
+        syy / n - my * my + 1.0 / 12.0,
+        sxy / n - mx * my,
+    );
     let small = 0.5 * (a + b) - (0.25 * (a - b) * (a - b) + c * c).sqrt();
     Some((12.0 * small.max(0.0)).sqrt())
 }
@@ -425,20 +436,49 @@ mod tests {
     fn a_crop_copies_whole_pixels_and_blackens_outside() {
         // 4x3 image, pixel value = 10 y + x.
         let src: Vec<f32> = (0..12).map(|p| (10 * (p / 4) + p % 4) as f32).collect();
-        let roi = Roi { x0: 2, y0: -1, size: 3 };
+        let roi = Roi {
+            x0: 2,
+            y0: -1,
+            size: 3,
+        };
         assert_eq!(
             roi.crop(&src, 1, 4, 3),
             vec![0.0, 0.0, 0.0, 2.0, 3.0, 0.0, 12.0, 13.0, 0.0]
         );
-        assert_eq!(Roi::frame(4, 3), Roi { x0: 0, y0: 0, size: 3 });
-        assert_eq!(roi.shifted_into(4, 3), Roi { x0: 1, y0: 0, size: 3 });
+        assert_eq!(
+            Roi::frame(4, 3),
+            Roi {
+                x0: 0,
+                y0: 0,
+                size: 3
+            }
+        );
+        assert_eq!(
+            roi.shifted_into(4, 3),
+            Roi {
+                x0: 1,
+                y0: 0,
+                size: 3
+            }
+        );
     }
 
     #[test]
     fn the_crop_camera_projects_where_the_crop_puts_the_pixel() {
-        let camera = Camera::look_at([2.0, 0.3, 1.0], [0.0, 0.0, 0.5], [0.0, 0.0, 1.0], 640, 480, 40.0)
-            .unwrap();
-        let roi = Roi { x0: 250, y0: 100, size: 200 };
+        let camera = Camera::look_at(
+            [2.0, 0.3, 1.0],
+            [0.0, 0.0, 0.5],
+            [0.0, 0.0, 1.0],
+            640,
+            480,
+            40.0,
+        )
+        .unwrap();
+        let roi = Roi {
+            x0: 250,
+            y0: 100,
+            size: 200,
+        };
         let crop = roi.camera(&camera, 100).unwrap();
         let p_C = camera.X_WC.inverse() * Vector::new(0.1, -0.05, 0.6);
         let [u, v] = camera.project(p_C).unwrap();
@@ -449,12 +489,22 @@ mod tests {
 
     #[test]
     fn a_sphere_on_the_axis_spans_its_tangent_cone() {
-        let camera = Camera::look_at([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 1000, 1000, 60.0)
-            .unwrap();
+        let camera = Camera::look_at(
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 1.0, 0.0],
+            1000,
+            1000,
+            60.0,
+        )
+        .unwrap();
         // Radius 0.3 at 5 m: half-width f r / sqrt(d^2 - r^2).
         let roi = Roi::of_sphere(&camera, Vector::new(0.0, 0.0, 5.0), 0.3, 1.0).unwrap();
         let expected = 2.0 * camera.fx * 0.3 / (25.0f64 - 0.09).sqrt();
-        assert!((f64::from(roi.size) - expected).abs() <= 0.5, "{roi:?} vs {expected}");
+        assert!(
+            (f64::from(roi.size) - expected).abs() <= 0.5,
+            "{roi:?} vs {expected}"
+        );
         assert!(Roi::of_sphere(&camera, Vector::new(0.0, 0.0, -5.0), 0.3, 1.0).is_none());
     }
 
@@ -463,7 +513,9 @@ mod tests {
         // A 64 x 8 bar in a 64 x 64 mask, at 16 x 16: 2 px wide on the grid, edges aligned
         // to it, so averaging and coming back keeps it exactly.
         let bar = |w0: usize, w1: usize| -> Vec<u8> {
-            (0..64 * 64).map(|p| u8::from((w0..w1).contains(&(p / 64)))).collect()
+            (0..64 * 64)
+                .map(|p| u8::from((w0..w1).contains(&(p / 64))))
+                .collect()
         };
         assert!(perfect_dice_loss(&bar(24, 32), 64, 64, 16, 16).unwrap() < 1e-9);
         // A 2 px bar at 16 x 16 is half a pixel there: nothing comes back.

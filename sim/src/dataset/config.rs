@@ -227,7 +227,12 @@ impl DatasetConfig {
     /// Distance classes plus the cell's cameras when they are a source.
     #[must_use]
     pub fn camera_classes(&self, cameras: usize) -> usize {
-        self.distances.len() + if self.cell_cameras.enabled { cameras } else { 0 }
+        self.distances.len()
+            + if self.cell_cameras.enabled {
+                cameras
+            } else {
+                0
+            }
     }
 
     /// Checks every value.

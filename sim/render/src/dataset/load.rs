@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use crate::Class;
 use crate::dataset::frame_files;
-use crate::dataset::labels::{READS, FrameLabels, Manifest, SequenceEntry, Split};
+use crate::dataset::labels::{FrameLabels, Manifest, READS, SequenceEntry, Split};
 use crate::error::{RenderError, Result};
 use crate::image::{PixelKind, read_png};
 
@@ -147,7 +147,13 @@ impl Dataset {
     pub fn amodal_forearm(&self, entry: &SequenceEntry, f: usize) -> Result<Vec<u8>> {
         let path = self.sequence_dir(entry)?.join(&frame_files(f)[4]);
         let (w, h, kind, data) = read_png(&path)?;
-        if (w, h, kind) != (self.manifest.width_px, self.manifest.height_px, PixelKind::Gray) {
+        if (w, h, kind)
+            != (
+                self.manifest.width_px,
+                self.manifest.height_px,
+                PixelKind::Gray,
+            )
+        {
             return Err(invalid(&path, "not a grey mask of the manifest's size"));
         }
         Ok(data.iter().map(|&v| u8::from(v >= 128)).collect())

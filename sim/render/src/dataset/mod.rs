@@ -24,8 +24,8 @@ mod sheet;
 mod stats;
 
 pub use labels::{
-    CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, READS,
-    RoiLabel, SequenceEntry, Split,
+    CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, READS, RoiLabel,
+    SequenceEntry, Split,
 };
 pub use load::{Dataset, Sequence};
 pub use sheet::contact_sheet;

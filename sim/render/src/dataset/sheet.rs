@@ -108,8 +108,8 @@ impl Canvas {
     }
 }
 
-/// A contact sheet of `dataset`: for the first sequence of every distance class and
-/// occlusion level, `columns` frames spread over the sequence in two rows, the input (with
+/// A contact sheet of `dataset`: for the first sequence of every camera source, distance
+/// class and occlusion level, `columns` frames spread over the sequence in two rows, the input (with
 /// the black occluder) above, and below the classes the network must find (without the
 /// occluder), with the forearm's hidden pixels in dark red and the occluder's outline in white.
 /// Returns `(width, height, rgb)`.
@@ -122,7 +122,9 @@ pub fn contact_sheet(dataset: &Dataset, columns: usize) -> Result<(u32, u32, Vec
     let mut chosen = Vec::new();
     for e in &m.sequences {
         if !chosen.iter().any(|c: &&crate::dataset::SequenceEntry| {
-            c.distance_class == e.distance_class && c.occlusion_level == e.occlusion_level
+            c.source == e.source
+                && c.distance_class == e.distance_class
+                && c.occlusion_level == e.occlusion_level
         }) {
             chosen.push(e);
         }
@@ -155,12 +157,21 @@ pub fn contact_sheet(dataset: &Dataset, columns: usize) -> Result<(u32, u32, Vec
             .map_or("forearm out of view".to_string(), |o| {
                 format!("forearm {:.0}% hidden", 100.0 * o)
             });
-        let distance = s.labels.first().map_or(0.0, |l| l.distance_m);
+        let first = s.labels.first();
+        let distance = first.map_or(0.0, |l| l.distance_m);
+        let crop = first
+            .and_then(|l| l.roi)
+            .map_or(String::new(), |r| format!(" - {} crop", r.kind.name()));
+        let source = if entry.source == "paper" {
+            String::new()
+        } else {
+            format!("{} ", entry.source)
+        };
         canvas.text(
             gap,
             y0 + 3,
             &format!(
-                "seq {} - {} {:.1} m - {} occlusion - {}",
+                "seq {} - {source}{} {:.1} m - {} occlusion - {}{crop}",
                 entry.index, entry.distance_class, distance, entry.occlusion_level, occlusion
             ),
             2,
