@@ -578,8 +578,44 @@ mod tests {
         assert!(err.to_string().contains("3072 values"), "{err}");
     }
 
+    /// A network reads the frame's region of interest at its input size: the shipped
+    /// weights on a 640x480 frame see the reach sphere's square, resampled to 64x64, and the
+    /// mask comes back with that square's camera.
+    #[test]
+    fn the_network_reads_the_region_of_interest_at_its_input() {
+        let arm = ArmModel::new(&human(), &Pose::IDENTITY).expect("arm");
+        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
+        let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("weights/procnet-cpu.safetensors");
+        let net = ProcNet::load(&weights, crate::Backend::Flex).expect("shipped weights");
+        let input = net.config().input_size;
+        let mut tracker = ArmTracker::new(arm, PoseConfig::default())
+            .with_network(net)
+            .expect("forearm class");
+        let camera = Camera::look_at(
+            (shoulder + Vector::new(2.5, 0.5, 0.2)).to_array(),
+            shoulder.to_array(),
+            [0.0, 0.0, 1.0],
+            640,
+            480,
+            45.0,
+        )
+        .expect("camera");
+        let roi = tracker.roi(&camera);
+        let out = tracker
+            .forearm_mask(&camera, &vec![90; 640 * 480 * 3])
+            .expect("segmented");
+        assert_eq!(out.roi, roi);
+        assert_eq!(
+            out.camera,
+            roi.camera(&camera, input as u32).expect("camera")
+        );
+        assert_eq!(out.mask.len(), input * input);
+        assert!(out.mask.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+
     /// The region of interest: the reach sphere without an estimate, the arm's joints with
-    /// one, the whole frame without a fixed shoulder.
+    /// one, the reach sphere again after a lost track.
     #[test]
     fn the_region_follows_the_estimate_and_falls_back_to_the_workspace() {
         let human = human();
