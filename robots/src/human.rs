@@ -116,8 +116,8 @@ impl HumanLook {
         }
     }
 
-    /// What a flesh visual is dressed in: the second part of its name, `skin`, `sleeve` or
-    /// `shirt` (`flesh/sleeve/upper_arm`), else `None`.
+    /// What a flesh visual is dressed in: the second part of its name, `skin`, `sleeve`,
+    /// `shirt` or `forearm` (bare or long-sleeved) (`flesh/sleeve/upper_arm`), else `None`.
     #[must_use]
     pub fn role(name: Option<&str>) -> Option<&str> {
         name?.strip_prefix("flesh/")?.split('/').next()

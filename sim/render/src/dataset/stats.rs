@@ -67,26 +67,34 @@ pub fn forearm_stats(
         for (f, l) in labels.iter().enumerate() {
             let roi = l.roi.map_or("frame", |r| r.kind.name()).to_string();
             let key = (l.source.clone(), l.distance_class.clone(), roi);
-            let row = |s: &mut Samples| -> Result<()> {
-                s.frames += 1;
-                let Some(part) = l.part(Class::Forearm).filter(|p| p.pixels_amodal > 0) else {
-                    return Ok(());
-                };
-                s.pixels.push(f64::from(part.pixels_amodal));
-                let (width, dice) = match (part.width_px, part.perfect_dice_loss) {
-                    (Some(width), Some(dice)) => (Some(width), Some(dice)),
+            // The frame's forearm (pixels, width, ceiling), measured once for both its
+            // group and the group's `all` row.
+            let forearm = match l.part(Class::Forearm).filter(|p| p.pixels_amodal > 0) {
+                None => None,
+                Some(part) => Some(match (part.width_px, part.perfect_dice_loss) {
+                    (Some(width), Some(dice)) => (part.pixels_amodal, Some(width), Some(dice)),
                     _ => {
                         let mask = dataset.amodal_forearm(entry, f)?;
                         let i = input_px as usize;
-                        (mask_width(&mask, w), perfect_dice_loss(&mask, w, h, i, i))
+                        let width = mask_width(&mask, w);
+                        (
+                            part.pixels_amodal,
+                            width,
+                            perfect_dice_loss(&mask, w, h, i, i),
+                        )
                     }
-                };
-                s.width.extend(width);
-                s.dice.extend(dice);
-                Ok(())
+                }),
             };
-            row(groups.entry(key.clone()).or_default())?;
-            row(groups.entry((key.0, key.1, "all".into())).or_default())?;
+            let all = (key.0.clone(), key.1.clone(), "all".to_string());
+            for group in [key, all] {
+                let s = groups.entry(group).or_default();
+                s.frames += 1;
+                if let Some((pixels, width, dice)) = forearm {
+                    s.pixels.push(f64::from(pixels));
+                    s.width.extend(width);
+                    s.dice.extend(dice);
+                }
+            }
         }
         progress(k + 1);
     }
