@@ -54,6 +54,8 @@ class ProcNet:
         self.delay = cfg["axonal_delay"]
         self.cell = cfg["cell"]
         self.gelu = cfg["decoder_activation"] == "gelu"
+        # Absent from weight files written before the switch existed: off.
+        self.full_res = cfg.get("decoder_full_resolution", False)
 
     def norm(self, x, name, groups):
         return group_norm(x, groups, self.P[name + ".weight"], self.P[name + ".bias"])
@@ -139,7 +141,7 @@ class ProcNet:
         return logits, pred, pe, (new_cells, new_cs, errors)
 
     def decode(self, cells):
-        first = 1 if self.pred else 0
+        first = 1 if self.pred and not self.full_res else 0
         x = cells[-1]
         for l in reversed(range(self.L - 1)):
             groups = decoder_groups(x.shape[1])

@@ -55,6 +55,13 @@ pub struct ProcNetConfig {
     /// Layers predict their input and pass the error up (predictive coding); when off,
     /// E_l = ReLU(A_l) and the decoder reads layer 0.
     pub prediction_loss: bool,
+    /// The decoder adds layer 0's representation (full resolution) before its head even with
+    /// the prediction loss on. The paper's decoder reads layer 0 only with the prediction loss
+    /// off, so with it on no full-resolution feature reaches the masks and thin parts blur.
+    /// No parameters of its own: weights of either setting load into the other, so the
+    /// setting is part of the configuration a weight file is checked against.
+    #[serde(default)]
+    pub decoder_full_resolution: bool,
     /// Kernel of the horizontal (hGRU) and recurrent (ConvLSTM) convolutions.
     pub cell_kernel: usize,
     pub decoder_activation: Activation,
@@ -89,6 +96,7 @@ impl ProcNetConfig {
             cell: CellKind::Hgru,
             axonal_delay: false,
             prediction_loss: true,
+            decoder_full_resolution: false,
             cell_kernel: 5,
             decoder_activation: Activation::Relu,
             classes: DATASET_CLASSES.to_vec(),
@@ -99,9 +107,10 @@ impl ProcNetConfig {
     #[must_use]
     pub fn cpu() -> Self {
         Self {
-            input_size: 64,
+            input_size: 128,
             repr_channels: vec![16, 32, 64],
             input_channels: vec![3, 16, 32],
+            decoder_full_resolution: true,
             ..Self::paper()
         }
     }

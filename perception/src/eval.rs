@@ -1,10 +1,13 @@
-//! Segmentation evaluation on a dataset split: Dice loss, focal loss and IoU per class,
-//! broken down by occlusion level and distance class.
+//! Segmentation evaluation on a dataset split, measured as the paper measures and more: per
+//! class and per (distance, occlusion) cell, the per-frame Dice loss (the paper's quantity),
+//! the batch Dice loss (all frames of a group as one volume), IoU and focal loss, the mean over
+//! the classes, and that mean on the scale of the authors' public test code; each with the
+//! frames and sequences behind it.
 //!
 //! Predictions are made at the model's resolution and their logits upsampled (bilinear) to
-//! the dataset's, so that every model is scored against the same full-resolution labels.
+//! the dataset's, so that every model is scored against the same stored labels.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use workcell_render::Class;
 
@@ -16,54 +19,151 @@ use workcell_render::dataset::{Dataset, Split};
 
 use crate::config::ProcNetConfig;
 use crate::data::{class_map, model_frames, one_hot};
-use crate::error::Result;
+use crate::error::{PerceptionError, Result};
 use crate::loss::{dice_per_class, focal_per_class, iou_per_class};
 use crate::model::ProcNetModel;
 
-/// Sums of per-frame scores of one group of frames.
+/// The authors' public test code sums the per-frame losses of frames 21 to 49 of each
+/// 50-frame sequence and divides by 50 (`reference/PROCNET.md`): a per-frame mean times 29/50.
+pub const AUTHORS_SCALE: f64 = 29.0 / 50.0;
+
+/// Sums over the frames of one group.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Scores {
     pub frames: usize,
-    /// Per class: sums over frames.
+    /// Indices of the sequences the frames come from.
+    pub sequences: BTreeSet<usize>,
+    /// Per class: sums over frames of the per-frame losses.
     pub dice: Vec<f64>,
     pub focal: Vec<f64>,
     pub iou: Vec<f64>,
+    /// Per class: `sum p y`, `sum p` and `sum y` over all pixels of all frames (batch Dice).
+    pub intersection: Vec<f64>,
+    pub predicted: Vec<f64>,
+    pub truth: Vec<f64>,
+    /// Sum and count of the forearm's resolution ceiling over the frames whose labels have it
+    /// (a perfect network's Dice loss at the model's input, `PartLabel::perfect_dice_loss`).
+    pub ceiling: f64,
+    pub ceiling_frames: usize,
+}
+
+/// One frame's scores, per class.
+#[derive(Debug, Clone, Default)]
+struct FrameScores {
+    dice: Vec<f32>,
+    focal: Vec<f32>,
+    iou: Vec<f32>,
+    intersection: Vec<f32>,
+    predicted: Vec<f32>,
+    truth: Vec<f32>,
+    ceiling: Option<f64>,
 }
 
 impl Scores {
-    fn add(&mut self, dice: &[f32], focal: &[f32], iou: &[f32]) {
-        if self.dice.is_empty() {
-            self.dice = vec![0.0; dice.len()];
-            self.focal = vec![0.0; dice.len()];
-            self.iou = vec![0.0; dice.len()];
+    fn add(&mut self, sequence: usize, f: &FrameScores) {
+        let c = f.dice.len();
+        for v in [
+            &mut self.dice,
+            &mut self.focal,
+            &mut self.iou,
+            &mut self.intersection,
+            &mut self.predicted,
+            &mut self.truth,
+        ] {
+            v.resize(c, 0.0);
         }
-        for c in 0..dice.len() {
-            self.dice[c] += f64::from(dice[c]);
-            self.focal[c] += f64::from(focal[c]);
-            self.iou[c] += f64::from(iou[c]);
+        for k in 0..c {
+            self.dice[k] += f64::from(f.dice[k]);
+            self.focal[k] += f64::from(f.focal[k]);
+            self.iou[k] += f64::from(f.iou[k]);
+            self.intersection[k] += f64::from(f.intersection[k]);
+            self.predicted[k] += f64::from(f.predicted[k]);
+            self.truth[k] += f64::from(f.truth[k]);
+        }
+        if let Some(v) = f.ceiling {
+            self.ceiling += v;
+            self.ceiling_frames += 1;
         }
         self.frames += 1;
+        self.sequences.insert(sequence);
     }
 
-    /// Mean Dice loss of class `c`.
+    fn mean(&self, sums: &[f64], c: usize) -> f64 {
+        sums.get(c)
+            .map_or(f64::NAN, |v| v / self.frames.max(1) as f64)
+    }
+
+    /// Mean per-frame Dice loss of class `c` (the paper's Table 1 quantity).
     #[must_use]
     pub fn dice(&self, c: usize) -> f64 {
-        self.dice
-            .get(c)
-            .map_or(f64::NAN, |v| v / self.frames.max(1) as f64)
+        self.mean(&self.dice, c)
     }
     #[must_use]
     pub fn focal(&self, c: usize) -> f64 {
-        self.focal
-            .get(c)
-            .map_or(f64::NAN, |v| v / self.frames.max(1) as f64)
+        self.mean(&self.focal, c)
     }
     #[must_use]
     pub fn iou(&self, c: usize) -> f64 {
-        self.iou
-            .get(c)
-            .map_or(f64::NAN, |v| v / self.frames.max(1) as f64)
+        self.mean(&self.iou, c)
     }
+
+    /// Dice loss of class `c` with all the group's frames as one volume (no smoothing; 0 when
+    /// the class is neither present nor predicted anywhere).
+    #[must_use]
+    pub fn batch_dice(&self, c: usize) -> f64 {
+        let (Some(i), Some(p), Some(t)) = (
+            self.intersection.get(c),
+            self.predicted.get(c),
+            self.truth.get(c),
+        ) else {
+            return f64::NAN;
+        };
+        if p + t <= 0.0 {
+            0.0
+        } else {
+            1.0 - 2.0 * i / (p + t)
+        }
+    }
+
+    /// The mean over all classes of the per-frame Dice loss.
+    #[must_use]
+    pub fn class_mean_dice(&self) -> f64 {
+        let n = self.dice.len();
+        if n == 0 {
+            return f64::NAN;
+        }
+        (0..n).map(|c| self.dice(c)).sum::<f64>() / n as f64
+    }
+
+    /// The mean forearm resolution ceiling (NaN when no frame's labels have it).
+    #[must_use]
+    pub fn ceiling(&self) -> f64 {
+        if self.ceiling_frames == 0 {
+            f64::NAN
+        } else {
+            self.ceiling / self.ceiling_frames as f64
+        }
+    }
+}
+
+/// A frame kept for the contact sheet of the worst predictions.
+#[derive(Debug, Clone)]
+pub struct ScoredFrame {
+    pub sequence: usize,
+    pub frame: usize,
+    pub distance_class: String,
+    pub occlusion_level: String,
+    /// The forearm's Dice loss on this frame.
+    pub forearm_dice: f64,
+    /// Stored-size frame, interleaved RGB bytes.
+    pub rgb: Vec<u8>,
+    /// The true class of each pixel (`Class as u8`).
+    pub truth: Vec<u8>,
+    /// The predicted class (`Class as u8`): the most probable class above one half, else the
+    /// background.
+    pub predicted: Vec<u8>,
+    pub width: usize,
+    pub height: usize,
 }
 
 /// The scores of a split, overall and per group.
@@ -79,6 +179,8 @@ pub struct Evaluation {
     pub by_distance: BTreeMap<String, Scores>,
     /// Keyed by (distance class, occlusion level).
     pub by_pair: BTreeMap<(String, String), Scores>,
+    /// The frames of highest forearm Dice loss, worst first (as many as asked for).
+    pub worst: Vec<ScoredFrame>,
 }
 
 /// Order of the dataset's distance classes and occlusion levels in tables (others last).
@@ -88,20 +190,27 @@ fn rank(order: &[&str], name: &str) -> usize {
 const DISTANCES: [&str; 3] = ["short", "medium", "large"];
 const LEVELS: [&str; 3] = ["light", "medium", "heavy"];
 
+/// Reads a `[1, c]` tensor.
+fn row(t: Tensor<2>) -> Vec<f32> {
+    t.into_data().try_into_vec::<f32>().unwrap_or_default()
+}
+
 /// Evaluates `model` on a split. Frame 0 of each sequence (weight 0 in training) is left out.
-/// `progress` is called after each sequence with (done, total).
+/// Keeps the `keep_worst` frames of highest forearm Dice loss. `progress` is called after
+/// each sequence with (done, total).
 pub fn evaluate(
     model: &ProcNetModel,
     config: &ProcNetConfig,
     dataset: &Dataset,
     split: Split,
     device: &Device,
+    keep_worst: usize,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Evaluation> {
     let map = class_map(config, dataset)?;
     let entries: Vec<_> = dataset.entries(Some(split)).cloned().collect();
     if entries.is_empty() {
-        return Err(crate::error::PerceptionError::Input {
+        return Err(PerceptionError::Input {
             message: format!(
                 "the dataset at {} has no {} sequences",
                 dataset.root.display(),
@@ -116,6 +225,7 @@ pub fn evaluate(
         ..Evaluation::default()
     };
     let c = map.len();
+    let forearm = config.class_index(Class::Forearm);
     for (k, entry) in entries.iter().enumerate() {
         let seq = dataset.load(entry)?;
         let frames = model_frames(&seq, config)?;
@@ -145,28 +255,109 @@ pub fn evaluate(
                 device,
             );
             let p = sigmoid(logits.clone());
-            let read = |t: Tensor<2>| t.into_data().try_into_vec::<f32>().unwrap_or_default();
-            let dice = read(dice_per_class(p.clone(), y.clone()));
-            let focal = read(focal_per_class(logits, y.clone(), 0.5, 2.0));
-            let iou = read(iou_per_class(p, y, 0.5));
-            ev.overall.add(&dice, &focal, &iou);
+            let sums =
+                |t: Tensor<4>| row(t.reshape([1i32, c as i32, -1]).sum_dim(2).reshape([1, c]));
+            let scores = FrameScores {
+                dice: row(dice_per_class(p.clone(), y.clone())),
+                focal: row(focal_per_class(logits, y.clone(), 0.5, 2.0)),
+                iou: row(iou_per_class(p.clone(), y.clone(), 0.5)),
+                intersection: sums(p.clone() * y.clone()),
+                predicted: sums(p.clone()),
+                truth: sums(y),
+                ceiling: seq
+                    .labels
+                    .get(t)
+                    .and_then(|l| l.part(Class::Forearm))
+                    .and_then(|part| part.perfect_dice_loss),
+            };
+            if let Some(f) = forearm
+                && keep_worst > 0
+            {
+                let loss = f64::from(scores.dice[f]);
+                let worse_than_kept = ev.worst.len() < keep_worst
+                    || ev.worst.last().is_some_and(|w| loss > w.forearm_dice);
+                if worse_than_kept {
+                    let probabilities = p.into_data().try_into_vec::<f32>().unwrap_or_default();
+                    ev.worst.push(ScoredFrame {
+                        sequence: entry.index,
+                        frame: t,
+                        distance_class: entry.distance_class.clone(),
+                        occlusion_level: entry.occlusion_level.clone(),
+                        forearm_dice: loss,
+                        rgb: interleave(seq.rgb_frame(t), w * h),
+                        truth: seq
+                            .class_frame(t)
+                            .iter()
+                            .map(|&v| {
+                                let class = dataset.manifest.classes.get(usize::from(v));
+                                class.map_or(Class::Background, |&c| c) as u8
+                            })
+                            .collect(),
+                        predicted: argmax(&probabilities, c, w * h)
+                            .into_iter()
+                            .map(|k| {
+                                let class =
+                                    k.checked_sub(1).map(|k| config.classes[usize::from(k)]);
+                                class.unwrap_or(Class::Background) as u8
+                            })
+                            .collect(),
+                        width: w,
+                        height: h,
+                    });
+                    ev.worst
+                        .sort_by(|a, b| b.forearm_dice.total_cmp(&a.forearm_dice));
+                    ev.worst.truncate(keep_worst);
+                }
+            }
             let (d, o) = (entry.distance_class.clone(), entry.occlusion_level.clone());
+            ev.overall.add(entry.index, &scores);
             ev.by_occlusion
                 .entry(o.clone())
                 .or_default()
-                .add(&dice, &focal, &iou);
+                .add(entry.index, &scores);
             ev.by_distance
                 .entry(d.clone())
                 .or_default()
-                .add(&dice, &focal, &iou);
+                .add(entry.index, &scores);
             ev.by_pair
                 .entry((d, o))
                 .or_default()
-                .add(&dice, &focal, &iou);
+                .add(entry.index, &scores);
         }
         progress(k + 1, entries.len());
     }
     Ok(ev)
+}
+
+/// Planar `[3, n]` floats in [0, 1] to interleaved bytes.
+fn interleave(planar: &[f32], n: usize) -> Vec<u8> {
+    (0..n)
+        .flat_map(|p| {
+            [0, 1, 2].map(|ch| (planar[ch * n + p].clamp(0.0, 1.0) * 255.0).round() as u8)
+        })
+        .collect()
+}
+
+/// Per pixel: 1 + the most probable of `c` planar class probabilities when above one half,
+/// else 0.
+fn argmax(probabilities: &[f32], c: usize, n: usize) -> Vec<u8> {
+    (0..n)
+        .map(|p| {
+            (0..c)
+                .map(|k| (k, probabilities.get(k * n + p).copied().unwrap_or(0.0)))
+                .filter(|&(_, v)| v > 0.5)
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .map_or(0, |(k, _)| k as u8 + 1)
+        })
+        .collect()
+}
+
+fn fmt(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.4}")
+    } else {
+        "-".into()
+    }
 }
 
 impl Evaluation {
@@ -174,63 +365,112 @@ impl Evaluation {
     #[must_use]
     pub fn to_markdown(&self) -> String {
         let mut md = String::new();
-        let frames = self.overall.frames;
+        let o = &self.overall;
         let _ = writeln!(
             md,
-            "Split `{}`: {} sequences, {frames} frames scored (the first frame of each sequence is not).\n",
-            self.split, self.sequences
+            "Split `{}`: {} sequences, {} frames scored (the first frame of each sequence is not).\n",
+            self.split, self.sequences, o.frames
         );
         let _ = writeln!(
             md,
-            "| class | Dice loss | focal loss | IoU |\n|---|---|---|---|"
+            "| class | Dice loss (per frame) | batch Dice loss | IoU | focal loss |\n|---|---|---|---|---|"
         );
-        for (c, name) in self.classes.iter().enumerate() {
-            if self.overall.frames == 0 {
-                break;
+        if o.frames > 0 {
+            for (c, name) in self.classes.iter().enumerate() {
+                let _ = writeln!(
+                    md,
+                    "| {name} | {} | {} | {} | {} |",
+                    fmt(o.dice(c)),
+                    fmt(o.batch_dice(c)),
+                    fmt(o.iou(c)),
+                    fmt(o.focal(c))
+                );
             }
+            let mean = o.class_mean_dice();
             let _ = writeln!(
                 md,
-                "| {name} | {:.4} | {:.4} | {:.4} |",
-                self.overall.dice(c),
-                self.overall.focal(c),
-                self.overall.iou(c)
+                "\nMean over the {} classes of the per-frame Dice loss: **{}**; on the scale of the \
+                 authors' public test code (x 29/50, see docs/perception.md): {} (the paper's \
+                 Table 1: 0.1739).",
+                self.classes.len(),
+                fmt(mean),
+                fmt(mean * AUTHORS_SCALE)
             );
         }
         let Some(f) = self.classes.iter().position(|&c| c == Class::Forearm) else {
             return md;
         };
-        let mut groups: Vec<(String, &Scores)> = Vec::new();
-        let mut occ: Vec<_> = self.by_occlusion.iter().collect();
-        occ.sort_by_key(|(k, _)| rank(&LEVELS, k));
+        let mut groups: Vec<(String, &Scores)> = vec![("all".into(), o)];
         let mut dist: Vec<_> = self.by_distance.iter().collect();
         dist.sort_by_key(|(k, _)| rank(&DISTANCES, k));
-        groups.extend(dist.iter().map(|(k, s)| (format!("distance {k}"), *s)));
-        groups.extend(occ.iter().map(|(k, s)| (format!("occlusion {k}"), *s)));
+        let mut occ: Vec<_> = self.by_occlusion.iter().collect();
+        occ.sort_by_key(|(k, _)| rank(&LEVELS, k));
         let mut pairs: Vec<_> = self.by_pair.iter().collect();
         pairs.sort_by_key(|((d, o), _)| (rank(&DISTANCES, d), rank(&LEVELS, o)));
+        groups.extend(dist.iter().map(|(k, s)| (format!("distance {k}"), *s)));
+        groups.extend(occ.iter().map(|(k, s)| (format!("occlusion {k}"), *s)));
         groups.extend(pairs.iter().map(|((d, o), s)| (format!("{d} / {o}"), *s)));
         let _ = writeln!(
             md,
-            "\nForearm by distance class and occlusion level:\n\n| frames | group | Dice loss | focal loss | IoU |\n|---|---|---|---|---|"
-        );
-        let _ = writeln!(
-            md,
-            "| {} | all | {:.4} | {:.4} | {:.4} |",
-            self.overall.frames,
-            self.overall.dice(f),
-            self.overall.focal(f),
-            self.overall.iou(f)
+            "\nForearm by distance class and occlusion level (ceiling: a perfect network's Dice \
+             loss at this input size, from the labels):\n\n\
+             | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |\n\
+             |---|---|---|---|---|---|---|---|---|"
         );
         for (name, s) in groups {
             let _ = writeln!(
                 md,
-                "| {} | {name} | {:.4} | {:.4} | {:.4} |",
+                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                s.sequences.len(),
                 s.frames,
-                s.dice(f),
-                s.focal(f),
-                s.iou(f)
+                fmt(s.dice(f)),
+                fmt(s.batch_dice(f)),
+                fmt(s.iou(f)),
+                fmt(s.focal(f)),
+                fmt(s.ceiling()),
+                fmt(s.class_mean_dice())
             );
         }
         md
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(dice: f32, inter: f32, pred: f32, truth: f32) -> FrameScores {
+        FrameScores {
+            dice: vec![dice, 0.0],
+            focal: vec![0.0; 2],
+            iou: vec![0.0; 2],
+            intersection: vec![inter, 0.0],
+            predicted: vec![pred, 0.0],
+            truth: vec![truth, 0.0],
+            ceiling: None,
+        }
+    }
+
+    #[test]
+    fn batch_dice_weighs_frames_by_their_pixels() {
+        // A large part found perfectly (100 px) and a small one missed (4 px): per frame the
+        // losses are 0 and (smoothed) 0.75, their mean 0.375; as one volume 1 - 200/204.
+        let mut s = Scores::default();
+        s.add(0, &frame(0.0, 100.0, 100.0, 100.0));
+        s.add(1, &frame(0.75, 0.0, 0.0, 4.0));
+        assert_eq!(s.dice(0), 0.375);
+        assert!((s.batch_dice(0) - (1.0 - 200.0 / 204.0)).abs() < 1e-12);
+        // A class absent everywhere and never predicted scores 0, not NaN.
+        assert_eq!(s.batch_dice(1), 0.0);
+        assert_eq!(s.class_mean_dice(), 0.1875);
+        assert_eq!((s.frames, s.sequences.len()), (2, 2));
+        assert!(s.ceiling().is_nan());
+    }
+
+    #[test]
+    fn argmax_keeps_the_most_probable_class_above_one_half() {
+        // Two pixels, two classes (planar): pixel 0 -> class 2, pixel 1 -> background.
+        let p = [0.6, 0.2, 0.9, 0.4];
+        assert_eq!(argmax(&p, 2, 2), vec![2, 0]);
     }
 }

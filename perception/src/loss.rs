@@ -17,6 +17,20 @@ pub fn dice_per_class(p: Tensor<4>, y: Tensor<4>) -> Tensor<2> {
     dice.neg().add_scalar(1.0).reshape([b, c])
 }
 
+/// Batch Dice loss per class: the whole batch as one volume,
+/// `1 - (2 sum_b(p y) + 1) / (sum_b p + sum_b y + 1)`. A frame where a part is small or absent
+/// then weighs by its pixels rather than as much as a frame where the part fills the view, and
+/// an empty frame's false positives are not scored against a smoothing term alone.
+///
+/// # Shapes
+/// `p, y: [b, classes, h, w]` -> `[1, classes]`
+pub fn batch_dice_per_class(p: Tensor<4>, y: Tensor<4>) -> Tensor<2> {
+    let [b, c, h, w] = p.dims();
+    // [b, c, h, w] -> [1, c, b h, w]: one sample whose rows are the frames' rows.
+    let volume = |t: Tensor<4>| t.swap_dims(0, 1).reshape([1, c, b * h, w]);
+    dice_per_class(volume(p), volume(y))
+}
+
 /// Focal loss per sample and class, averaged over pixels:
 /// `-|y - p|^gamma [alpha y log p + (1 - alpha)(1 - y) log(1 - p)]`, computed from logits
 /// so that it stays finite when p saturates.

@@ -43,6 +43,9 @@ pub struct ProcNetModel {
     pub prediction_loss: bool,
     pub axonal_delay: bool,
     pub gelu: bool,
+    /// The decoder reads layer 0 even with the prediction loss on
+    /// (`ProcNetConfig::decoder_full_resolution`).
+    pub decoder_full_resolution: bool,
 }
 
 /// The recurrent state of one batch of streams between frames.
@@ -107,6 +110,7 @@ impl ProcNetConfig {
             prediction_loss: self.prediction_loss,
             axonal_delay: self.axonal_delay,
             gelu: self.decoder_activation == Activation::Gelu,
+            decoder_full_resolution: self.decoder_full_resolution,
         })
     }
 }
@@ -260,9 +264,9 @@ impl ProcNetModel {
 
     /// The segmentation decoder: from the top representation down to full resolution,
     /// adding each lower layer's representation on the way (layer 0 only with the prediction
-    /// loss off: then it is not busy predicting the frame).
+    /// loss off, where it is not busy predicting the frame, or when asked for).
     fn decode(&self, cells: &[CellState]) -> Tensor<4> {
-        let first_read = usize::from(self.prediction_loss);
+        let first_read = usize::from(self.prediction_loss && !self.decoder_full_resolution);
         let top = cells.len() - 1;
         let mut x = cells[top].h.clone();
         for l in (0..top).rev() {

@@ -19,7 +19,7 @@ use crate::backend::Backend;
 use crate::config::ProcNetConfig;
 use crate::data::{Augment, SequenceTensors, load_split, make_batch};
 use crate::error::{PerceptionError, Result};
-use crate::loss::{dice_per_class, focal_per_class};
+use crate::loss::{batch_dice_per_class, dice_per_class, focal_per_class};
 use crate::model::{ProcNetModel, StepOutput};
 use crate::weights;
 
@@ -27,7 +27,11 @@ use crate::weights;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LossConfig {
+    /// Dice per frame and class, averaged (the paper's).
     pub dice: f32,
+    /// Dice per class over the whole batch of a time step as one volume
+    /// ([`crate::loss::batch_dice_per_class`]).
+    pub batch_dice: f32,
     pub focal: f32,
     /// Weight of `sum_l mean(E_l)` (ignored when the model has no prediction loss).
     pub prediction: f32,
@@ -42,6 +46,7 @@ impl Default for LossConfig {
     fn default() -> Self {
         Self {
             dice: 1.0,
+            batch_dice: 0.0,
             focal: 1.0,
             prediction: 1.0,
             focal_alpha: 0.5,
@@ -74,6 +79,10 @@ pub struct AugmentConfig {
     pub flip: bool,
     /// Largest shift, in model pixels.
     pub max_shift_px: i32,
+    /// Random crops: the side of the square read is drawn from `min_crop..=1` of the frame's
+    /// and resampled to the frame's size (1: no crop). The frames are already crops of the
+    /// region of interest, so this varies the arm's scale and place within it.
+    pub min_crop: f32,
     /// Colour jitter: brightness offset and contrast, saturation factors within 1 +- this.
     pub jitter: f32,
 }
@@ -83,6 +92,7 @@ impl Default for AugmentConfig {
         Self {
             flip: true,
             max_shift_px: 4,
+            min_crop: 0.8,
             jitter: 0.15,
         }
     }
@@ -116,6 +126,9 @@ pub struct TrainConfig {
     pub checkpoint_every: usize,
     /// Evaluate on the validation split every this many steps (0: never).
     pub validate_every: usize,
+    /// Validate on this many sequences of the validation split, taken in turn from each
+    /// (distance, occlusion) cell so that every cell is represented (0: all of them).
+    pub validation_sequences: usize,
     /// The network (starts from the `cpu` preset; override any key).
     pub model: ProcNetConfig,
 }
@@ -138,6 +151,7 @@ impl Default for TrainConfig {
             augment: AugmentConfig::default(),
             checkpoint_every: 100,
             validate_every: 250,
+            validation_sequences: 24,
             model: ProcNetConfig::cpu(),
         }
     }
@@ -213,8 +227,14 @@ impl TrainConfig {
         if self.checkpoint_every == 0 {
             return bad("checkpoint_every", "at least 1".into());
         }
+        if !(0.25..=1.0).contains(&self.augment.min_crop) {
+            return bad(
+                "augment.min_crop",
+                format!("in [0.25, 1], got {}", self.augment.min_crop),
+            );
+        }
         let l = &self.loss;
-        if [l.dice, l.focal, l.prediction, l.focal_gamma]
+        if [l.dice, l.batch_dice, l.focal, l.prediction, l.focal_gamma]
             .iter()
             .any(|w| !w.is_finite() || *w < 0.0)
             || !(0.0..=1.0).contains(&l.focal_alpha)
@@ -308,6 +328,7 @@ pub fn read_metrics(path: &Path) -> Result<Vec<StepMetrics>> {
 /// The losses of one window, summed over frames with their weights.
 pub struct WindowLoss {
     pub total: Tensor<1>,
+    /// The Dice terms (per frame and per batch), each times its weight.
     pub dice: Tensor<1>,
     pub focal: Tensor<1>,
     pub prediction: Option<Tensor<1>>,
@@ -353,9 +374,19 @@ pub fn window_loss(
             continue;
         }
         // Terms of weight 0 are not computed (nor differentiated).
-        if loss.dice > 0.0 {
+        if loss.dice > 0.0 || loss.batch_dice > 0.0 {
             let p = burn::tensor::activation::sigmoid(logits.clone());
-            dice_sum = add(dice_sum, reduce(dice_per_class(p, y.clone())));
+            let mut d = None;
+            if loss.dice > 0.0 {
+                d = add(d, reduce(dice_per_class(p.clone(), y.clone())) * loss.dice);
+            }
+            if loss.batch_dice > 0.0 {
+                d = add(
+                    d,
+                    reduce(batch_dice_per_class(p, y.clone())) * loss.batch_dice,
+                );
+            }
+            dice_sum = add(dice_sum, d.unwrap_or_else(|| Tensor::zeros([1], &device)));
         }
         if loss.focal > 0.0 {
             let focal = focal_per_class(logits, y.clone(), loss.focal_alpha, loss.focal_gamma);
@@ -369,7 +400,8 @@ pub fn window_loss(
     let dice = dice_sum.unwrap_or_else(zero) / weighted;
     let focal = focal_sum.unwrap_or_else(zero) / weighted;
     let prediction = pred_sum.map(|p| p / weighted);
-    let mut total = dice.clone() * loss.dice + focal.clone() * loss.focal;
+    // `dice` holds both Dice terms with their weights.
+    let mut total = dice.clone() + focal.clone() * loss.focal;
     if let Some(p) = &prediction {
         total = total + p.clone() * loss.prediction;
     }
@@ -486,7 +518,10 @@ impl Trainer {
 
         let dataset = Dataset::open(&cfg.dataset)?;
         let train = load_split(&dataset, Split::Train, &cfg.model)?;
-        let validation = load_split(&dataset, Split::Validation, &cfg.model)?;
+        let validation = validation_subset(
+            load_split(&dataset, Split::Validation, &cfg.model)?,
+            cfg.validation_sequences,
+        );
         let usable: Vec<&SequenceTensors> =
             train.iter().filter(|s| s.frames >= cfg.window).collect();
         if usable.is_empty() {
@@ -550,11 +585,13 @@ impl Trainer {
                     let start = rng.random_range(0..=seq.frames - cfg.window);
                     let aug = if cfg.augment.flip
                         || cfg.augment.max_shift_px > 0
+                        || cfg.augment.min_crop < 1.0
                         || cfg.augment.jitter > 0.0
                     {
                         let mut a = Augment::draw(
                             &mut rng,
                             cfg.augment.max_shift_px.max(0),
+                            cfg.augment.min_crop,
                             cfg.augment.jitter,
                         );
                         a.flip &= cfg.augment.flip;
@@ -718,6 +755,34 @@ impl Trainer {
 /// The value of a one-element tensor.
 pub fn scalar(t: &Tensor<1>) -> f64 {
     t.clone().into_scalar::<f32>() as f64
+}
+
+/// Up to `count` sequences (0: all), taken in turn from each (distance, occlusion) cell in
+/// the dataset's order.
+fn validation_subset(all: Vec<SequenceTensors>, count: usize) -> Vec<SequenceTensors> {
+    if count == 0 || all.len() <= count {
+        return all;
+    }
+    let mut cells: std::collections::BTreeMap<(String, String), Vec<SequenceTensors>> =
+        std::collections::BTreeMap::new();
+    for s in all.into_iter().rev() {
+        let key = (
+            s.entry.distance_class.clone(),
+            s.entry.occlusion_level.clone(),
+        );
+        cells.entry(key).or_default().push(s);
+    }
+    let mut out = Vec::with_capacity(count);
+    while out.len() < count {
+        for queue in cells.values_mut() {
+            if out.len() < count
+                && let Some(s) = queue.pop()
+            {
+                out.push(s);
+            }
+        }
+    }
+    out
 }
 
 /// Mean forearm Dice loss over the validation sequences (frames after the first), at the

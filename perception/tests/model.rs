@@ -279,12 +279,13 @@ fn flex_and_the_gpu_give_the_same_masks() {
 }
 
 /// The shipped weights (ProcNet and its feed-forward baseline) load, are of the configuration
-/// `configs/train.toml` trains (with `--model baseline` for the second), and run.
+/// `configs/train-v1.toml` trained (with `--model baseline` for the second), and run.
 #[test]
 fn the_shipped_weights_load_and_match_their_recipe() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let recipe =
-        workcell_perception::TrainConfig::from_file(&root.join("../configs/train.toml")).unwrap();
+        workcell_perception::TrainConfig::from_file(&root.join("../configs/train-v1.toml"))
+            .unwrap();
     for (file, model) in [
         ("procnet-cpu", recipe.model.clone()),
         ("baseline-cpu", recipe.model.feed_forward_baseline()),

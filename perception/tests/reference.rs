@@ -42,6 +42,12 @@ fn conv_no_prediction_gelu() -> ProcNetConfig {
         ..tiny(CellKind::Conv)
     }
 }
+fn hgru_full_resolution() -> ProcNetConfig {
+    ProcNetConfig {
+        decoder_full_resolution: true,
+        ..tiny(CellKind::Hgru)
+    }
+}
 fn hgru_4_layers() -> ProcNetConfig {
     ProcNetConfig {
         repr_channels: vec![4, 6, 8, 8],
@@ -77,6 +83,16 @@ const CASES: &[Case] = &[
         probs_sample: [0.6337619423866272, 0.5676930546760559],
         prediction_error: None,
         repr_top_mean: 0.032572947442531586,
+    },
+    Case {
+        name: "hgru_full_resolution",
+        config: hgru_full_resolution,
+        seed: 7,
+        // The same weights as `hgru`: the representations agree, the masks do not.
+        logits_abs_mean_per_class: [0.5087615847587585, 0.4411807954311371],
+        probs_sample: [0.7443380355834961, 0.6077597737312317],
+        prediction_error: Some(0.4632231593132019),
+        repr_top_mean: 0.07888266444206238,
     },
     Case {
         name: "hgru_4_layers",

@@ -8,6 +8,8 @@ use workcell::perception::eval::evaluate;
 use workcell::perception::train::{TrainConfig, Trainer, read_metrics};
 use workcell::perception::{Backend, backend, weights};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
+use workcell::render::dataset::{PredictionPanel, prediction_sheet};
+use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::Dataset;
 
 #[derive(Debug, clap::Args)]
@@ -60,6 +62,13 @@ pub struct EvalSegmentationArgs {
     /// Also write the Markdown table to this file.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write a contact sheet of the worst frames (highest forearm Dice loss first):
+    /// input, truth, prediction and the forearm's agreement.
+    #[arg(long)]
+    pub sheet: Option<PathBuf>,
+    /// Frames on the sheet.
+    #[arg(long, default_value_t = 24)]
+    pub worst: usize,
 }
 
 fn format_channels(c: &[usize]) -> String {
@@ -226,9 +235,18 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
         n as u64,
         "{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})",
     );
-    let ev = evaluate(&model, &config, &dataset, split, &device, &mut |done, _| {
-        progress.set_position(done as u64);
-    })?;
+    let keep = if args.sheet.is_some() { args.worst } else { 0 };
+    let ev = evaluate(
+        &model,
+        &config,
+        &dataset,
+        split,
+        &device,
+        keep,
+        &mut |done, _| {
+            progress.set_position(done as u64);
+        },
+    )?;
     progress.finish_and_clear();
     let md = format!(
         "# {} segmentation: {}\n\nWeights `{}` ({} cell, {} layers, {}x{} input), dataset `{}`.\n\n{}",
@@ -245,6 +263,41 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
     print!("{md}");
     if let Some(out) = &args.out {
         std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
+    }
+    if let Some(path) = &args.sheet {
+        let titles: Vec<String> = ev
+            .worst
+            .iter()
+            .map(|f| {
+                format!(
+                    "seq {} frame {} - {} / {} - forearm dice loss {:.2}",
+                    f.sequence, f.frame, f.distance_class, f.occlusion_level, f.forearm_dice
+                )
+            })
+            .collect();
+        let panels: Vec<PredictionPanel<'_>> = ev
+            .worst
+            .iter()
+            .zip(&titles)
+            .map(|(f, title)| PredictionPanel {
+                title,
+                width: f.width,
+                height: f.height,
+                rgb: &f.rgb,
+                truth: &f.truth,
+                predicted: &f.predicted,
+            })
+            .collect();
+        let title = format!(
+            "{} worst of {} {} frames - {}",
+            panels.len(),
+            ev.overall.frames,
+            args.split,
+            args.weights.display()
+        );
+        let (w, h, rgb) = prediction_sheet(&title, &panels, 2);
+        write_png(path, w, h, PixelKind::Rgb, &rgb)?;
+        println!("worst frames: {}", path.display());
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -268,6 +321,13 @@ pub struct BenchArgs {
     pub frames: usize,
     #[arg(long, default_value_t = 5)]
     pub iters: usize,
+    /// Override the input size (pixels per side).
+    #[arg(long)]
+    pub input_size: Option<usize>,
+    /// Override the representation channels per layer, e.g. 16,32,64 (the bottom-up input
+    /// channels follow: 3, then each layer's representation channels below).
+    #[arg(long, value_delimiter = ',')]
+    pub channels: Option<Vec<usize>>,
     /// Write the benchmarked model's initial weights here (bench/procnet.py reads them).
     #[arg(long)]
     pub write_weights: Option<PathBuf>,
@@ -276,10 +336,21 @@ pub struct BenchArgs {
 /// Prints one JSON line per backend: seconds per training step and per inference frame.
 pub fn bench(args: &BenchArgs) -> Result<ExitCode> {
     use workcell::perception::ProcNetConfig;
-    let config = match &args.weights {
+    let mut config = match &args.weights {
         Some(w) => weights::read_config(w)?,
         None => ProcNetConfig::preset(&args.preset)?,
     };
+    if let Some(size) = args.input_size {
+        config.input_size = size;
+    }
+    if let Some(channels) = &args.channels {
+        config.repr_channels.clone_from(channels);
+        config.input_channels = std::iter::once(3)
+            .chain(channels.iter().copied())
+            .take(channels.len())
+            .collect();
+    }
+    config.validate()?;
     backend::set_threads(args.threads);
     if let Some(path) = &args.write_weights {
         let model = config.init(&Backend::Flex.device()?, 0)?;

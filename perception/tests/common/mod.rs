@@ -13,6 +13,8 @@ pub fn tiny(cell: CellKind) -> ProcNetConfig {
         input_channels: vec![3, 4, 6],
         cell,
         classes: vec![Class::Forearm, Class::Robot],
+        // The paper's decoder; `reference.rs` has a case with the full-resolution one.
+        decoder_full_resolution: false,
         ..ProcNetConfig::cpu()
     }
 }

@@ -28,7 +28,7 @@ pub use labels::{
     SequenceEntry, Split,
 };
 pub use load::{Dataset, Sequence};
-pub use sheet::contact_sheet;
+pub use sheet::{PredictionPanel, contact_sheet, prediction_sheet};
 pub use stats::{ForearmStats, forearm_stats};
 
 /// The folder of sequence `index`.

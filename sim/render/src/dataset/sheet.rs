@@ -225,3 +225,74 @@ pub fn contact_sheet(dataset: &Dataset, columns: usize) -> Result<(u32, u32, Vec
     }
     Ok((width as u32, height as u32, canvas.rgb))
 }
+
+/// One frame of a prediction sheet: the input, the true classes and the predicted ones.
+#[derive(Debug, Clone, Copy)]
+pub struct PredictionPanel<'a> {
+    pub title: &'a str,
+    pub width: usize,
+    pub height: usize,
+    /// Interleaved RGB bytes.
+    pub rgb: &'a [u8],
+    /// Per pixel, `Class as u8`.
+    pub truth: &'a [u8],
+    pub predicted: &'a [u8],
+}
+
+/// A sheet of predictions beside the truth, `per_row` frames to a row, each as four images:
+/// the input, the true classes, the predicted classes, and the forearm's agreement over the
+/// dimmed input (green: found, red: predicted where it is not, blue: missed). Returns
+/// `(width, height, rgb)`.
+#[must_use]
+pub fn prediction_sheet(
+    title: &str,
+    panels: &[PredictionPanel<'_>],
+    per_row: usize,
+) -> (u32, u32, Vec<u8>) {
+    let per_row = per_row.max(1);
+    let w = panels.iter().map(|p| p.width).max().unwrap_or(1);
+    let h = panels.iter().map(|p| p.height).max().unwrap_or(1);
+    let (gap, header, top) = (4, 14, 44);
+    let frame_w = 4 * (w + gap) + 3 * gap;
+    let rows = panels.len().div_ceil(per_row);
+    let width = (per_row * frame_w + gap).max(480);
+    let height = top + rows * (header + h + 2 * gap) + gap;
+    let mut canvas = Canvas::new(width, height, [24, 24, 28]);
+    canvas.text(gap, 6, title, 2, [235, 235, 235]);
+    let legend = "input - truth - prediction - forearm: green found, red false, blue missed";
+    canvas.text(gap, 24, legend, 1, [200, 200, 200]);
+    let mut x = gap + 4 * (legend.len() + 2);
+    for c in &Class::ALL[1..] {
+        canvas.image(x, 23, 8, 8, |_| c.color());
+        canvas.text(x + 10, 24, c.name(), 1, [200, 200, 200]);
+        x += 14 + 4 * c.name().len() + 8;
+    }
+    let colour = |v: u8| Class::from_u8(v).unwrap_or(Class::Background).color();
+    let forearm = Class::Forearm as u8;
+    for (k, p) in panels.iter().enumerate() {
+        let n = p.width * p.height;
+        if p.rgb.len() < 3 * n || p.truth.len() < n || p.predicted.len() < n {
+            continue;
+        }
+        let x0 = gap + (k % per_row) * frame_w;
+        let y0 = top + (k / per_row) * (header + h + 2 * gap);
+        canvas.text(x0, y0 + 3, p.title, 1, [235, 235, 235]);
+        let y = y0 + header;
+        let step = p.width + gap;
+        let pixel = |q: usize| [p.rgb[3 * q], p.rgb[3 * q + 1], p.rgb[3 * q + 2]];
+        canvas.image(x0, y, p.width, p.height, pixel);
+        canvas.image(x0 + step, y, p.width, p.height, |q| colour(p.truth[q]));
+        canvas.image(x0 + 2 * step, y, p.width, p.height, |q| {
+            colour(p.predicted[q])
+        });
+        canvas.image(x0 + 3 * step, y, p.width, p.height, |q| {
+            match (p.truth[q] == forearm, p.predicted[q] == forearm) {
+                (true, true) => [40, 220, 70],
+                (false, true) => [235, 50, 40],
+                (true, false) => [60, 110, 255],
+                (false, false) => pixel(q).map(|v| v / 3),
+            }
+        });
+    }
+    (width as u32, height as u32, canvas.rgb)
+}
