@@ -1,42 +1,46 @@
 #!/usr/bin/env bash
-# The paper's Table 1 at CPU scale: hGRU, ConvLSTM and conv cells, with and without the
-# prediction loss, each trained by configs/train.toml's recipe (seed, losses, schedule) for
-# STEPS steps (default 1000) at half the cpu preset's channels (8, 16, 32), and evaluated on
-# the test split. Writes out/table1/<variant>/ and out/table1/table1.md.
-#   scripts/table1.sh [STEPS]        (needs out/dataset-paper and a release build)
+# The paper's Table 1 at CPU scale on the default dataset: hGRU, ConvLSTM and conv cells, with
+# and without the prediction loss, and hGRU with the axonal delay; each trained by
+# configs/train.toml's recipe (seed, losses, schedule, channels) for the same STEPS steps
+# (default 1500), then evaluated on the test split. Writes out/table1/<variant>/ (a resumable
+# run folder each: stop any time, the same command goes on) and out/table1/table1.md.
+#   scripts/table1.sh [STEPS]        (needs out/dataset and a release build; tch recipe)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-STEPS="${1:-1000}"
+STEPS="${1:-1500}"
 BIN="${WORKCELL_BIN:-target/release/workcell}"
+DATASET="${WORKCELL_DATASET:-out/dataset}"
 OUT=out/table1
 mkdir -p "$OUT"
-ROWS=()
-for cell in hgru convlstm conv; do
-    for pred in true false; do
-        name="${cell}-pred-${pred}"
-        cfg="$OUT/$name.toml"
-        sed -e "s/^cell = .*/cell = \"$cell\"/" \
-            -e "s/^prediction_loss = .*/prediction_loss = $pred/" \
-            -e "s|^dataset = .*|dataset = \"../dataset-paper\"|" \
-            -e "s/^steps = .*/steps = $STEPS/" \
-            -e "s/^repr_channels = .*/repr_channels = [8, 16, 32]/" \
-            -e "s/^input_channels = .*/input_channels = [3, 8, 16]/" configs/train.toml > "$cfg"
+VARIANTS=(hgru:true:false hgru:false:false hgru:true:true convlstm:true:false convlstm:false:false
+          conv:true:false conv:false:false)
+for v in "${VARIANTS[@]}"; do
+    IFS=: read -r cell pred delay <<< "$v"
+    name="${cell}-pred-${pred}-delay-${delay}"
+    cfg="$OUT/$name.toml"
+    sed -e "s/^cell = .*/cell = \"$cell\"/" \
+        -e "s/^prediction_loss = .*/prediction_loss = $pred/" \
+        -e "s/^axonal_delay = .*/axonal_delay = $delay/" \
+        -e "s|^dataset = .*|dataset = \"../../$DATASET\"|" \
+        -e "s/^steps = .*/steps = $STEPS/" configs/train.toml > "$cfg"
+    if [ ! -f "$OUT/$name/test.md" ]; then
         "$BIN" train --config "$cfg" --out "$OUT/$name" | tail -3
-        "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" --dataset out/dataset-paper \
-            --split test --out "$OUT/$name/test.md" > /dev/null
-        ROWS+=("$name")
-    done
+        "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" --dataset "$DATASET" \
+            --split test --backend "${WORKCELL_EVAL_BACKEND:-flex}" --out "$OUT/$name/test.md" > /dev/null
+    fi
 done
+# Columns of a row of `eval segmentation`'s forearm table:
+# | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |
+col() { grep -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }
 {
-    echo "| cell | prediction loss | forearm Dice loss, all | heavy occlusion | medium | light |"
-    echo "|---|---|---|---|---|---|"
-    for name in "${ROWS[@]}"; do
-        f="$OUT/$name/test.md"
-        all=$(grep -E '^\| [0-9]+ \| all \|' "$f" | cut -d'|' -f4 | tr -d ' ')
-        heavy=$(grep -E '\| occlusion heavy \|' "$f" | cut -d'|' -f4 | tr -d ' ')
-        medium=$(grep -E '\| occlusion medium \|' "$f" | cut -d'|' -f4 | tr -d ' ')
-        light=$(grep -E '\| occlusion light \|' "$f" | cut -d'|' -f4 | tr -d ' ')
-        cell="${name%%-pred-*}"; pred="${name##*-pred-}"
-        echo "| $cell | $pred | $all | $heavy | $medium | $light |"
+    echo "| cell | prediction loss | axonal delay | forearm Dice loss | heavy occlusion | medium | light | five-class mean | x 29/50 |"
+    echo "|---|---|---|---|---|---|---|---|---|"
+    for v in "${VARIANTS[@]}"; do
+        IFS=: read -r cell pred delay <<< "$v"
+        f="$OUT/${cell}-pred-${pred}-delay-${delay}/test.md"
+        mean=$(col "$f" all 10)
+        scaled=$(python3 -c "print(f'{$mean * 29 / 50:.4f}')")
+        echo "| $cell | $pred | $delay | $(col "$f" all 5) | $(col "$f" 'occlusion heavy' 5) |" \
+             "$(col "$f" 'occlusion medium' 5) | $(col "$f" 'occlusion light' 5) | $mean | $scaled |"
     done
 } | tee "$OUT/table1.md"
