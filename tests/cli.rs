@@ -290,7 +290,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     let train_cfg = tmp.path().join("train.toml");
     let recipe = |steps: usize, channels: &str| {
         format!(
-            "dataset = \"data\"\nsteps = {steps}\nbatch = 2\nwindow = 3\ncheckpoint_every = 2\nvalidate_every = 2\n\n[model]\ninput_size = 16\nrepr_channels = {channels}\ninput_channels = [3, 4, 4]\n"
+            "dataset = \"data\"\nsteps = {steps}\nbatch = 2\nwindow = 3\ncheckpoint_every = 2\nvalidate_every = 2\n\n[loss]\nbatch_dice = 1.0\n\n[model]\ninput_size = 16\nrepr_channels = {channels}\ninput_channels = [3, 4, 4]\n"
         )
     };
     std::fs::write(&train_cfg, recipe(6, "[4, 4, 4]")).expect("train config");
@@ -350,6 +350,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
 
     let weights = out.join("procnet.safetensors");
+    let sheet = tmp.path().join("worst.png");
     let eval = workcell(&[
         "eval",
         "segmentation",
@@ -359,13 +360,27 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         data_s,
         "--split",
         "test",
+        "--sheet",
+        sheet.to_str().expect("utf-8"),
+        "--worst",
+        "3",
     ]);
     assert!(eval.status.success(), "{}", text(&eval.stderr));
     let md = text(&eval.stdout);
     assert!(
-        md.contains("| forearm |") && md.contains("occlusion"),
+        md.contains("| forearm |")
+            && md.contains("occlusion")
+            && md.contains("batch Dice loss")
+            && md.contains("x 29/50"),
         "{md}"
     );
+    // The worst frames' sheet: two frames to a row, four 32x32 images each.
+    let png = std::fs::read(&sheet).expect("the sheet is written");
+    let (w, h) = (
+        u32::from_be_bytes(png[16..20].try_into().expect("4 bytes")),
+        u32::from_be_bytes(png[20..24].try_into().expect("4 bytes")),
+    );
+    assert!(w >= 2 * 4 * 32 && h >= 2 * 32, "{w}x{h}");
     let bad = workcell(&[
         "eval",
         "segmentation",

@@ -228,6 +228,43 @@ impl ProcNetConfig {
         n + 2 * r(0) + conv(r(0), self.num_classes(), 1, false)
     }
 
+    /// Multiply-accumulates of the convolutions of one frame's forward pass (batch 1): the
+    /// floor of inference time, whatever the backend (element-wise operations and
+    /// normalisations, a few percent, are left out). Two FLOPs each.
+    #[must_use]
+    pub fn macs_per_frame(&self) -> u64 {
+        let l_count = self.layers();
+        let r = |l: usize| self.repr_channels.get(l).copied().unwrap_or(0) as u64;
+        let a = |l: usize| self.input_channels.get(l).copied().unwrap_or(0) as u64;
+        let e = |l: usize| if self.prediction_loss { 2 * a(l) } else { a(l) };
+        let pixels = |l: usize| ((self.input_size >> l) * (self.input_size >> l)) as u64;
+        let s2 = (self.cell_kernel * self.cell_kernel) as u64;
+        let mut n = 0;
+        for l in 0..l_count {
+            let (k, px) = (r(l), pixels(l));
+            if self.prediction_loss {
+                n += k * a(l) * px;
+            }
+            let c_in = e(l) + if l + 1 < l_count { r(l + 1) } else { 0 };
+            n += px
+                * match self.cell {
+                    CellKind::Hgru => {
+                        let input = if c_in == k { 0 } else { c_in * k };
+                        input + 2 * k * k + 2 * k * k * s2
+                    }
+                    CellKind::ConvLstm => (c_in + k) * 4 * k * s2 + k * 3 * k * s2,
+                    CellKind::Conv => c_in * k * 25,
+                };
+            if l + 1 < l_count {
+                // The 5x5 convolution to the next layer's input (before its 2x2 pooling), and
+                // the decoder's 3x3 transposed convolution from layer l+1 up to l.
+                n += e(l) * a(l + 1) * 25 * px;
+                n += r(l + 1) * k * 9 * pixels(l + 1);
+            }
+        }
+        n + r(0) * self.num_classes() as u64 * pixels(0)
+    }
+
     #[must_use]
     pub fn layers(&self) -> usize {
         self.repr_channels.len()
@@ -351,6 +388,33 @@ mod tests {
             let model = c.init(&device, 0).unwrap();
             assert_eq!(c.parameter_count(), model.num_params(), "{c:?}");
         }
+    }
+
+    #[test]
+    fn macs_per_frame_count_each_convolution() {
+        // Counted by hand for the cpu preset at 128x128, (16, 32, 64) representation and
+        // (3, 16, 32) input channels, hGRU with 5x5 kernels, prediction loss on, 5 classes.
+        let px = |l: u64| (128 >> l) * (128 >> l);
+        let hgru =
+            |c_in: u64, k: u64| if c_in == k { 0 } else { c_in * k } + 2 * k * k + 50 * k * k;
+        let expected = px(0) * (16 * 3 + hgru(6 + 32, 16) + 6 * 16 * 25 + 5 * 16)
+            + 32 * 16 * 9 * px(1)
+            + px(1) * (32 * 16 + hgru(32 + 64, 32) + 32 * 32 * 25)
+            + 64 * 32 * 9 * px(2)
+            + px(2) * (64 * 32 + hgru(64, 64));
+        let cpu = ProcNetConfig {
+            input_size: 128,
+            ..ProcNetConfig::cpu()
+        };
+        assert_eq!(cpu.macs_per_frame(), expected);
+        // 269.5 M at full resolution, 337.6 M at half, 220.2 M at a quarter, 37.7 M decoding.
+        assert_eq!(expected, 865_075_200);
+        // Each halving of the input side divides the count by four.
+        let half = ProcNetConfig {
+            input_size: 64,
+            ..cpu.clone()
+        };
+        assert_eq!(cpu.macs_per_frame(), 4 * half.macs_per_frame());
     }
 
     #[test]

@@ -71,3 +71,50 @@ pub fn iou_per_class(p: Tensor<4>, y: Tensor<4>, threshold: f32) -> Tensor<2> {
     let iou: Tensor<3> = (intersection + empty.clone()) / (union + empty);
     iou.reshape([b, c])
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::{Device, TensorData};
+
+    fn tensor(values: &[f32], shape: [usize; 4]) -> Tensor<4> {
+        Tensor::from_data(TensorData::new(values.to_vec(), shape), &Device::flex())
+    }
+
+    fn values(t: Tensor<2>) -> Vec<f32> {
+        t.into_data().try_into_vec::<f32>().unwrap()
+    }
+
+    #[test]
+    fn batch_dice_pools_the_frames_and_equals_frame_dice_for_one_frame() {
+        // Two 1x2 frames, one class. Frame 0: prediction (1, 0) against truth (1, 0);
+        // frame 1: prediction (0.5, 0) against truth (0, 1).
+        let p = tensor(&[1.0, 0.0, 0.5, 0.0], [2, 1, 1, 2]);
+        let y = tensor(&[1.0, 0.0, 0.0, 1.0], [2, 1, 1, 2]);
+        // Per frame: 1 - 3/3 = 0 and 1 - 1/2.5 = 0.6.
+        let per_frame = values(dice_per_class(p.clone(), y.clone()));
+        assert!((per_frame[0] - 0.0).abs() < 1e-6 && (per_frame[1] - 0.6).abs() < 1e-6);
+        // As one volume: sum p y = 1, sum p = 1.5, sum y = 2: 1 - 3/4.5.
+        let pooled = values(batch_dice_per_class(p.clone(), y.clone()));
+        assert_eq!(pooled.len(), 1);
+        assert!((pooled[0] - (1.0 - 3.0 / 4.5)).abs() < 1e-6, "{pooled:?}");
+        // A batch of one frame: the two agree.
+        let (p1, y1) = (p.slice([1..2]), y.slice([1..2]));
+        assert_eq!(
+            values(batch_dice_per_class(p1.clone(), y1.clone())),
+            values(dice_per_class(p1, y1))
+        );
+    }
+
+    #[test]
+    fn batch_dice_keeps_the_classes_apart() {
+        // Two classes; class 1 is predicted perfectly, class 0 not at all.
+        let p = tensor(&[0.0, 0.0, 1.0, 1.0], [1, 2, 1, 2]);
+        let y = tensor(&[1.0, 1.0, 1.0, 1.0], [1, 2, 1, 2]);
+        let d = values(batch_dice_per_class(p, y));
+        assert!(
+            (d[0] - (1.0 - 1.0 / 3.0)).abs() < 1e-6 && d[1].abs() < 1e-6,
+            "{d:?}"
+        );
+    }
+}

@@ -71,6 +71,10 @@ pub struct EvalSegmentationArgs {
     pub worst: usize,
 }
 
+fn on_off(b: bool) -> &'static str {
+    if b { "on" } else { "off" }
+}
+
 fn format_channels(c: &[usize]) -> String {
     let c: Vec<String> = c.iter().map(ToString::to_string).collect();
     format!("({})", c.join(", "))
@@ -98,13 +102,20 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
         other => anyhow::bail!("unknown --model {other:?} (procnet, baseline)"),
     }
     println!(
-        "{}: {} parameters, {} cells, {} channels, {}x{} input",
+        "{}: {} parameters, {} cells, {} channels, {}x{} input, prediction loss {}, axonal delay {}, decoder {}",
         config.model.model_name(),
         config.model.parameter_count(),
         config.model.cell.name(),
         format_channels(&config.model.repr_channels),
         config.model.input_size,
-        config.model.input_size
+        config.model.input_size,
+        on_off(config.model.prediction_loss),
+        on_off(config.model.axonal_delay),
+        if config.model.decoder_full_resolution || !config.model.prediction_loss {
+            "reads full resolution"
+        } else {
+            "from half resolution (the paper's)"
+        }
     );
     backend::set_threads(config.threads);
     let trainer = Trainer::new(config, &args.out)?;
@@ -359,12 +370,17 @@ pub fn bench(args: &BenchArgs) -> Result<ExitCode> {
     for name in args.backends.split(',').filter(|n| !n.trim().is_empty()) {
         let b = Backend::parse(name.trim())?;
         let t = workcell::perception::bench::time(&config, b, args.batch, args.frames, args.iters)?;
+        // The convolutions' arithmetic over the time a frame took: how near the backend runs
+        // to the machine's peak.
+        let gflops = 2.0 * config.macs_per_frame() as f64 / t.infer_frame_s / 1e9;
         println!(
-            "{{\"backend\": \"{}\", \"threads\": {}, \"train_step_s\": {:.6}, \"infer_frame_s\": {:.6}}}",
+            "{{\"backend\": \"{}\", \"threads\": {}, \"train_step_s\": {:.6}, \"infer_frame_s\": {:.6}, \"gmac_per_frame\": {:.4}, \"infer_gflops\": {:.1}}}",
             b.name(),
             args.threads,
             t.train_step_s,
-            t.infer_frame_s
+            t.infer_frame_s,
+            config.macs_per_frame() as f64 / 1e9,
+            gflops
         );
     }
     Ok(ExitCode::SUCCESS)
