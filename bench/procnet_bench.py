@@ -31,6 +31,7 @@ def run_json_lines(cmd, env=None):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--preset", default="cpu")
+    ap.add_argument("--input-size", type=int, default=None, help="override the preset's input size")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--iters", type=int, default=5)
     ap.add_argument("--backends", default="flex,tch")
@@ -43,8 +44,9 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         weights = os.path.join(tmp, "bench.safetensors")
         common = ["--threads", str(args.threads), "--iters", str(args.iters)]
+        size = ["--input-size", str(args.input_size)] if args.input_size else []
         run_json_lines([args.binary, "bench", "--preset", args.preset, "--backends", "",
-                        "--write-weights", weights], env)
+                        "--write-weights", weights] + size, env)
         for _ in range(max(1, args.rounds)):
             rows = []
             for b in args.backends.split(","):

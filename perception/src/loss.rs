@@ -99,7 +99,7 @@ mod tests {
         assert_eq!(pooled.len(), 1);
         assert!((pooled[0] - (1.0 - 3.0 / 4.5)).abs() < 1e-6, "{pooled:?}");
         // A batch of one frame: the two agree.
-        let (p1, y1) = (p.slice([1..2]), y.slice([1..2]));
+        let (p1, y1) = (p.slice([1..2, 0..1]), y.slice([1..2, 0..1]));
         assert_eq!(
             values(batch_dice_per_class(p1.clone(), y1.clone())),
             values(dice_per_class(p1, y1))
