@@ -175,9 +175,9 @@ pub struct Evaluation {
     pub overall: Scores,
     /// Keyed by occlusion level.
     pub by_occlusion: BTreeMap<String, Scores>,
-    /// Keyed by distance class.
+    /// Keyed by distance class (a camera of the cell by its name: `front camera`).
     pub by_distance: BTreeMap<String, Scores>,
-    /// Keyed by (distance class, occlusion level).
+    /// Keyed by (distance class or camera, occlusion level).
     pub by_pair: BTreeMap<(String, String), Scores>,
     /// The frames of highest forearm Dice loss, worst first (as many as asked for).
     pub worst: Vec<ScoredFrame>,
@@ -309,7 +309,7 @@ pub fn evaluate(
                     ev.worst.truncate(keep_worst);
                 }
             }
-            let (d, o) = (entry.distance_class.clone(), entry.occlusion_level.clone());
+            let (d, o) = (camera_class(entry), entry.occlusion_level.clone());
             ev.overall.add(entry.index, &scores);
             ev.by_occlusion
                 .entry(o.clone())
@@ -327,6 +327,16 @@ pub fn evaluate(
         progress(k + 1, entries.len());
     }
     Ok(ev)
+}
+
+/// The row a sequence is reported under: its distance class for the paper's cameras, the
+/// camera's name for a camera of the cell (`camera:front` -> `front camera`), which sees the
+/// arm from its own distance.
+fn camera_class(entry: &workcell_render::dataset::SequenceEntry) -> String {
+    entry.source.strip_prefix("camera:").map_or_else(
+        || entry.distance_class.clone(),
+        |name| format!("{name} camera"),
+    )
 }
 
 /// Planar `[3, n]` floats in [0, 1] to interleaved bytes.
@@ -412,7 +422,7 @@ impl Evaluation {
         groups.extend(pairs.iter().map(|((d, o), s)| (format!("{d} / {o}"), *s)));
         let _ = writeln!(
             md,
-            "\nForearm by distance class and occlusion level (ceiling: a perfect network's Dice \
+            "\nForearm by distance class (the paper's cameras) or camera of the cell, and occlusion level (ceiling: a perfect network's Dice \
              loss at this input size, from the labels):\n\n\
              | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |\n\
              |---|---|---|---|---|---|---|---|---|"
