@@ -309,7 +309,7 @@ pub fn evaluate(
                     ev.worst.truncate(keep_worst);
                 }
             }
-            let (d, o) = (camera_class(entry), entry.occlusion_level.clone());
+            let (d, o) = (entry.camera_class(), entry.occlusion_level.clone());
             ev.overall.add(entry.index, &scores);
             ev.by_occlusion
                 .entry(o.clone())
@@ -327,16 +327,6 @@ pub fn evaluate(
         progress(k + 1, entries.len());
     }
     Ok(ev)
-}
-
-/// The row a sequence is reported under: its distance class for the paper's cameras, the
-/// camera's name for a camera of the cell (`camera:front` -> `front camera`), which sees the
-/// arm from its own distance.
-fn camera_class(entry: &workcell_render::dataset::SequenceEntry) -> String {
-    entry.source.strip_prefix("camera:").map_or_else(
-        || entry.distance_class.clone(),
-        |name| format!("{name} camera"),
-    )
 }
 
 /// Planar `[3, n]` floats in [0, 1] to interleaved bytes.

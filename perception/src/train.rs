@@ -757,8 +757,8 @@ pub fn scalar(t: &Tensor<1>) -> f64 {
     t.clone().into_scalar::<f32>() as f64
 }
 
-/// Up to `count` sequences (0: all), taken in turn from each (distance, occlusion) cell in
-/// the dataset's order.
+/// Up to `count` sequences (0: all), taken in turn from each (distance class or camera,
+/// occlusion) cell in the dataset's order.
 fn validation_subset(all: Vec<SequenceTensors>, count: usize) -> Vec<SequenceTensors> {
     if count == 0 || all.len() <= count {
         return all;
@@ -766,10 +766,7 @@ fn validation_subset(all: Vec<SequenceTensors>, count: usize) -> Vec<SequenceTen
     let mut cells: std::collections::BTreeMap<(String, String), Vec<SequenceTensors>> =
         std::collections::BTreeMap::new();
     for s in all.into_iter().rev() {
-        let key = (
-            s.entry.distance_class.clone(),
-            s.entry.occlusion_level.clone(),
-        );
+        let key = (s.entry.camera_class(), s.entry.occlusion_level.clone());
         cells.entry(key).or_default().push(s);
     }
     let mut out = Vec::with_capacity(count);
@@ -820,4 +817,61 @@ fn validation_dice(
 
 fn model_classes(model: &ProcNetModel) -> usize {
     model.head.weight.dims()[0]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use workcell_render::dataset::SequenceEntry;
+
+    fn sequence(index: usize, distance: &str, occlusion: &str, source: &str) -> SequenceTensors {
+        SequenceTensors {
+            entry: SequenceEntry {
+                index,
+                dir: String::new(),
+                seed: 0,
+                attempts: 1,
+                distance_class: distance.into(),
+                occlusion_level: occlusion.into(),
+                source: source.into(),
+                split: Split::Validation,
+                frames: 0,
+                mean_forearm_occlusion: None,
+                frames_without_forearm: 0,
+            },
+            size: 0,
+            frames: 0,
+            rgb: Vec::new(),
+            target: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_validation_subset_takes_every_cell_in_turn() {
+        // Three cells (the cell's camera apart from the paper's short class), unequal sizes.
+        let mut all = Vec::new();
+        for i in 0..5 {
+            all.push(sequence(i, "short", "light", "paper"));
+        }
+        all.push(sequence(5, "short", "light", "camera:front"));
+        for i in 6..8 {
+            all.push(sequence(i, "large", "heavy", "paper"));
+        }
+        let pick = |count| -> Vec<usize> {
+            let mut v: Vec<usize> = validation_subset(all.clone(), count)
+                .iter()
+                .map(|s| s.entry.index)
+                .collect();
+            v.sort_unstable();
+            v
+        };
+        // One per cell, the first of each in the dataset's order.
+        assert_eq!(pick(3), vec![0, 5, 6]);
+        // Then round-robin among the cells that still have sequences.
+        assert_eq!(pick(5), vec![0, 1, 5, 6, 7]);
+        assert_eq!(pick(6), vec![0, 1, 2, 5, 6, 7]);
+        // 0 or more than there are: all of them.
+        assert_eq!(pick(0).len(), 8);
+        assert_eq!(pick(100).len(), 8);
+    }
 }

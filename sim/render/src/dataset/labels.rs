@@ -217,6 +217,19 @@ pub struct SequenceEntry {
     pub frames_without_forearm: usize,
 }
 
+impl SequenceEntry {
+    /// The row a sequence is reported under: its distance class for the paper's cameras, the
+    /// camera's name for a camera of the cell (`camera:front` -> `front camera`), which sees
+    /// the arm from its own distance.
+    #[must_use]
+    pub fn camera_class(&self) -> String {
+        self.source.strip_prefix("camera:").map_or_else(
+            || self.distance_class.clone(),
+            |name| format!("{name} camera"),
+        )
+    }
+}
+
 /// The manifest: everything needed to regenerate the dataset bit for bit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
