@@ -407,7 +407,15 @@ impl Evaluation {
         occ.sort_by_key(|(k, _)| rank(&LEVELS, k));
         let mut pairs: Vec<_> = self.by_pair.iter().collect();
         pairs.sort_by_key(|((d, o), _)| (rank(&DISTANCES, d), rank(&LEVELS, o)));
-        groups.extend(dist.iter().map(|(k, s)| (format!("distance {k}"), *s)));
+        groups.extend(dist.iter().map(|(k, s)| {
+            // A camera of the cell is named as such, the paper's classes as distances.
+            let name = if k.ends_with(" camera") {
+                (*k).clone()
+            } else {
+                format!("distance {k}")
+            };
+            (name, *s)
+        }));
         groups.extend(occ.iter().map(|(k, s)| (format!("occlusion {k}"), *s)));
         groups.extend(pairs.iter().map(|((d, o), s)| (format!("{d} / {o}"), *s)));
         let _ = writeln!(
