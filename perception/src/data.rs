@@ -26,7 +26,7 @@ pub struct SequenceTensors {
 }
 
 /// [0, 1] to a byte, rounded.
-fn to_byte(v: f32) -> u8 {
+pub(crate) fn to_byte(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 

@@ -18,7 +18,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use workcell_render::dataset::{Dataset, Split};
 
 use crate::config::ProcNetConfig;
-use crate::data::{class_map, model_frames, one_hot};
+use crate::data::{class_map, model_frames, one_hot, to_byte};
 use crate::error::{PerceptionError, Result};
 use crate::loss::{dice_per_class, focal_per_class, iou_per_class};
 use crate::model::ProcNetModel;
