@@ -332,9 +332,7 @@ pub fn evaluate(
 /// Planar `[3, n]` floats in [0, 1] to interleaved bytes.
 fn interleave(planar: &[f32], n: usize) -> Vec<u8> {
     (0..n)
-        .flat_map(|p| {
-            [0, 1, 2].map(|ch| (planar[ch * n + p].clamp(0.0, 1.0) * 255.0).round() as u8)
-        })
+        .flat_map(|p| [0, 1, 2].map(|ch| to_byte(planar[ch * n + p])))
         .collect()
 }
 
