@@ -349,6 +349,66 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         text(&other.stderr)
     );
 
+    // A second cycle starts from the finished run's weights: one step at a learning rate of
+    // 1e-15 leaves them within 1e-12 of the first run's (a run from the seed's random weights
+    // would be off by the size of the weights themselves).
+    let second_cfg = tmp.path().join("second.toml");
+    let second = |channels: &str| {
+        recipe(1, channels).replace(
+            "window = 3\n",
+            "window = 3\nlr = 1e-15\ninit_weights = \"run/procnet.safetensors\"\n",
+        )
+    };
+    std::fs::write(&second_cfg, second("[4, 4, 4]")).expect("second config");
+    let second_out = tmp.path().join("second");
+    let cycle = workcell(&[
+        "train",
+        "--config",
+        second_cfg.to_str().expect("utf-8"),
+        "--out",
+        second_out.to_str().expect("utf-8"),
+    ]);
+    assert!(cycle.status.success(), "{}", text(&cycle.stderr));
+    // Every tensor is f32, in the same order in both files (one configuration).
+    let tensors = |path: &Path| -> Vec<f32> {
+        let bytes = std::fs::read(path).expect("weights");
+        let header = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;
+        bytes[8 + header..]
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+            .collect()
+    };
+    let (first_w, second_w) = (
+        tensors(&out.join("procnet.safetensors")),
+        tensors(&second_out.join("procnet.safetensors")),
+    );
+    assert_eq!(first_w.len(), second_w.len());
+    let moved = first_w
+        .iter()
+        .zip(&second_w)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
+    assert!(
+        moved < 1e-12,
+        "the second cycle did not start from the first run's weights ({moved})"
+    );
+    // Weights of another shape are refused before any data is loaded, naming what differs.
+    std::fs::write(&second_cfg, second("[4, 4, 8]")).expect("second config");
+    let refused = workcell(&[
+        "train",
+        "--config",
+        second_cfg.to_str().expect("utf-8"),
+        "--out",
+        tmp.path().join("refused").to_str().expect("utf-8"),
+    ]);
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused.stderr).contains("repr_channels")
+            && text(&refused.stderr).contains("procnet.safetensors"),
+        "{}",
+        text(&refused.stderr)
+    );
+
     let weights = out.join("procnet.safetensors");
     let sheet = tmp.path().join("worst.png");
     let eval = workcell(&[
@@ -381,6 +441,25 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         u32::from_be_bytes(png[20..24].try_into().expect("4 bytes")),
     );
     assert!(w >= 2 * 4 * 32 && h >= 2 * 32, "{w}x{h}");
+    // A subset of the split: two of its sequences.
+    let subset = workcell(&[
+        "eval",
+        "segmentation",
+        "--weights",
+        weights.to_str().expect("utf-8"),
+        "--dataset",
+        data_s,
+        "--split",
+        "test",
+        "--sequences",
+        "2",
+    ]);
+    assert!(subset.status.success(), "{}", text(&subset.stderr));
+    let md = text(&subset.stdout);
+    assert!(
+        md.contains("(2 of its ") && md.contains("Split `test`: 2 sequences, 6 frames scored"),
+        "{md}"
+    );
     let bad = workcell(&[
         "eval",
         "segmentation",

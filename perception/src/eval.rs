@@ -18,7 +18,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use workcell_render::dataset::{Dataset, Split};
 
 use crate::config::ProcNetConfig;
-use crate::data::{class_map, model_frames, one_hot, to_byte};
+use crate::data::{class_map, model_frames, one_hot, per_cell_subset, to_byte};
 use crate::error::{PerceptionError, Result};
 use crate::loss::{dice_per_class, focal_per_class, iou_per_class};
 use crate::model::ProcNetModel;
@@ -195,7 +195,9 @@ fn row(t: Tensor<2>) -> Vec<f32> {
     t.into_data().try_into_vec::<f32>().unwrap_or_default()
 }
 
-/// Evaluates `model` on a split. Frame 0 of each sequence (weight 0 in training) is left out.
+/// Evaluates `model` on a split, or on `sequences` of it taken in turn from each (camera
+/// class, occlusion level) cell (0: all; [`per_cell_subset`]). Frame 0 of each sequence
+/// (weight 0 in training) is left out.
 /// Keeps the `keep_worst` frames of highest forearm Dice loss. `progress` is called after
 /// each sequence with (done, total).
 pub fn evaluate(
@@ -203,12 +205,17 @@ pub fn evaluate(
     config: &ProcNetConfig,
     dataset: &Dataset,
     split: Split,
+    sequences: usize,
     device: &Device,
     keep_worst: usize,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Evaluation> {
     let map = class_map(config, dataset)?;
-    let entries: Vec<_> = dataset.entries(Some(split)).cloned().collect();
+    let entries = per_cell_subset(
+        dataset.entries(Some(split)).cloned().collect(),
+        sequences,
+        |e| e,
+    );
     if entries.is_empty() {
         return Err(PerceptionError::Input {
             message: format!(

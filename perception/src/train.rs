@@ -129,6 +129,10 @@ pub struct TrainConfig {
     /// Validate on this many sequences of the validation split, taken in turn from each
     /// (distance, occlusion) cell so that every cell is represented (0: all of them).
     pub validation_sequences: usize,
+    /// Start from these weights (of the same `model` configuration) instead of the seed's
+    /// random ones: a second training cycle on top of a finished run. Relative to the config
+    /// file. A checkpoint in the run folder still wins (resuming).
+    pub init_weights: Option<PathBuf>,
     /// The network (starts from the `cpu` preset; override any key).
     pub model: ProcNetConfig,
 }
@@ -152,6 +156,7 @@ impl Default for TrainConfig {
             checkpoint_every: 100,
             validate_every: 250,
             validation_sequences: 24,
+            init_weights: None,
             model: ProcNetConfig::cpu(),
         }
     }
@@ -169,9 +174,12 @@ impl TrainConfig {
                 path: path.to_path_buf(),
                 message: e.to_string(),
             })?;
+        let base = path.parent().unwrap_or(Path::new("."));
         if config.dataset.is_relative() {
-            let base = path.parent().unwrap_or(Path::new("."));
             config.dataset = base.join(&config.dataset);
+        }
+        if let Some(init) = config.init_weights.as_mut().filter(|p| p.is_relative()) {
+            *init = base.join(&*init);
         }
         config.validate().map_err(|e| PerceptionError::ConfigFile {
             path: path.to_path_buf(),
@@ -516,6 +524,10 @@ impl Trainer {
         std::fs::create_dir_all(files.dir.join("checkpoint")).map_err(io_err(&files.dir))?;
         self.check_or_write_config()?;
 
+        // A wrong starting point is refused before the split is loaded.
+        if let Some(init) = &cfg.init_weights {
+            weights::check_config(init, &cfg.model)?;
+        }
         let dataset = Dataset::open(&cfg.dataset)?;
         let train = load_split(&dataset, Split::Train, &cfg.model)?;
         let validation = validation_subset(
@@ -564,6 +576,9 @@ impl Trainer {
                 .filter(|m| m.step <= start)
                 .collect();
             tracing::info!(step = start, "resuming");
+        } else if let Some(init) = &cfg.init_weights {
+            weights::load_checked(&mut model, &cfg.model, init)?;
+            tracing::info!(weights = %init.display(), "starting from trained weights");
         }
         self.rewrite_metrics(&metrics)?;
         let elapsed_before = metrics.last().map_or(0.0, |m| m.elapsed_s);
@@ -760,26 +775,7 @@ pub fn scalar(t: &Tensor<1>) -> f64 {
 /// Up to `count` sequences (0: all), taken in turn from each (distance class or camera,
 /// occlusion) cell in the dataset's order.
 fn validation_subset(all: Vec<SequenceTensors>, count: usize) -> Vec<SequenceTensors> {
-    if count == 0 || all.len() <= count {
-        return all;
-    }
-    let mut cells: std::collections::BTreeMap<(String, String), Vec<SequenceTensors>> =
-        std::collections::BTreeMap::new();
-    for s in all.into_iter().rev() {
-        let key = (s.entry.camera_class(), s.entry.occlusion_level.clone());
-        cells.entry(key).or_default().push(s);
-    }
-    let mut out = Vec::with_capacity(count);
-    while out.len() < count {
-        for queue in cells.values_mut() {
-            if out.len() < count
-                && let Some(s) = queue.pop()
-            {
-                out.push(s);
-            }
-        }
-    }
-    out
+    crate::data::per_cell_subset(all, count, |s| &s.entry)
 }
 
 /// Mean forearm Dice loss over the validation sequences (frames after the first), at the

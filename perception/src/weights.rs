@@ -122,6 +122,13 @@ pub fn load(path: &Path, device: &Device) -> Result<(ProcNetModel, ProcNetConfig
 
 /// Loads weights into `model`, which must be of the configuration `expected`.
 pub fn load_checked(model: &mut ProcNetModel, expected: &ProcNetConfig, path: &Path) -> Result<()> {
+    check_config(path, expected)?;
+    load_into(model, path)
+}
+
+/// Reads only the configuration of a weight file and refuses one other than `expected`,
+/// naming what differs.
+pub fn check_config(path: &Path, expected: &ProcNetConfig) -> Result<()> {
     let found = read_config(path)?;
     if &found != expected {
         return Err(weights_error(
@@ -132,7 +139,7 @@ pub fn load_checked(model: &mut ProcNetModel, expected: &ProcNetConfig, path: &P
             ),
         ));
     }
-    load_into(model, path)
+    Ok(())
 }
 
 fn load_into(model: &mut ProcNetModel, path: &Path) -> Result<()> {

@@ -53,6 +53,10 @@ pub struct EvalSegmentationArgs {
     /// Which split: train, validation or test.
     #[arg(long, default_value = "test")]
     pub split: String,
+    /// Score this many sequences of the split, taken in turn from each (camera, occlusion)
+    /// cell so that every cell is represented (0: all of them).
+    #[arg(long, default_value_t = 0)]
+    pub sequences: usize,
     /// flex, tch or gpu (the latter two with their cargo features).
     #[arg(long, default_value = "flex")]
     pub backend: String,
@@ -241,7 +245,12 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
     let device = Backend::parse(&args.backend)?.device()?;
     let (model, config) = weights::load(&args.weights, &device)?;
     let dataset = Dataset::open(&args.dataset)?;
-    let n = dataset.entries(Some(split)).count();
+    let n_split = dataset.entries(Some(split)).count();
+    let n = if args.sequences == 0 {
+        n_split
+    } else {
+        n_split.min(args.sequences)
+    };
     let progress = super::progress_bar(
         n as u64,
         "{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})",
@@ -252,6 +261,7 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
         &config,
         &dataset,
         split,
+        args.sequences,
         &device,
         keep,
         &mut |done, _| {
@@ -259,8 +269,16 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
         },
     )?;
     progress.finish_and_clear();
+    let subset = if ev.sequences < n_split {
+        format!(
+            " ({} of its {n_split} sequences, taken in turn from each cell)",
+            ev.sequences
+        )
+    } else {
+        String::new()
+    };
     let md = format!(
-        "# {} segmentation: {}\n\nWeights `{}` ({} cell, {} layers, {}x{} input), dataset `{}`.\n\n{}",
+        "# {} segmentation: {}{subset}\n\nWeights `{}` ({} cell, {} layers, {}x{} input), dataset `{}`.\n\n{}",
         config.model_name(),
         args.split,
         args.weights.display(),
@@ -339,6 +357,10 @@ pub struct BenchArgs {
     /// channels follow: 3, then each layer's representation channels below).
     #[arg(long, value_delimiter = ',')]
     pub channels: Option<Vec<usize>>,
+    /// Override the kernel of the cells' horizontal (hGRU) or recurrent (ConvLSTM)
+    /// convolutions (an odd size).
+    #[arg(long)]
+    pub cell_kernel: Option<usize>,
     /// Write the benchmarked model's initial weights here (bench/procnet.py reads them).
     #[arg(long)]
     pub write_weights: Option<PathBuf>,
@@ -360,6 +382,9 @@ pub fn bench(args: &BenchArgs) -> Result<ExitCode> {
             .chain(channels.iter().copied())
             .take(channels.len())
             .collect();
+    }
+    if let Some(kernel) = args.cell_kernel {
+        config.cell_kernel = kernel;
     }
     config.validate()?;
     backend::set_threads(args.threads);
