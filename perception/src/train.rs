@@ -687,7 +687,9 @@ impl Trainer {
     fn run_identity(config: &TrainConfig) -> serde_json::Value {
         let mut v = serde_json::to_value(config).unwrap_or_default();
         if let Some(map) = v.as_object_mut() {
-            for key in ["dataset", "backend", "threads"] {
+            // Where the files are and how fast it runs do not change the run; the starting
+            // weights only matter before the first checkpoint.
+            for key in ["dataset", "backend", "threads", "init_weights"] {
                 map.remove(key);
             }
         }
