@@ -303,6 +303,38 @@ pub fn make_batch(
     Batch { rgb, target }
 }
 
+/// Up to `count` sequences taken in turn from each (camera class, occlusion level) cell, the
+/// first of each cell in the dataset's order first, so that every cell is represented; all of
+/// them when `count` is 0 or not smaller than their number. The order within the result is
+/// that of the round-robin.
+pub fn per_cell_subset<T>(
+    all: Vec<T>,
+    count: usize,
+    entry: impl Fn(&T) -> &SequenceEntry,
+) -> Vec<T> {
+    if count == 0 || all.len() <= count {
+        return all;
+    }
+    let mut cells: std::collections::BTreeMap<(String, String), Vec<T>> =
+        std::collections::BTreeMap::new();
+    for s in all.into_iter().rev() {
+        let e = entry(&s);
+        let key = (e.camera_class(), e.occlusion_level.clone());
+        cells.entry(key).or_default().push(s);
+    }
+    let mut out = Vec::with_capacity(count);
+    while out.len() < count {
+        for queue in cells.values_mut() {
+            if out.len() < count
+                && let Some(s) = queue.pop()
+            {
+                out.push(s);
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -370,36 +402,4 @@ mod tests {
         whole.geometry(&mut out, 1, s);
         assert_eq!(out, ramp);
     }
-}
-
-/// Up to `count` sequences taken in turn from each (camera class, occlusion level) cell, the
-/// first of each cell in the dataset's order first, so that every cell is represented; all of
-/// them when `count` is 0 or not smaller than their number. The order within the result is
-/// that of the round-robin.
-pub fn per_cell_subset<T>(
-    all: Vec<T>,
-    count: usize,
-    entry: impl Fn(&T) -> &SequenceEntry,
-) -> Vec<T> {
-    if count == 0 || all.len() <= count {
-        return all;
-    }
-    let mut cells: std::collections::BTreeMap<(String, String), Vec<T>> =
-        std::collections::BTreeMap::new();
-    for s in all.into_iter().rev() {
-        let e = entry(&s);
-        let key = (e.camera_class(), e.occlusion_level.clone());
-        cells.entry(key).or_default().push(s);
-    }
-    let mut out = Vec::with_capacity(count);
-    while out.len() < count {
-        for queue in cells.values_mut() {
-            if out.len() < count
-                && let Some(s) = queue.pop()
-            {
-                out.push(s);
-            }
-        }
-    }
-    out
 }

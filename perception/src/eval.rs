@@ -200,6 +200,9 @@ fn row(t: Tensor<2>) -> Vec<f32> {
 /// (weight 0 in training) is left out.
 /// Keeps the `keep_worst` frames of highest forearm Dice loss. `progress` is called after
 /// each sequence with (done, total).
+// The split and its subset, the model and its configuration, the dataset, the device, the
+// sheet's frame count and the progress callback: each a separate choice of the caller.
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate(
     model: &ProcNetModel,
     config: &ProcNetConfig,
