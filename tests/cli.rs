@@ -406,21 +406,23 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
 
     let weights = out.join("procnet.safetensors");
+    let weights_s = weights.to_str().expect("utf-8");
+    let eval_test = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "segmentation",
+            "--weights",
+            weights_s,
+            "--dataset",
+            data_s,
+            "--split",
+            "test",
+        ];
+        args.extend_from_slice(extra);
+        workcell(&args)
+    };
     let sheet = tmp.path().join("worst.png");
-    let eval = workcell(&[
-        "eval",
-        "segmentation",
-        "--weights",
-        weights.to_str().expect("utf-8"),
-        "--dataset",
-        data_s,
-        "--split",
-        "test",
-        "--sheet",
-        sheet.to_str().expect("utf-8"),
-        "--worst",
-        "3",
-    ]);
+    let eval = eval_test(&["--sheet", sheet.to_str().expect("utf-8"), "--worst", "3"]);
     assert!(eval.status.success(), "{}", text(&eval.stderr));
     let md = text(&eval.stdout);
     assert!(
@@ -438,18 +440,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
     assert!(w >= 2 * 4 * 32 && h >= 2 * 32, "{w}x{h}");
     // A subset of the split: two of its sequences.
-    let subset = workcell(&[
-        "eval",
-        "segmentation",
-        "--weights",
-        weights.to_str().expect("utf-8"),
-        "--dataset",
-        data_s,
-        "--split",
-        "test",
-        "--sequences",
-        "2",
-    ]);
+    let subset = eval_test(&["--sequences", "2"]);
     assert!(subset.status.success(), "{}", text(&subset.stderr));
     let md = text(&subset.stdout);
     assert!(
