@@ -47,10 +47,7 @@ impl UrdfAssets {
     /// root, [`RobotError::Mesh`] for a mesh that does not resolve to an existing file.
     pub fn read(path: impl AsRef<Path>, packages: &PackageMap) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|error| RobotError::Io {
-            path: path.to_path_buf(),
-            error,
-        })?;
+        let text = crate::input::read_urdf_text(path)?;
         Self::from_text(text, path, packages)
     }
 
@@ -63,12 +60,7 @@ impl UrdfAssets {
             path: path.to_path_buf(),
             message,
         };
-        let options = roxmltree::ParsingOptions {
-            allow_dtd: true,
-            ..roxmltree::ParsingOptions::default()
-        };
-        let doc = roxmltree::Document::parse_with_options(&text, options)
-            .map_err(|e| parse(e.to_string()))?;
+        let doc = crate::input::parse_xml(&text).map_err(parse)?;
         if doc.root_element().tag_name().name() != "robot" {
             return Err(parse(format!(
                 "the root element is <{}>, not <robot>",

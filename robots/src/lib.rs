@@ -25,6 +25,7 @@ mod catalogue;
 pub mod collision;
 mod error;
 pub mod human;
+pub mod input;
 mod kinematics;
 pub mod math;
 mod mesh;

@@ -27,8 +27,8 @@ impl TriMesh {
     /// # Errors
     /// A message saying what is wrong with the file.
     pub fn load(path: &Path, scale: [f64; 3]) -> Result<Self, String> {
-        let bytes =
-            std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let bytes = crate::input::read_regular_file(path, crate::input::MAX_MESH_BYTES)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         Self::from_bytes(&bytes, path, scale)
     }
 
@@ -38,6 +38,7 @@ impl TriMesh {
     /// A message saying what is wrong with the bytes.
     pub fn from_bytes(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, String> {
         check_binary_stl_length(bytes, path)?;
+        check_collada(bytes, path)?;
         // A binary STL whose free-form header starts with "solid" is taken for ASCII by the
         // decoder; when the size fits the binary layout exactly, blank the header first.
         let patched;
@@ -45,6 +46,13 @@ impl TriMesh {
             let mut copy = bytes.to_vec();
             copy[..5].copy_from_slice(b"     ");
             patched = copy;
+            &patched[..]
+        } else if !bytes.is_ascii() && is_ascii_stl(bytes) {
+            // The decoder wants ASCII throughout; only the solid's name may be anything else.
+            patched = bytes
+                .iter()
+                .map(|&b| if b.is_ascii() { b } else { b'_' })
+                .collect();
             &patched[..]
         } else {
             bytes
@@ -125,6 +133,23 @@ impl TriMesh {
     }
 }
 
+/// A COLLADA file must be well-formed XML of bounded depth whose counts fit its size before
+/// the decoder (recursive, and trusting every `count`) sees it.
+fn check_collada(bytes: &[u8], path: &Path) -> Result<(), String> {
+    let is_dae = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("dae"));
+    if !is_dae {
+        return Ok(());
+    }
+    let text = std::str::from_utf8(bytes)
+        .map_err(|e| format!("cannot decode {}: not UTF-8 XML ({e})", path.display()))?;
+    let doc = crate::input::parse_xml(text)
+        .map_err(|e| format!("cannot decode {}: {e}", path.display()))?;
+    crate::input::check_collada_counts(&doc, bytes.len())
+        .map_err(|e| format!("cannot decode {}: {e}", path.display()))
+}
+
 /// The triangle count in the header of a binary STL, `None` when the file is not an STL
 /// long enough to have that header.
 fn binary_stl_count(bytes: &[u8], path: &Path) -> Option<usize> {
@@ -141,7 +166,7 @@ fn check_binary_stl_length(bytes: &[u8], path: &Path) -> Result<(), String> {
     let Some(count) = binary_stl_count(bytes, path) else {
         return Ok(());
     };
-    if bytes.starts_with(b"solid") && bytes.is_ascii() {
+    if is_ascii_stl(bytes) {
         return Ok(());
     }
     let expected = 84 + 50 * count;
@@ -153,6 +178,25 @@ fn check_binary_stl_length(bytes: &[u8], path: &Path) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// An ASCII STL: "solid", and then a first facet or the end (the name may be any UTF-8; a
+/// binary STL whose header starts with "solid" has binary bytes right after its header).
+fn is_ascii_stl(bytes: &[u8]) -> bool {
+    if !bytes.starts_with(b"solid") {
+        return false;
+    }
+    let line_end = bytes
+        .iter()
+        .position(|&b| b == b'\n')
+        .unwrap_or(bytes.len());
+    let rest = &bytes[line_end..];
+    let first_word = rest
+        .split(u8::is_ascii_whitespace)
+        .find(|w| !w.is_empty())
+        .unwrap_or_default();
+    std::str::from_utf8(&bytes[..line_end]).is_ok()
+        && (first_word == b"facet" || first_word == b"endsolid")
 }
 
 /// A binary STL whose header starts with "solid": the size fits the binary layout exactly.

@@ -78,28 +78,43 @@ impl PackageMap {
             })?;
             return join_inside(&root, relative);
         }
-        if let Some(absolute) = uri.strip_prefix("file://") {
-            let path = PathBuf::from(absolute);
-            if !path.is_absolute() {
-                return Err(format!("'{uri}' is not an absolute file:// URI"));
-            }
-            return Ok(path);
-        }
-        if uri.contains("://") {
-            return Err(format!("'{uri}' uses an unsupported URI scheme"));
-        }
-        let path = Path::new(uri);
-        if path.is_absolute() {
-            return Ok(path.to_path_buf());
-        }
-        // A relative path stays inside the package that holds the URDF (the nearest folder
-        // with a package.xml), or inside the URDF's own folder when there is none.
-        let root = urdf_dir
+        // The package that holds the URDF (the nearest folder with a package.xml), or the
+        // URDF's own folder when there is none.
+        let own_root = urdf_dir
             .ancestors()
             .find(|dir| dir.join("package.xml").is_file())
             .unwrap_or(urdf_dir);
-        let within = urdf_dir.strip_prefix(root).unwrap_or(Path::new(""));
-        join_inside(root, &within.join(uri).to_string_lossy())
+        let absolute = match uri.strip_prefix("file://") {
+            Some(rest) if !Path::new(rest).is_absolute() => {
+                return Err(format!("'{uri}' is not an absolute file:// URI"));
+            }
+            Some(rest) => Some(Path::new(rest)),
+            None if uri.contains("://") => {
+                return Err(format!("'{uri}' uses an unsupported URI scheme"));
+            }
+            None => Some(Path::new(uri)).filter(|p| p.is_absolute()),
+        };
+        if let Some(path) = absolute {
+            // An absolute path must lie inside a root the user named or the URDF's package.
+            let roots = self
+                .packages
+                .values()
+                .chain(&self.search_paths)
+                .map(PathBuf::as_path)
+                .chain([own_root]);
+            for root in roots {
+                if let Ok(relative) = path.strip_prefix(root) {
+                    return join_inside(root, &relative.to_string_lossy());
+                }
+            }
+            return Err(format!(
+                "'{uri}' is outside every known package root (the URDF's package {}, mapped \
+                 packages and package search paths)",
+                own_root.display()
+            ));
+        }
+        let within = urdf_dir.strip_prefix(own_root).unwrap_or(Path::new(""));
+        join_inside(own_root, &within.join(uri).to_string_lossy())
     }
 
     fn package_root(&self, package: &str, urdf_dir: &Path) -> Option<PathBuf> {
@@ -115,13 +130,17 @@ impl PackageMap {
                 return Some(candidate);
             }
         }
-        // The URDF's ancestors: one named like the package, or one holding the package.
+        // The URDF's ancestors: one named like the package, or one holding the package. Only
+        // a folder with a package.xml (or the URDF's own folder) is a package here: otherwise
+        // `package://root/.bashrc` in a URDF under /root would open /root/.bashrc.
+        let is_package = |dir: &Path| dir.join("package.xml").is_file();
         for dir in urdf_dir.ancestors() {
-            if dir.file_name().is_some_and(|n| n == package) {
+            if dir.file_name().is_some_and(|n| n == package) && (is_package(dir) || dir == urdf_dir)
+            {
                 return Some(dir.to_path_buf());
             }
             let candidate = dir.join(package);
-            if candidate.is_dir() {
+            if is_package(&candidate) {
                 return Some(candidate);
             }
         }
@@ -242,6 +261,49 @@ mod tests {
             .resolve("package://my_robot/meshes/link.stl", &urdf_dir)
             .expect_err("symlink escape");
         assert!(err.contains("outside"), "{err}");
+    }
+
+    #[test]
+    fn absolute_paths_stay_inside_known_roots() {
+        let dir = tree();
+        let pkg = dir.path().join("share/my_robot");
+        let urdf_dir = pkg.join("urdf");
+        let map = PackageMap::new();
+        let inside = pkg.join("meshes/a.stl");
+        for uri in [
+            inside.display().to_string(),
+            format!("file://{}", inside.display()),
+        ] {
+            assert_eq!(map.resolve(&uri, &urdf_dir).expect("inside"), inside);
+        }
+        for uri in ["/etc/hostname", "file:///etc/hostname", "/dev/zero"] {
+            let err = map.resolve(uri, &urdf_dir).expect_err("outside");
+            assert!(err.contains("outside every known package root"), "{err}");
+        }
+        // `..` in an absolute path may not climb out either.
+        let climb = format!("{}/../../../../etc/hostname", pkg.display());
+        assert!(map.resolve(&climb, &urdf_dir).is_err());
+        // A mapped package's files may be named absolutely.
+        let elsewhere = tempfile::tempdir().expect("tempdir");
+        let mut mapped = PackageMap::new();
+        mapped.insert("my_robot", &pkg);
+        assert_eq!(
+            mapped
+                .resolve(&inside.display().to_string(), elsewhere.path())
+                .expect("mapped"),
+            inside
+        );
+    }
+
+    #[test]
+    fn an_ancestor_is_a_package_only_with_a_package_xml() {
+        let dir = tree();
+        // `package://share/...` names an ancestor folder that is no package.
+        let urdf_dir = dir.path().join("share/my_robot/urdf");
+        let err = PackageMap::new()
+            .resolve("package://share/my_robot/meshes/a.stl", &urdf_dir)
+            .expect_err("not a package");
+        assert!(err.contains("not found"), "{err}");
     }
 
     #[test]

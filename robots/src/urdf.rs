@@ -25,10 +25,7 @@ impl RobotModel {
     /// [`RobotError`] naming the file and the element that is wrong.
     pub fn from_urdf_file(path: impl AsRef<Path>, packages: &PackageMap) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|error| RobotError::Io {
-            path: path.to_path_buf(),
-            error,
-        })?;
+        let text = crate::input::read_urdf_text(path)?;
         Self::from_urdf_str(&text, path, packages)
     }
 
@@ -37,6 +34,8 @@ impl RobotModel {
     /// # Errors
     /// [`RobotError`] naming `path` and the element that is wrong.
     pub fn from_urdf_str(text: &str, path: &Path, packages: &PackageMap) -> Result<Self> {
+        // Well-formed, bounded XML with a <robot> root before the recursive parser sees it.
+        check_urdf_document(text, path)?;
         // urdf-rs reports an unknown joint type without saying which joint: find it first.
         if let Some((joint, kind)) = unknown_joint_type(text) {
             return Err(RobotError::invalid(
@@ -71,6 +70,40 @@ impl RobotModel {
         }
         .build(&robot)
     }
+}
+
+/// Checks that `text` is one well-formed XML document with a `<robot>` root, nested no
+/// deeper than [`MAX_XML_DEPTH`](crate::input::MAX_XML_DEPTH), with at most
+/// [`MAX_LINKS`](crate::input::MAX_LINKS) links.
+fn check_urdf_document(text: &str, path: &Path) -> Result<()> {
+    let parse = |message: String| RobotError::Parse {
+        path: path.to_path_buf(),
+        message,
+    };
+    let doc = crate::input::parse_xml(text).map_err(parse)?;
+    let root = doc.root_element().tag_name().name();
+    if root != "robot" {
+        let hint = match root {
+            "sdf" => " (this is an SDFormat file: export the model as URDF)",
+            "mujoco" => " (this is an MJCF file for MuJoCo: export the model as URDF)",
+            _ => "",
+        };
+        return Err(parse(format!(
+            "the root element is <{root}>, not <robot>{hint}"
+        )));
+    }
+    let links = doc
+        .root_element()
+        .children()
+        .filter(|n| n.has_tag_name("link"))
+        .count();
+    if links > crate::input::MAX_LINKS {
+        return Err(parse(format!(
+            "{links} links, more than the limit of {}",
+            crate::input::MAX_LINKS
+        )));
+    }
+    Ok(())
 }
 
 /// The first `<joint name=".." type="..">` whose type URDF does not define, as
@@ -110,6 +143,23 @@ fn unknown_joint_type(text: &str) -> Option<(String, String)> {
 
 /// Negative inertia moments smaller than this (kg m^2) are rounding noise, not errors.
 const INERTIA_NOISE_KGM2: f64 = 1e-12;
+/// Positive principal moments below this (kg m^2) are noise, taken as 0 (a 1 g sphere of
+/// 1 mm radius has 4e-10).
+const MIN_INERTIA_KGM2: f64 = 1e-15;
+/// The smallest positive mass accepted, kg.
+const MIN_MASS_KG: f64 = 1e-9;
+
+/// `v` scaled to unit length; `None` when it has no direction (zero or not finite). Scaled by
+/// its largest component first, so that huge components (`1e200 1e200 0`) do not overflow
+/// the length to infinity.
+fn unit_direction(v: Vector) -> Option<Vector> {
+    let largest = v.abs().max_element();
+    if !largest.is_finite() || largest < 1e-9 {
+        return None;
+    }
+    let unit = (v / largest).normalize();
+    unit.is_normalized().then_some(unit)
+}
 
 struct Builder<'a> {
     path: &'a Path,
@@ -126,7 +176,12 @@ impl Builder<'_> {
 
     fn build(mut self, robot: &urdf_rs::Robot) -> Result<RobotModel> {
         if robot.links.is_empty() {
-            return Err(self.invalid(format!("robot '{}'", robot.name), "has no link"));
+            let element = if robot.name.is_empty() {
+                "<robot>".to_string()
+            } else {
+                format!("robot '{}'", robot.name)
+            };
+            return Err(self.invalid(element, "has no <link> element"));
         }
         let materials: HashMap<&str, [f64; 4]> = robot
             .materials
@@ -242,6 +297,17 @@ impl Builder<'_> {
                 actuated.push(id);
             }
         }
+        if actuated.len() > crate::input::MAX_DOF {
+            return Err(self.invalid(
+                format!("robot '{}'", robot.name),
+                format!(
+                    "{} actuated joints, more than the limit of {} (rapier's multibody \
+                     solver costs O(n^3) per step)",
+                    actuated.len(),
+                    crate::input::MAX_DOF
+                ),
+            ));
+        }
         self.resolve_mimics(&mut joints)?;
 
         tracing::debug!(
@@ -297,6 +363,16 @@ impl Builder<'_> {
                     return Err(self.invalid(&element, "mimic joints form a cycle"));
                 }
             }
+            let max = crate::input::MAX_MIMIC_FACTOR;
+            if multiplier.abs() > max || offset.abs() > max {
+                return Err(self.invalid(
+                    &element,
+                    format!(
+                        "its chain of mimics multiplies to {multiplier:e} with offset \
+                         {offset:e}, beyond +-{max}"
+                    ),
+                ));
+            }
             let Coordinate::Own { index } = joints[current].coordinate else {
                 return Err(self.invalid(&element, "mimics a joint with no coordinate"));
             };
@@ -311,7 +387,7 @@ impl Builder<'_> {
 
     fn joint(&mut self, j: &urdf_rs::Joint, parent: usize, child: usize) -> Result<Joint> {
         let element = format!("joint '{}'", j.name);
-        let kind = match j.joint_type {
+        let mut kind = match j.joint_type {
             urdf_rs::JointType::Revolute => JointKind::Revolute,
             urdf_rs::JointType::Continuous => JointKind::Continuous,
             urdf_rs::JointType::Prismatic => JointKind::Prismatic,
@@ -324,15 +400,13 @@ impl Builder<'_> {
             }
         };
         let X_PJ = self.origin(&element, &j.origin)?;
-        let axis = Vector::from_array(j.axis.xyz.0);
         let axis = if kind.is_movable() {
-            if !axis.is_finite() || axis.length() < 1e-9 {
-                return Err(self.invalid(
-                    element,
+            unit_direction(Vector::from_array(j.axis.xyz.0)).ok_or_else(|| {
+                self.invalid(
+                    &element,
                     format!("axis {:?} is not a direction", j.axis.xyz.0),
-                ));
-            }
-            axis.normalize()
+                )
+            })?
         } else {
             Vector::X
         };
@@ -348,7 +422,30 @@ impl Builder<'_> {
         let (lower, upper) = match kind {
             JointKind::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
             JointKind::Fixed => (0.0, 0.0),
+            JointKind::Revolute
+                if l.lower.abs().max(l.upper.abs()) > crate::input::MAX_JOINT_LIMIT =>
+            {
+                self.warnings.push(format!(
+                    "{element}: limits lower={:e} upper={:e} beyond +-{:e} rad taken as \
+                     none: the joint is continuous",
+                    l.lower,
+                    l.upper,
+                    crate::input::MAX_JOINT_LIMIT
+                ));
+                kind = JointKind::Continuous;
+                (f64::NEG_INFINITY, f64::INFINITY)
+            }
             JointKind::Revolute | JointKind::Prismatic => {
+                let max = crate::input::MAX_JOINT_LIMIT;
+                if l.lower.abs() > max || l.upper.abs() > max {
+                    return Err(self.invalid(
+                        element,
+                        format!(
+                            "prismatic limit lower={:e} upper={:e} is beyond +-{max:e} m",
+                            l.lower, l.upper
+                        ),
+                    ));
+                }
                 if l.lower > l.upper {
                     return Err(self.invalid(
                         element,
@@ -385,10 +482,18 @@ impl Builder<'_> {
             Some(m) => {
                 let multiplier = m.multiplier.unwrap_or(1.0);
                 let offset = m.offset.unwrap_or(0.0);
-                if !all_finite(&[multiplier, offset]) {
-                    return Err(
-                        self.invalid(element, "mimic has a non-finite multiplier or offset")
-                    );
+                let max = crate::input::MAX_MIMIC_FACTOR;
+                if !all_finite(&[multiplier, offset])
+                    || multiplier.abs() > max
+                    || offset.abs() > max
+                {
+                    return Err(self.invalid(
+                        element,
+                        format!(
+                            "mimic multiplier {multiplier:e} or offset {offset:e} is not finite or \
+                             beyond +-{max}"
+                        ),
+                    ));
                 }
                 if kind.is_movable() {
                     Some((m.joint.clone(), multiplier, offset))
@@ -464,14 +569,32 @@ impl Builder<'_> {
                 "inertia has a non-finite or negative diagonal value",
             ));
         }
+        if i.mass.value > 0.0 && i.mass.value < MIN_MASS_KG {
+            return Err(self.invalid(
+                element,
+                format!(
+                    "inertial mass {:e} kg: 0 (massless) or at least {MIN_MASS_KG:e} kg",
+                    i.mass.value
+                ),
+            ));
+        }
         // Exporters write numerical noise such as -5e-20 for zero moments: clamp it to zero.
         let mut tensor = tensor;
+        // Moments far below any physical body's (icub writes 2.7e-20) are noise too, and
+        // rapier divides by them: take them as 0 (rotation about that axis locked).
         for k in [0, 3, 5] {
             if tensor[k] < 0.0 {
                 tensor[k] = 0.0;
                 self.warnings.push(format!(
                     "{element}: inertia diagonal {k} below zero by rounding, taken as 0"
                 ));
+            } else if tensor[k] > 0.0 && tensor[k] < MIN_INERTIA_KGM2 {
+                self.warnings.push(format!(
+                    "{element}: inertia diagonal {k} = {:e} below {MIN_INERTIA_KGM2:e} kg m^2, \
+                     taken as 0",
+                    tensor[k]
+                ));
+                tensor[k] = 0.0;
             }
         }
         let inertial = (i.mass.value > 0.0).then(|| -> Result<Inertial> {

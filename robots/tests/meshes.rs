@@ -117,3 +117,35 @@ fn truncated_and_corrupted_meshes_are_errors_not_panics() {
         }
     }
 }
+
+#[test]
+fn lying_counts_and_odd_names_are_told_apart() {
+    let meshes = fixtures().join("meshes");
+    let dae = std::fs::read_to_string(meshes.join("cube.dae")).expect("fixture");
+    // A count the file cannot hold is refused before the decoder allocates for it (4e9
+    // triangles made it ask for 51 GB).
+    for (honest, lie) in [
+        (
+            "<triangles count=\"12\">",
+            "<triangles count=\"4294967295\">",
+        ),
+        ("count=\"24\">", "count=\"4000000000\">"),
+        (
+            "count=\"8\" stride=\"3\"",
+            "count=\"8\" stride=\"4294967295\"",
+        ),
+    ] {
+        assert!(dae.contains(honest), "{honest}");
+        let text = dae.replace(honest, lie);
+        let err = TriMesh::from_bytes(text.as_bytes(), Path::new("cube.dae"), [1.0; 3])
+            .expect_err("lying count");
+        assert!(err.contains("claims more values than the"), "{lie}: {err}");
+    }
+    // An ASCII STL whose name is not ASCII is decoded as ASCII, not called a truncated
+    // binary file.
+    let stl = std::fs::read_to_string(meshes.join("cube_ascii.stl")).expect("fixture");
+    let named = stl.replacen("solid cube", "solid würfel", 1);
+    let mesh = TriMesh::from_bytes(named.as_bytes(), Path::new("würfel.stl"), [1.0; 3])
+        .expect("ASCII STL with a UTF-8 name");
+    assert_eq!(mesh.triangles.len(), 12);
+}

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use workcell_robots::{PackageMap, RobotError, RobotModel};
+use workcell_robots::{JointKind, PackageMap, RobotError, RobotModel};
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -173,4 +173,159 @@ fn truncated_and_corrupted_urdfs_are_errors_not_panics() {
             let _ = RobotModel::from_urdf_str(&broken, &path, &packages);
         }
     }
+}
+
+/// A link `name` of 1 kg with principal moments `moment` (kg m^2).
+fn link(name: &str, moment: &str) -> String {
+    format!(
+        "<link name=\"{name}\"><inertial><mass value=\"1\"/><inertia ixx=\"{moment}\" \
+         iyy=\"{moment}\" izz=\"{moment}\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial></link>"
+    )
+}
+
+/// A revolute joint from `parent` to `child` with `extra` elements inside it.
+fn joint(name: &str, parent: &str, child: &str, extra: &str) -> String {
+    format!(
+        "<joint name=\"{name}\" type=\"revolute\"><parent link=\"{parent}\"/>\
+         <child link=\"{child}\"/>{extra}</joint>"
+    )
+}
+
+const AXIS_LIMIT: &str =
+    "<axis xyz=\"0 0 1\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/>";
+
+/// A chain of `n` revolute joints, each with `extra`.
+fn chain(n: usize, extra: &str) -> String {
+    let mut text = String::from("<robot name=\"chain\">");
+    for i in 0..=n {
+        text += &link(&format!("l{i}"), "0.01");
+    }
+    for i in 1..=n {
+        text += &joint(
+            &format!("j{i}"),
+            &format!("l{}", i - 1),
+            &format!("l{i}"),
+            extra,
+        );
+    }
+    text + "</robot>"
+}
+
+fn load_str(text: &str) -> Result<RobotModel, RobotError> {
+    RobotModel::from_urdf_str(text, &fixture("hostile.urdf"), &PackageMap::new())
+}
+
+fn refused(text: &str, needle: &str) {
+    let err = load_str(text).expect_err("hostile URDF loaded").to_string();
+    assert!(err.contains(needle), "'{err}' lacks '{needle}'");
+    assert!(err.contains("hostile.urdf"), "{err}");
+}
+
+#[test]
+fn hostile_numbers_are_refused_before_the_physics_sees_them() {
+    // rapier panicked on these (issue: hostile input). A moment of 1e-300 is noise: taken
+    // as 0 with a warning, as icub's 2.7e-20.
+    let robot = load_str(&format!(
+        "<robot name=\"r\">{}{}{}</robot>",
+        link("a", "1e-300"),
+        link("b", "1e-300"),
+        joint("j", "a", "b", AXIS_LIMIT)
+    ))
+    .expect("noise moments load");
+    assert_eq!(
+        robot.links()[1]
+            .inertial
+            .as_ref()
+            .expect("mass")
+            .inertia_kgm2,
+        [0.0; 6]
+    );
+    assert!(
+        robot
+            .warnings()
+            .iter()
+            .any(|w| w.contains("1e-300 below 1e-15")),
+        "{:?}",
+        robot.warnings()
+    );
+    refused(
+        &chain(1, AXIS_LIMIT).replace("<mass value=\"1\"/>", "<mass value=\"1e-300\"/>"),
+        "mass 1e-300 kg",
+    );
+    let mut mimics = chain(4, AXIS_LIMIT);
+    for i in 2..=4 {
+        mimics = mimics.replace(
+            &format!("<child link=\"l{i}\"/>"),
+            &format!(
+                "<child link=\"l{i}\"/><mimic joint=\"j{}\" multiplier=\"1e200\"/>",
+                i - 1
+            ),
+        );
+    }
+    refused(&mimics, "mimic multiplier 1e200");
+    // 1e2 per hop is within the limit; j3 follows j1 through j2 at 1e2 * 1e2.
+    refused(
+        &mimics.replace("1e200", "1e2"),
+        "joint 'j3': its chain of mimics multiplies to 1e4",
+    );
+    // Limits of +-1e308 (robot add panicked on them) mean none: the joint is continuous.
+    let wide = chain(1, AXIS_LIMIT).replace(
+        "lower=\"-1\" upper=\"1\"",
+        "lower=\"-1e308\" upper=\"1e308\"",
+    );
+    let robot = load_str(&wide).expect("loads as continuous");
+    assert_eq!(robot.joints()[0].kind, JointKind::Continuous);
+    refused(
+        &wide.replace("revolute", "prismatic"),
+        "prismatic limit lower=-1e308",
+    );
+}
+
+#[test]
+fn a_huge_axis_is_still_a_unit_direction() {
+    // The length of (1e200, 1e200, 0) overflows to infinity; the direction is exact.
+    let robot = load_str(&chain(1, AXIS_LIMIT).replace("0 0 1", "1e200 1e200 0")).expect("loads");
+    let axis = robot.joints()[0].axis;
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    assert!(
+        (axis.x - h).abs() < 1e-15 && (axis.y - h).abs() < 1e-15 && axis.z == 0.0,
+        "{axis}"
+    );
+    refused(
+        &chain(1, AXIS_LIMIT).replace("0 0 1", "1e-300 0 0"),
+        "is not a direction",
+    );
+}
+
+#[test]
+fn hostile_structure_is_refused() {
+    let deep = format!(
+        "<robot name=\"r\">{}{}{}</robot>",
+        link("a", "0.01"),
+        "<a>".repeat(20_000),
+        "</a>".repeat(20_000)
+    );
+    refused(&deep, "deeper than 256 levels");
+    refused(
+        "<robot name=\"r\"><link name=\"a\"/></robot><robot name=\"s\"/>",
+        "not a valid URDF",
+    );
+    refused(
+        "<robot name=\"r\"><link name=\"a\"/>\0</robot>",
+        "not a valid URDF",
+    );
+    refused(
+        "<sdf version=\"1.6\"><model name=\"m\"/></sdf>",
+        "the root element is <sdf>, not <robot> (this is an SDFormat file",
+    );
+    refused(
+        &chain(129, AXIS_LIMIT),
+        "129 actuated joints, more than the limit of 128",
+    );
+    let fixed = chain(1100, "").replace("type=\"revolute\"", "type=\"fixed\"");
+    refused(&fixed, "1101 links, more than the limit of 1024");
+    assert_eq!(
+        load_str(&chain(128, AXIS_LIMIT)).expect("128 dofs").dof(),
+        128
+    );
 }
