@@ -316,7 +316,26 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         text(&first.stdout)
     );
     assert!(!out.join("procnet.safetensors").exists());
-    // ... the same command resumes from the checkpoint and finishes.
+    // The checkpoint is step 4's pair alone, named by step.json (step 2's files are gone) ...
+    let mut files: Vec<String> = std::fs::read_dir(out.join("checkpoint"))
+        .expect("checkpoint folder")
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    files.sort();
+    assert_eq!(
+        files,
+        ["model-4.safetensors", "optimizer-4.burn", "step.json"]
+    );
+    // ... a step.json beyond the run's steps is refused rather than underflowing ...
+    let step_json = out.join("checkpoint/step.json");
+    std::fs::write(&step_json, "99").expect("tamper");
+    refused(
+        &["train", "--config", cfg_s, "--out", out_s],
+        "says 99 steps are done, more than the run's 6",
+    );
+    std::fs::write(&step_json, "4").expect("restore");
+    // ... and the same command resumes from the checkpoint and finishes.
     let resumed = workcell(&["train", "--config", cfg_s, "--out", out_s]);
     assert!(resumed.status.success(), "{}", text(&resumed.stderr));
     assert!(
@@ -685,7 +704,7 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     };
     let cell_line = format!("cell = {:?}\n", cell.display().to_string());
     bad(
-        &format!("{cell_line}[safety]\nd_min_m = 50.0\n"),
+        &format!("{cell_line}[safety]\nd_min_m = 50.0\ndetection_m = 51.0\n"),
         "larger than the whole cell",
     );
     bad(
@@ -695,6 +714,15 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     bad(
         &format!("{cell_line}control_period_s = 0.0025\n"),
         "not a multiple",
+    );
+    bad(
+        &format!("{cell_line}control_period_s = 1e6\n"),
+        "control_period_s: 1000000 is above the limit of 0.1",
+    );
+    // Each key in range, together contradictory: pairs would enter the filter inside d_min.
+    bad(
+        &format!("{cell_line}[safety]\ndetection_m = 0.01\nd_min_m = 0.1\n"),
+        "safety.detection_m",
     );
     bad(
         &format!("{cell_line}[perception]\ndropout = 1.5\n"),

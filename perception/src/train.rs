@@ -98,6 +98,13 @@ impl Default for AugmentConfig {
     }
 }
 
+/// The most steps a run may ask for.
+pub const MAX_STEPS: usize = 10_000_000;
+/// The longest training window, frames.
+pub const MAX_WINDOW: usize = 64;
+/// The largest loss weight (a weight of 1e300 is infinite in f32).
+pub const MAX_LOSS_WEIGHT: f32 = 1e3;
+
 /// A training run (`workcell train --config FILE`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -169,8 +176,17 @@ impl TrainConfig {
             path: path.to_path_buf(),
             message: format!("cannot read: {e}"),
         })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// Like [`TrainConfig::from_file`] on text already read; `path` names it in errors and
+    /// anchors its relative paths.
+    ///
+    /// # Errors
+    /// [`PerceptionError::ConfigFile`] naming the key that is wrong.
+    pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
         let mut config: TrainConfig =
-            toml::from_str(&text).map_err(|e| PerceptionError::ConfigFile {
+            toml::from_str(text).map_err(|e| PerceptionError::ConfigFile {
                 path: path.to_path_buf(),
                 message: e.to_string(),
             })?;
@@ -202,11 +218,17 @@ impl TrainConfig {
             })
         };
         self.model.validate()?;
-        if self.steps == 0 {
-            return bad("steps", "at least 1".into());
+        if !(1..=MAX_STEPS).contains(&self.steps) {
+            return bad("steps", format!("1..={MAX_STEPS}, got {}", self.steps));
         }
         if self.batch == 0 || self.batch > 256 {
             return bad("batch", format!("1..=256, got {}", self.batch));
+        }
+        if self.window > MAX_WINDOW {
+            return bad(
+                "window",
+                format!("at most {MAX_WINDOW} frames, got {}", self.window),
+            );
         }
         if self.window < 2 {
             return bad(
@@ -241,13 +263,44 @@ impl TrainConfig {
                 format!("in [0.25, 1], got {}", self.augment.min_crop),
             );
         }
+        let jitter = self.augment.jitter;
+        if !(0.0..=1.0).contains(&jitter) {
+            return bad("augment.jitter", format!("in [0, 1], got {jitter}"));
+        }
+        let shift = self.augment.max_shift_px;
+        let most = i32::try_from(self.model.input_size / 2).unwrap_or(i32::MAX);
+        if !(0..=most).contains(&shift) {
+            return bad(
+                "augment.max_shift_px",
+                format!("0..={most} (half the input), got {shift}"),
+            );
+        }
         let l = &self.loss;
-        if [l.dice, l.batch_dice, l.focal, l.prediction, l.focal_gamma]
-            .iter()
-            .any(|w| !w.is_finite() || *w < 0.0)
+        let in_range = |w: f32| w.is_finite() && (0.0..=MAX_LOSS_WEIGHT).contains(&w);
+        if ![l.dice, l.batch_dice, l.focal, l.prediction, l.focal_gamma]
+            .into_iter()
+            .all(in_range)
             || !(0.0..=1.0).contains(&l.focal_alpha)
         {
-            return bad("loss", "weights and gamma >= 0, alpha in [0, 1]".into());
+            return bad(
+                "loss",
+                format!("weights and gamma in [0, {MAX_LOSS_WEIGHT}], alpha in [0, 1]"),
+            );
+        }
+        if l.dice + l.batch_dice + l.focal == 0.0 {
+            return bad(
+                "loss",
+                "dice, batch_dice and focal are all 0: nothing would train the segmentation".into(),
+            );
+        }
+        if let Some((class, w)) = l.class_weights.iter().find(|(_, w)| !in_range(**w)) {
+            return bad(
+                "loss.class_weights",
+                format!("{class} = {w}: each in [0, {MAX_LOSS_WEIGHT}]"),
+            );
+        }
+        if !l.class_weights.is_empty() && l.class_weights.values().all(|w| *w == 0.0) {
+            return bad("loss.class_weights", "all 0: no class would count".into());
         }
         Ok(())
     }
@@ -449,14 +502,23 @@ impl RunFiles {
             "procnet.safetensors"
         })
     }
+    /// The checkpoint's weights after `step` steps.
     #[must_use]
-    pub fn checkpoint_weights(&self) -> PathBuf {
-        self.dir.join("checkpoint").join("model.safetensors")
+    pub fn checkpoint_weights(&self, step: usize) -> PathBuf {
+        self.dir
+            .join("checkpoint")
+            .join(format!("model-{step}.safetensors"))
     }
+    /// The checkpoint's optimizer state after `step` steps.
     #[must_use]
-    pub fn checkpoint_optimizer(&self) -> PathBuf {
-        self.dir.join("checkpoint").join("optimizer.burn")
+    pub fn checkpoint_optimizer(&self, step: usize) -> PathBuf {
+        self.dir
+            .join("checkpoint")
+            .join(format!("optimizer-{step}.burn"))
     }
+    /// The number of steps of the last complete checkpoint: written (atomically, by a rename)
+    /// only after that step's weights and optimizer state, so a run killed at any moment
+    /// resumes from a checkpoint whose files belong together.
     #[must_use]
     pub fn checkpoint_step(&self) -> PathBuf {
         self.dir.join("checkpoint").join("step.json")
@@ -557,15 +619,27 @@ impl Trainer {
         let mut metrics: Vec<StepMetrics> = Vec::new();
         let mut start = 0usize;
         if let Ok(text) = std::fs::read_to_string(files.checkpoint_step()) {
+            let step_path = files.checkpoint_step();
             start = serde_json::from_str::<usize>(text.trim()).map_err(|e| {
                 PerceptionError::Training {
-                    message: format!("{}: {e}", files.checkpoint_step().display()),
+                    message: format!("{}: {e}", step_path.display()),
                 }
             })?;
-            weights::load_checked(&mut model, &cfg.model, &files.checkpoint_weights())?;
-            let record = OptimizerRecord::load(files.checkpoint_optimizer()).map_err(|e| {
+            if start > cfg.steps {
+                return Err(PerceptionError::Training {
+                    message: format!(
+                        "{} says {start} steps are done, more than the run's {}: the folder \
+                         belongs to another run (choose another --out, or delete the \
+                         checkpoint folder to start again)",
+                        step_path.display(),
+                        cfg.steps
+                    ),
+                });
+            }
+            weights::load_checked(&mut model, &cfg.model, &files.checkpoint_weights(start))?;
+            let record = OptimizerRecord::load(files.checkpoint_optimizer(start)).map_err(|e| {
                 PerceptionError::Weights {
-                    path: files.checkpoint_optimizer(),
+                    path: files.checkpoint_optimizer(start),
                     message: format!("cannot load the optimizer state: {e:?}"),
                 }
             })?;
@@ -726,26 +800,35 @@ impl Trainer {
         }
     }
 
+    /// Writes the checkpoint after `step` steps: the weights and optimizer state under names
+    /// of their own, then `step.json` by a rename, then the previous checkpoint's files go.
     fn checkpoint(&self, model: &ProcNetModel, optim: &ModuleOptimizer, step: usize) -> Result<()> {
         let files = &self.files;
         weights::save(
             &model.valid(),
             &self.config.model,
-            &files.checkpoint_weights(),
+            &files.checkpoint_weights(step),
         )?;
-        let opt_path = files.checkpoint_optimizer();
-        let tmp = opt_path.with_extension("tmp");
+        let opt_path = files.checkpoint_optimizer(step);
         optim
             .to_record()
-            .save(&tmp)
+            .save(&opt_path)
             .map_err(|e| PerceptionError::Weights {
                 path: opt_path.clone(),
                 message: format!("cannot save the optimizer state: {e:?}"),
             })?;
-        std::fs::rename(&tmp, &opt_path).map_err(io_err(&opt_path))?;
-        // The step file is written last: it marks the checkpoint complete.
         let step_path = files.checkpoint_step();
-        std::fs::write(&step_path, step.to_string()).map_err(io_err(&step_path))
+        let previous = std::fs::read_to_string(&step_path)
+            .ok()
+            .and_then(|t| t.trim().parse::<usize>().ok());
+        let tmp = step_path.with_extension("json.tmp");
+        std::fs::write(&tmp, step.to_string()).map_err(io_err(&tmp))?;
+        std::fs::rename(&tmp, &step_path).map_err(io_err(&step_path))?;
+        if let Some(old) = previous.filter(|&old| old != step) {
+            let _ = std::fs::remove_file(files.checkpoint_weights(old));
+            let _ = std::fs::remove_file(files.checkpoint_optimizer(old));
+        }
+        Ok(())
     }
 
     fn rewrite_metrics(&self, metrics: &[StepMetrics]) -> Result<()> {
@@ -842,6 +925,34 @@ mod tests {
             rgb: Vec::new(),
             target: Vec::new(),
         }
+    }
+
+    #[test]
+    fn hostile_recipes_are_refused_naming_the_key() {
+        // Each of these panicked or trained nothing (issue: hostile input).
+        for (toml, key) in [
+            ("[augment]\njitter = nan", "augment.jitter"),
+            ("[augment]\njitter = 1e300", "augment.jitter"),
+            ("[augment]\nmax_shift_px = 100000", "augment.max_shift_px"),
+            ("[loss]\ndice = 0.0\nbatch_dice = 0.0\nfocal = 0.0", "all 0"),
+            ("[loss]\nfocal = 1e300", "loss"),
+            ("[loss.class_weights]\nforearm = nan", "loss.class_weights"),
+            (
+                "[loss.class_weights]\nforearm = 0.0\nbackground = 0.0",
+                "all 0",
+            ),
+            ("steps = 100000000000", "steps"),
+            ("window = 1000000", "window"),
+        ] {
+            let config: TrainConfig = match toml::from_str(toml) {
+                Ok(c) => c,
+                // A number TOML cannot hold in the field's type is the parser's error.
+                Err(e) => panic!("{toml}: {e}"),
+            };
+            let err = config.validate().expect_err(toml).to_string();
+            assert!(err.contains(key), "{toml}: {err}");
+        }
+        assert!(TrainConfig::default().validate().is_ok());
     }
 
     #[test]

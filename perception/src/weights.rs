@@ -23,8 +23,39 @@ fn weights_error(path: &Path, message: impl Into<String>) -> PerceptionError {
 /// Reads and checks a safetensors header: its metadata, and that the file holds every byte
 /// the header points to.
 pub fn read_metadata(path: &Path) -> Result<serde_json::Map<String, serde_json::Value>> {
+    read_header(path).map(|(meta, _)| meta)
+}
+
+/// The largest weight file read, bytes.
+pub const MAX_WEIGHTS_BYTES: u64 = 4 << 30;
+
+/// The metadata of a safetensors file and the size of its data section, checked as
+/// [`read_metadata`] says.
+fn read_header(path: &Path) -> Result<(serde_json::Map<String, serde_json::Value>, usize)> {
+    let meta =
+        std::fs::metadata(path).map_err(|e| weights_error(path, format!("cannot read: {e}")))?;
+    if !meta.is_file() {
+        return Err(weights_error(path, "cannot read: not a regular file"));
+    }
+    if meta.len() > MAX_WEIGHTS_BYTES {
+        return Err(weights_error(
+            path,
+            format!(
+                "cannot read: {} bytes, more than the limit of {MAX_WEIGHTS_BYTES}",
+                meta.len()
+            ),
+        ));
+    }
     let bytes =
         std::fs::read(path).map_err(|e| weights_error(path, format!("cannot read: {e}")))?;
+    parse_header(&bytes, path)
+}
+
+/// [`read_header`] on bytes already read; `path` names them in errors.
+fn parse_header(
+    bytes: &[u8],
+    path: &Path,
+) -> Result<(serde_json::Map<String, serde_json::Value>, usize)> {
     let header_len = bytes
         .get(..8)
         .map(|b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
@@ -61,15 +92,34 @@ pub fn read_metadata(path: &Path) -> Result<serde_json::Map<String, serde_json::
             ));
         }
     }
-    match header.get("__metadata__") {
-        Some(serde_json::Value::Object(m)) => Ok(m.clone()),
-        _ => Ok(serde_json::Map::new()),
-    }
+    let meta = match header.get("__metadata__") {
+        Some(serde_json::Value::Object(m)) => m.clone(),
+        _ => serde_json::Map::new(),
+    };
+    Ok((meta, data_len))
 }
 
 /// The configuration stored in a weight file.
 pub fn read_config(path: &Path) -> Result<ProcNetConfig> {
-    let meta = read_metadata(path)?;
+    let (meta, data_len) = read_header(path)?;
+    config_of(&meta, data_len, path)
+}
+
+/// The configuration stored in the bytes of a weight file (checked as [`read_config`]
+/// checks it); `path` names them in errors.
+///
+/// # Errors
+/// As [`read_config`], without the I/O.
+pub fn config_from_bytes(bytes: &[u8], path: &Path) -> Result<ProcNetConfig> {
+    let (meta, data_len) = parse_header(bytes, path)?;
+    config_of(&meta, data_len, path)
+}
+
+fn config_of(
+    meta: &serde_json::Map<String, serde_json::Value>,
+    data_len: usize,
+    path: &Path,
+) -> Result<ProcNetConfig> {
     let format = meta.get("format").and_then(|v| v.as_str()).unwrap_or("");
     if format != FORMAT {
         return Err(weights_error(
@@ -86,6 +136,19 @@ pub fn read_config(path: &Path) -> Result<ProcNetConfig> {
     config
         .validate()
         .map_err(|e| weights_error(path, format!("configuration: {e}")))?;
+    // The model is built from the claimed configuration before its tensors are read: a claim
+    // the file cannot back (4096 channels in 1.3 MB) would allocate gigabytes first.
+    let claimed = config.parameter_count().saturating_mul(4);
+    if claimed > data_len {
+        return Err(weights_error(
+            path,
+            format!(
+                "its configuration claims {} parameters ({claimed} bytes of f32), but the file \
+                 holds {data_len} bytes of tensors",
+                config.parameter_count()
+            ),
+        ));
+    }
     Ok(config)
 }
 

@@ -299,3 +299,43 @@ fn a_window_weighs_its_first_frame_only_for_a_feed_forward_network() {
         sum / 2.0
     );
 }
+
+/// A weight file whose metadata claims a model larger than its tensors is refused before
+/// the model is built (4096 channels in a file of a few kB grew past 4 GB).
+#[test]
+fn a_weight_file_cannot_claim_more_than_it_holds() {
+    use workcell_perception::weights;
+    let config = tiny(CellKind::Hgru);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("tiny.safetensors");
+    let model = config.init(&Device::flex(), 0).expect("model");
+    weights::save(&model, &config, &path).expect("save");
+    assert_eq!(weights::read_config(&path).expect("honest"), config);
+
+    // The same tensors under a header whose configuration claims 4096 channels per layer.
+    let bytes = std::fs::read(&path).expect("read");
+    let header_len = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;
+    let mut header: serde_json::Value =
+        serde_json::from_slice(&bytes[8..8 + header_len]).expect("header");
+    let mut claim = config.clone();
+    claim.repr_channels = vec![4096; config.layers()];
+    claim.input_channels = std::iter::once(3)
+        .chain(vec![4096; config.layers() - 1])
+        .collect();
+    claim.cell_kernel = 15;
+    header["__metadata__"]["config"] = serde_json::Value::String(claim.to_json());
+    let new_header = serde_json::to_vec(&header).expect("json");
+    let mut lying = (new_header.len() as u64).to_le_bytes().to_vec();
+    lying.extend_from_slice(&new_header);
+    lying.extend_from_slice(&bytes[8 + header_len..]);
+    let lie = dir.path().join("lie.safetensors");
+    std::fs::write(&lie, lying).expect("write");
+    let err = weights::load(&lie, &Device::flex())
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        err.contains("its configuration claims") && err.contains("the file holds"),
+        "{err}"
+    );
+}

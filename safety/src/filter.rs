@@ -33,6 +33,10 @@ impl std::fmt::Display for FilterMode {
     }
 }
 
+/// The approach speed a pair's barrier row must still allow when the pair enters the filter,
+/// m/s: ISO 13855's 2.0 m/s for hands and arms near a hazard.
+pub const DETECTION_APPROACH_M_S: f64 = 2.0;
+
 /// Settings of the filter (the `[safety]` table of an evaluation file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -108,6 +112,24 @@ impl FilterConfig {
             return Err(invalid(
                 "safety.max_relaxation_m_s",
                 format!("must be finite and >= 0, got {}", self.max_relaxation_m_s),
+            ));
+        }
+        // Between keys: a pair must enter the QP while its barrier row still lets the human
+        // approach at ISO 13855's 2.0 m/s (gamma (d - d_min) >= 2.0 at d = detection_m);
+        // otherwise the row is tight the moment it appears and the arm cannot react in time.
+        let room = self.detection_m - self.d_min_m;
+        if room * self.gamma_per_s < DETECTION_APPROACH_M_S - 1e-9 {
+            return Err(invalid(
+                "safety.detection_m",
+                format!(
+                    "{} m leaves {room:.3} m beyond d_min_m = {} m: at gamma_per_s = {} a pair \
+                     must enter the filter at least {DETECTION_APPROACH_M_S} / gamma = {:.3} m \
+                     beyond d_min (ISO 13855's approach speed of 2.0 m/s)",
+                    self.detection_m,
+                    self.d_min_m,
+                    self.gamma_per_s,
+                    DETECTION_APPROACH_M_S / self.gamma_per_s
+                ),
             ));
         }
         if self.max_pairs == 0 || self.max_pairs > 256 {

@@ -399,6 +399,24 @@ fn invalid_configurations_are_refused_with_the_key() {
             },
             "safety.max_pairs",
         ),
+        // Each key alone is in range, together they contradict: pairs would enter the filter
+        // only inside d_min (this passed and gave violations).
+        (
+            FilterConfig {
+                detection_m: 0.01,
+                d_min_m: 0.1,
+                ..FilterConfig::default()
+            },
+            "safety.detection_m",
+        ),
+        // 0.3 m beyond d_min at gamma 4/s allows 1.2 m/s, below ISO 13855's 2.0 m/s.
+        (
+            FilterConfig {
+                detection_m: 0.4,
+                ..FilterConfig::default()
+            },
+            "2 / gamma = 0.500 m",
+        ),
         (
             FilterConfig {
                 ssm: SsmConfig {

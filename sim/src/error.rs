@@ -15,6 +15,13 @@ pub enum SimError {
         #[source]
         source: std::io::Error,
     },
+    /// A file of the output could not be written (a dataset's frames, its manifest).
+    #[error("{path}: cannot write")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     /// The scenario is not valid TOML for a scenario (syntax, unknown key, wrong type).
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },

@@ -177,6 +177,11 @@ fn default_margin() -> f64 {
 fn default_clearance() -> f64 {
     0.03
 }
+/// The most waypoints of a robot motion.
+pub const MAX_WAYPOINTS: usize = 10_000;
+/// The most boards of a shelf.
+pub const MAX_BOARDS: usize = 64;
+
 fn default_waypoints() -> usize {
     32
 }
@@ -385,11 +390,20 @@ impl Scenario {
                 Err(bad(key, format!("{v:?} has a non-finite value")))
             }
         };
-        if !(self.time_step_s > 0.0 && self.time_step_s <= 0.05) {
+        if !(1e-5..=0.05).contains(&self.time_step_s) {
             return Err(bad(
                 "time_step_s",
-                format!("{} must be in (0, 0.05] s", self.time_step_s),
+                format!("{} must be in [1e-5, 0.05] s", self.time_step_s),
             ));
+        }
+        for (key, n, most) in [
+            ("clutter", self.clutter.len(), 1000),
+            ("cameras", self.cameras.len(), 64),
+            ("human.motions", self.human.motions.len(), 10_000),
+        ] {
+            if n > most {
+                return Err(bad(key, format!("{n} entries, more than {most}")));
+            }
         }
         finite("gravity_m_s2", &self.gravity_m_s2)?;
         finite("robot.base.xyz", &self.robot.base.xyz)?;
@@ -440,8 +454,11 @@ impl Scenario {
                         format!("{margin_rad} must be >= 0"),
                     ));
                 }
-                if *waypoints < 2 {
-                    return Err(bad("robot.motion.waypoints", "at least 2 waypoints".into()));
+                if !(2..=MAX_WAYPOINTS).contains(waypoints) {
+                    return Err(bad(
+                        "robot.motion.waypoints",
+                        format!("{waypoints} is not in 2..={MAX_WAYPOINTS}"),
+                    ));
                 }
             }
             RobotMotionConfig::PickAndPlace {
@@ -452,8 +469,14 @@ impl Scenario {
             } => {
                 check_speed(*speed_scale, *acceleration_rad_s2)
                     .map_err(|m| bad("robot.motion", m))?;
-                if waypoints.len() < 2 {
-                    return Err(bad("robot.motion.waypoints", "at least 2 waypoints".into()));
+                if !(2..=MAX_WAYPOINTS).contains(&waypoints.len()) {
+                    return Err(bad(
+                        "robot.motion.waypoints",
+                        format!(
+                            "{} waypoints is not in 2..={MAX_WAYPOINTS}",
+                            waypoints.len()
+                        ),
+                    ));
                 }
                 for w in waypoints {
                     finite("robot.motion.waypoints", w)?;
@@ -479,10 +502,10 @@ impl Scenario {
                     format!("{:?} must be > 0", c.size_m),
                 ));
             }
-            if c.kind == ClutterKind::Shelf && c.boards < 2 {
+            if c.kind == ClutterKind::Shelf && !(2..=MAX_BOARDS).contains(&c.boards) {
                 return Err(bad(
                     &format!("{key}.boards"),
-                    "a shelf has at least 2 boards".into(),
+                    format!("a shelf has 2..={MAX_BOARDS} boards, not {}", c.boards),
                 ));
             }
         }

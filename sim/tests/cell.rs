@@ -481,3 +481,25 @@ fn the_default_cell_renders_every_class_it_shows_at_any_supported_size() {
         assert!(frame.rgb.chunks(3).all(|c| c != [0, 0, 0]));
     }
 }
+
+/// Settings that asked for hours of work or gigabytes (and hung or aborted) are refused with
+/// their key and limit.
+#[test]
+fn unbounded_scenario_settings_are_refused() {
+    let text = std::fs::read_to_string(default_path()).expect("scenario");
+    for (from, to, key) in [
+        ("boards = 5", "boards = 100000000", "clutter[1].boards"),
+        (
+            "waypoints = 32",
+            "waypoints = 1000000000000",
+            "robot.motion.waypoints",
+        ),
+        ("time_step_s = 0.001", "time_step_s = 1e-300", "time_step_s"),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let err = Scenario::from_toml(&text.replacen(from, to, 1), &default_path())
+            .expect_err(to)
+            .to_string();
+        assert!(err.contains(key), "{to}: {err}");
+    }
+}

@@ -321,6 +321,14 @@ fn bad_dataset_configurations_name_the_key() {
             "occlusion_levels[0].range",
         ),
         ("colour = true", "colour"),
+        // Counts that wrapped around or asked for terabytes.
+        ("sequences_per_pair = 1000000000000", "sequences_per_pair"),
+        (
+            "sequences_per_pair = 18446744073709551615",
+            "sequences_per_pair",
+        ),
+        ("frames = 1000000000000", "frames"),
+        ("sequences_per_episode = 100000000", "sequences_per_episode"),
     ];
     for (text, key) in cases {
         let err = DatasetConfig::from_toml(text, Path::new("bad.toml")).unwrap_err();

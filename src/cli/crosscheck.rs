@@ -71,9 +71,9 @@ pub fn run(args: &CrosscheckArgs) -> Result<ExitCode> {
     };
     let report = crosscheck(&robot, &assets, &workdir, &config)?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        say!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print!("{}", format_report(&report));
+        say_inline!("{}", format_report(&report));
     }
     Ok(if report.passed() {
         ExitCode::SUCCESS

@@ -35,8 +35,8 @@ pub struct ShowArgs {
     /// The contact sheet to write (default: DIR/contact_sheet.png).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Frames per sequence on the sheet.
-    #[arg(long, default_value_t = 6)]
+    /// Frames per sequence on the sheet (1 to 64).
+    #[arg(long, default_value_t = 6, value_parser = super::count_in::<1, 64>)]
     pub columns: usize,
 }
 
@@ -62,7 +62,7 @@ pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
     bar.finish_and_clear();
     let frames: usize = m.sequences.iter().map(|s| s.frames).sum();
     let look = m.human.as_ref().map_or("unknown", |h| h.look.name());
-    println!(
+    say!(
         "{}: {} ({} sequences, {frames} frames of {}x{} px, {look} human)",
         args.dir.display(),
         m.format,
@@ -71,12 +71,12 @@ pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
         m.height_px
     );
     if m.format.ends_with("/1") {
-        println!(
+        say!(
             "  format 1: the stored frame is the camera's image; ceiling at a {0}x{0} input",
             args.input
         );
     }
-    println!(
+    say!(
         "  {:<14} {:<8} {:<9} {:>7} {:>8} {:>10} {:>21} {:>23}",
         "source",
         "distance",
@@ -87,12 +87,19 @@ pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
         "forearm width px",
         "perfect-network Dice"
     );
-    println!(
+    say!(
         "  {:<14} {:<8} {:<9} {:>7} {:>8} {:>10} {:>21} {:>23}",
-        "", "", "", "", "in view", "(median)", "median [p10, p90]", "loss mean (median)"
+        "",
+        "",
+        "",
+        "",
+        "in view",
+        "(median)",
+        "median [p10, p90]",
+        "loss mean (median)"
     );
     for r in &rows {
-        println!(
+        say!(
             "  {:<14} {:<8} {:<9} {:>7} {:>8} {:>10.0} {:>8.1} [{:>4.1}, {:>4.1}] {:>13.3} ({:.3})",
             r.source,
             r.distance_class,
@@ -107,10 +114,10 @@ pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
             r.perfect_dice_loss[1]
         );
     }
-    println!(
+    say!(
         "  width: sqrt(12 x the smaller eigenvalue of the mask's pixel covariance) (a bar's width);"
     );
-    println!(
+    say!(
         "  perfect network: the truth averaged to the stored grid, resampled back bilinearly, \
          thresholded at 1/2"
     );
@@ -119,7 +126,7 @@ pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
 
 pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     if args.print_defaults {
-        print!("{}", DatasetConfig::default().to_toml());
+        say_inline!("{}", DatasetConfig::default().to_toml());
         return Ok(ExitCode::SUCCESS);
     }
     let path = args
@@ -138,7 +145,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     let wall = start.elapsed().as_secs_f64();
     let m = &report.manifest;
     let frames: usize = m.sequences.iter().map(|s| s.frames).sum();
-    println!(
+    say!(
         "{} sequences ({} new), {frames} frames of {}x{} px in {wall:.1} s -> {}",
         m.sequences.len(),
         report.generated,
@@ -148,12 +155,12 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     );
     for split in Split::ALL {
         let k = m.sequences.iter().filter(|s| s.split == split).count();
-        println!("  {:<10} {k} sequences", split.name());
+        say!("  {:<10} {k} sequences", split.name());
     }
     let t = report.timing;
     let total = t.total().as_secs_f64().max(1e-9);
     if report.generated > 0 {
-        println!(
+        say!(
             "  time (all threads): simulate {:.0}%, render {:.0}%, occlusion and labels {:.0}%, PNG+JSON encoding {:.0}%, writing {:.0}%",
             100.0 * t.simulate.as_secs_f64() / total,
             100.0 * t.render.as_secs_f64() / total,
@@ -164,9 +171,9 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     }
     let missing: usize = m.sequences.iter().map(|s| s.frames_without_forearm).sum();
     if missing > 0 {
-        println!("  {missing} frames show no forearm (out of view after every camera draw)");
+        say!("  {missing} frames show no forearm (out of view after every camera draw)");
     }
-    println!("look at it: workcell dataset show {}", args.out.display());
+    say!("look at it: workcell dataset show {}", args.out.display());
     Ok(ExitCode::SUCCESS)
 }
 
@@ -179,7 +186,7 @@ pub fn show(args: &ShowArgs) -> Result<ExitCode> {
         .unwrap_or_else(|| args.dir.join("contact_sheet.png"));
     write_png(&out, w, h, PixelKind::Rgb, &rgb)?;
     let m = &dataset.manifest;
-    println!(
+    say!(
         "{}: {} sequences of {}x{} px",
         args.dir.display(),
         m.sequences.len(),
@@ -207,17 +214,21 @@ pub fn show(args: &ShowArgs) -> Result<ExitCode> {
         }
     }
     pairs.sort_by(|a, b| (&a.0, &a.1).cmp(&(&b.0, &b.1)));
-    println!(
+    say!(
         "  {:<14} {:<8} {:<8} {:>9} {:>22}",
-        "source", "distance", "level", "sequences", "mean forearm occlusion"
+        "source",
+        "distance",
+        "level",
+        "sequences",
+        "mean forearm occlusion"
     );
     for (src, d, l, k, o) in pairs {
-        println!(
+        say!(
             "  {src:<14} {d:<8} {l:<8} {k:>9} {:>21.0}%",
             100.0 * o / k as f64
         );
     }
-    println!("measure it: workcell dataset stats {}", args.dir.display());
-    println!("contact sheet: {}", out.display());
+    say!("measure it: workcell dataset stats {}", args.dir.display());
+    say!("contact sheet: {}", out.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -55,8 +55,8 @@ pub enum PerceptionArg {
 pub struct EvaluateArgs {
     /// Evaluation file (TOML), e.g. configs/evaluate.toml.
     pub evaluation: Option<PathBuf>,
-    /// Number of episodes (seeds SEED, SEED+1, ...).
-    #[arg(long, default_value_t = 10)]
+    /// Number of episodes, seeds SEED, SEED+1, ... (1 to 1,000,000).
+    #[arg(long, default_value_t = 10, value_parser = super::count_in::<1, 1_000_000>)]
     pub episodes: usize,
     /// Seed of the first episode.
     #[arg(long, default_value_t = 1)]
@@ -87,7 +87,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
             Some(path) => Evaluation::from_file(path)?.config,
             None => EvaluationConfig::default(),
         };
-        print!(
+        say_inline!(
             "{}",
             toml::to_string_pretty(&config).context("serialising the configuration")?
         );
@@ -118,7 +118,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         FilterArg::Qp => FilterMode::Qp,
         FilterArg::Ssm => FilterMode::Ssm,
     };
-    super::prepare_out(&args.out, args.force, &OUTPUTS)?;
+    let out = super::OutputDir::create(&args.out, args.force, &OUTPUTS)?;
 
     let bar = super::progress_bar(
         (args.episodes * 100) as u64,
@@ -194,7 +194,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         command: &command,
     };
     let write = |name: &str, text: &str| {
-        let p = args.out.join(name);
+        let p = out.path().join(name);
         fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
     };
     write("summary.md", &summary_markdown(&context, &episodes))?;
@@ -204,12 +204,13 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         &toml::to_string_pretty(&evaluation.config).context("serialising the configuration")?,
     )?;
     write_plots(
-        &args.out,
+        out.path(),
         &episodes,
         &traces,
         evaluation.config.safety.d_min_m,
     )?;
 
+    out.commit()?;
     let a = Aggregate::of(&episodes);
     // A closed pipe (`| head`) is not an error: the report is already written.
     let mut stdout = std::io::stdout().lock();

@@ -1,5 +1,23 @@
 //! Subcommands of the `workcell` binary.
 
+/// Prints a line to standard output like `println!`, but a closed pipe (`workcell ... | head`)
+/// is not a panic: the output is dropped and the command goes on to write its files.
+macro_rules! say {
+    () => {
+        $crate::cli::write_stdout(format_args!("\n"))
+    };
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `print!` as [`say!`] is `println!`.
+macro_rules! say_inline {
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!($($arg)*))
+    };
+}
+
 pub mod crosscheck;
 pub mod dataset;
 pub mod evaluate;
@@ -30,6 +48,96 @@ pub fn prepare_out(out: &std::path::Path, force: bool, outputs: &[&str]) -> anyh
     Ok(())
 }
 
+/// Prefix of the folder inside `--out` where a run writes its files before they replace the
+/// previous run's.
+const STAGE_PREFIX: &str = ".workcell-partial-";
+
+/// The output folder of a run: files are written into a staging folder inside it and moved
+/// into place together by [`OutputDir::commit`], after the old run's outputs are removed. A
+/// run that is interrupted (Ctrl-C, an error, SIGKILL) leaves the previous run's files as
+/// they were, never a mix of two runs; the next run removes a stale staging folder.
+pub struct OutputDir {
+    out: std::path::PathBuf,
+    stage: std::path::PathBuf,
+    outputs: &'static [&'static str],
+    committed: bool,
+}
+
+impl OutputDir {
+    /// Prepares `out` as [`prepare_out`] does and creates the staging folder.
+    ///
+    /// # Errors
+    /// As [`prepare_out`], or the I/O error of creating the staging folder.
+    pub fn create(
+        out: &std::path::Path,
+        force: bool,
+        outputs: &'static [&'static str],
+    ) -> anyhow::Result<Self> {
+        use anyhow::Context as _;
+        prepare_out(out, force, outputs)?;
+        let entries =
+            std::fs::read_dir(out).with_context(|| format!("listing {}", out.display()))?;
+        for entry in entries.flatten() {
+            if entry
+                .file_name()
+                .to_string_lossy()
+                .starts_with(STAGE_PREFIX)
+            {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+        let stage = out.join(format!("{STAGE_PREFIX}{}", std::process::id()));
+        std::fs::create_dir(&stage).with_context(|| format!("creating {}", stage.display()))?;
+        Ok(Self {
+            out: out.to_path_buf(),
+            stage,
+            outputs,
+            committed: false,
+        })
+    }
+
+    /// Where to write the run's files.
+    #[must_use]
+    pub fn path(&self) -> &std::path::Path {
+        &self.stage
+    }
+
+    /// Removes the previous run's outputs and moves the new ones into place.
+    ///
+    /// # Errors
+    /// The I/O error of a removal or a move, naming the file.
+    pub fn commit(mut self) -> anyhow::Result<()> {
+        use anyhow::Context as _;
+        for name in self.outputs {
+            let old = self.out.join(name);
+            match std::fs::remove_file(&old) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e).with_context(|| format!("removing {}", old.display())),
+            }
+        }
+        for name in self.outputs {
+            let new = self.stage.join(name);
+            if new.exists() {
+                let to = self.out.join(name);
+                std::fs::rename(&new, &to)
+                    .with_context(|| format!("moving {} to {}", new.display(), to.display()))?;
+            }
+        }
+        self.committed = true;
+        std::fs::remove_dir_all(&self.stage)
+            .with_context(|| format!("removing {}", self.stage.display()))
+    }
+}
+
+impl Drop for OutputDir {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_dir_all(&self.stage);
+        }
+    }
+}
+
 /// A progress bar of `len` steps drawn with indicatif's `template` (its default style when
 /// the template does not parse).
 pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
@@ -39,6 +147,27 @@ pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
             .progress_chars("=> "),
     )
 }
+
+/// Parses a whole number from `LO` to `HI`: the limit of a command-line count (threads,
+/// episodes, frames). A count beyond its limit asks for hours of work or gigabytes of memory
+/// that no run needs, or wraps around.
+///
+/// # Errors
+/// A message with the limits, for clap to print.
+pub fn count_in<const LO: usize, const HI: usize>(text: &str) -> Result<usize, String> {
+    let n: usize = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{text}' is not a whole number from {LO} to {HI}"))?;
+    if (LO..=HI).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!("{n} is not from {LO} to {HI}"))
+    }
+}
+
+/// The limit of `--threads`.
+pub const MAX_THREADS: usize = 256;
 
 /// A dataset split by name.
 ///
@@ -50,4 +179,77 @@ pub fn parse_split(name: &str) -> anyhow::Result<workcell::sim::dataset::Split> 
         .into_iter()
         .find(|s| s.name() == name)
         .ok_or_else(|| anyhow::anyhow!("unknown split {name:?} (train, validation, test)"))
+}
+
+/// Writes to standard output; once a write fails (a closed pipe, a full disk behind a
+/// redirect), nothing more is written, and the command still finishes its work. The failure
+/// is logged once.
+pub fn write_stdout(text: std::fmt::Arguments<'_>) {
+    use std::io::Write as _;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    static CLOSED: AtomicBool = AtomicBool::new(false);
+    if CLOSED.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout.write_fmt(text).and_then(|()| stdout.flush()) {
+        CLOSED.store(true, Ordering::Relaxed);
+        tracing::info!("standard output closed ({e}); the rest of it is dropped");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const OUTPUTS: [&str; 2] = ["summary.md", "plot.svg"];
+
+    #[test]
+    fn a_run_replaces_the_previous_one_whole_or_not_at_all() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("run");
+        std::fs::create_dir_all(&out).expect("mkdir");
+        for name in OUTPUTS {
+            std::fs::write(out.join(name), "old").expect("write");
+        }
+        std::fs::write(out.join("notes.txt"), "the user's").expect("write");
+        // Without --force the old run is kept.
+        assert!(OutputDir::create(&out, false, &OUTPUTS).is_err());
+
+        // Interrupted after one file (an error, or a panic unwinding): the old run stays
+        // whole and the staging folder goes.
+        {
+            let run = OutputDir::create(&out, true, &OUTPUTS).expect("stage");
+            std::fs::write(run.path().join("summary.md"), "new").expect("write");
+        }
+        for name in OUTPUTS {
+            assert_eq!(std::fs::read_to_string(out.join(name)).expect("old"), "old");
+        }
+        // A staging folder left by a killed run is removed by the next run.
+        std::fs::create_dir(out.join(format!("{STAGE_PREFIX}999999"))).expect("stale");
+
+        // A run that writes one of its two outputs and commits: no old file is left beside it.
+        let run = OutputDir::create(&out, true, &OUTPUTS).expect("stage");
+        std::fs::write(run.path().join("summary.md"), "new").expect("write");
+        run.commit().expect("commit");
+        let mut names: Vec<String> = std::fs::read_dir(&out)
+            .expect("list")
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["notes.txt", "summary.md"]);
+        assert_eq!(
+            std::fs::read_to_string(out.join("summary.md")).expect("new"),
+            "new"
+        );
+    }
+
+    #[test]
+    fn counts_name_their_limits() {
+        assert_eq!(count_in::<1, 64>("64"), Ok(64));
+        assert_eq!(count_in::<1, 64>("0"), Err("0 is not from 1 to 64".into()));
+        assert!(count_in::<1, 64>("18446744073709551616").is_err());
+        assert!(count_in::<1, 64>("-1").is_err());
+    }
 }

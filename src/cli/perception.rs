@@ -31,11 +31,11 @@ pub struct TrainArgs {
     /// Override the configuration's backend (flex, tch, gpu).
     #[arg(long)]
     pub backend: Option<String>,
-    /// Override the configuration's number of steps.
-    #[arg(long)]
+    /// Override the configuration's number of steps (1 to 10,000,000).
+    #[arg(long, value_parser = super::count_in::<1, 10_000_000>)]
     pub steps: Option<usize>,
     /// Stop after this many steps of this run (checkpointed; the same command resumes).
-    #[arg(long)]
+    #[arg(long, value_parser = super::count_in::<1, 10_000_000>)]
     pub stop_after: Option<usize>,
     /// Print the configuration with every default filled in, then exit.
     #[arg(long)]
@@ -55,13 +55,13 @@ pub struct EvalSegmentationArgs {
     pub split: String,
     /// Score this many sequences of the split, taken in turn from each (camera, occlusion)
     /// cell so that every cell is represented (0: all of them).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = super::count_in::<0, 1_000_000>)]
     pub sequences: usize,
     /// flex, tch or gpu (the latter two with their cargo features).
     #[arg(long, default_value = "flex")]
     pub backend: String,
-    /// CPU threads.
-    #[arg(long, default_value_t = 2)]
+    /// CPU threads (1 to 256).
+    #[arg(long, default_value_t = 2, value_parser = super::count_in::<1, { super::MAX_THREADS }>)]
     pub threads: usize,
     /// Also write the Markdown table to this file.
     #[arg(long)]
@@ -86,7 +86,7 @@ fn format_channels(c: &[usize]) -> String {
 
 pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     if args.print_defaults {
-        print!("{}", TrainConfig::default().to_toml());
+        say_inline!("{}", TrainConfig::default().to_toml());
         return Ok(ExitCode::SUCCESS);
     }
     let path = args
@@ -105,7 +105,7 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
         "baseline" => config.model = config.model.feed_forward_baseline(),
         other => anyhow::bail!("unknown --model {other:?} (procnet, baseline)"),
     }
-    println!(
+    say!(
         "{}: {} parameters, {} cells, {} channels, {}x{} input, prediction loss {}, axonal delay {}, decoder {}",
         config.model.model_name(),
         config.model.parameter_count(),
@@ -138,7 +138,7 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     let png = svg.with_extension("png");
     let last = report.metrics.last().copied().unwrap_or_default();
     if !report.finished {
-        println!(
+        say!(
             "stopped at step {} of {} ({} this run, {:.0} s); the same command resumes. Metrics: {}",
             report.steps_done,
             trainer.config.steps,
@@ -148,7 +148,7 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
         );
         return Ok(ExitCode::SUCCESS);
     }
-    println!(
+    say!(
         "{} steps ({} this run, {:.0} s) -> {}\n  last loss {:.4} (Dice {:.4}, focal {:.4}, prediction {:.4}); validation forearm Dice loss {:.4}\n  metrics: {}, curve: {}",
         trainer.config.steps,
         trainer.config.steps - report.resumed_from,
@@ -269,6 +269,27 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
         },
     )?;
     progress.finish_and_clear();
+    if ev.overall.frames == 0 {
+        anyhow::bail!(
+            "no frame of the {} split was scored ({} sequences; frame 0 of each is left out): \
+             there is nothing to report",
+            args.split,
+            ev.sequences
+        );
+    }
+    let o = &ev.overall;
+    if o.dice
+        .iter()
+        .chain(&o.focal)
+        .chain(&o.iou)
+        .any(|v| !v.is_finite())
+    {
+        anyhow::bail!(
+            "the scores are not finite (NaN or infinite): the network's outputs are, so \
+             {} holds non-finite weights or was trained into divergence",
+            args.weights.display()
+        );
+    }
     let subset = if ev.sequences < n_split {
         format!(
             " ({} of its {n_split} sequences, taken in turn from each cell)",
@@ -289,7 +310,7 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
         args.dataset.display(),
         ev.to_markdown()
     );
-    print!("{md}");
+    say_inline!("{md}");
     if let Some(out) = &args.out {
         std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
     }
@@ -326,7 +347,7 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
         );
         let (w, h, rgb) = prediction_sheet(&title, &panels, 2);
         write_png(path, w, h, PixelKind::Rgb, &rgb)?;
-        println!("worst frames: {}", path.display());
+        say!("worst frames: {}", path.display());
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -342,13 +363,17 @@ pub struct BenchArgs {
     /// Backends to time (flex, tch, gpu), comma-separated.
     #[arg(long, default_value = "flex")]
     pub backends: String,
-    #[arg(long, default_value_t = 2)]
+    /// CPU threads (1 to 256).
+    #[arg(long, default_value_t = 2, value_parser = super::count_in::<1, { super::MAX_THREADS }>)]
     pub threads: usize,
-    #[arg(long, default_value_t = 4)]
+    /// Sequences per batch (1 to 64).
+    #[arg(long, default_value_t = 4, value_parser = super::count_in::<1, 64>)]
     pub batch: usize,
-    #[arg(long, default_value_t = 10)]
+    /// Frames per sequence (1 to 100).
+    #[arg(long, default_value_t = 10, value_parser = super::count_in::<1, 100>)]
     pub frames: usize,
-    #[arg(long, default_value_t = 5)]
+    /// Timed repetitions (1 to 1000).
+    #[arg(long, default_value_t = 5, value_parser = super::count_in::<1, 1000>)]
     pub iters: usize,
     /// Override the input size (pixels per side).
     #[arg(long)]
@@ -398,7 +423,7 @@ pub fn bench(args: &BenchArgs) -> Result<ExitCode> {
         // The convolutions' arithmetic over the time a frame took: how near the backend runs
         // to the machine's peak.
         let gflops = 2.0 * config.macs_per_frame() as f64 / t.infer_frame_s / 1e9;
-        println!(
+        say!(
             "{{\"backend\": \"{}\", \"threads\": {}, \"train_step_s\": {:.6}, \"infer_frame_s\": {:.6}, \"gmac_per_frame\": {:.4}, \"infer_gflops\": {:.1}}}",
             b.name(),
             args.threads,

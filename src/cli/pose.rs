@@ -36,8 +36,8 @@ pub struct EvalPoseArgs {
     /// flex, tch or gpu (the latter two with their cargo features), for the network.
     #[arg(long, default_value = "flex")]
     pub backend: String,
-    /// CPU threads.
-    #[arg(long, default_value_t = 2)]
+    /// CPU threads (1 to 256).
+    #[arg(long, default_value_t = 2, value_parser = super::count_in::<1, { super::MAX_THREADS }>)]
     pub threads: usize,
     /// Search over the whole image instead of a region of interest around the mask.
     #[arg(long)]
@@ -138,7 +138,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             args.dataset.display(),
             ev.to_markdown()
         );
-        print!("{md}");
+        say_inline!("{md}");
         let suffix = if several {
             format!("_{kind}")
         } else {
@@ -158,7 +158,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             args.split,
             compare_markdown(&named)?
         );
-        print!("\n{md}");
+        say_inline!("\n{md}");
         write("pose_compare.md", &md)?;
         written.push("pose_compare.md".into());
     }
@@ -166,7 +166,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
     write("pose_error_vs_distance.svg", &svg)?;
     let png = args.out.join("pose_error_vs_distance.png");
     svg_to_png(&svg, &png)?;
-    println!(
+    say!(
         "\nwrote {}/{}, {}",
         args.out.display(),
         written.join(", "),

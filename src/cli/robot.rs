@@ -69,10 +69,10 @@ struct Report {
 
 pub fn list() -> Result<ExitCode> {
     for entry in CATALOGUE {
-        println!("{:<20} {}", entry.name, entry.summary);
+        say!("{:<20} {}", entry.name, entry.summary);
     }
     for (name, urdf) in added_robots() {
-        println!("{name:<20} added: {}", urdf.display());
+        say!("{name:<20} added: {}", urdf.display());
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -120,12 +120,29 @@ pub fn add(args: &AddArgs) -> Result<ExitCode> {
     }
     // The vendor file must load before anything is copied.
     RobotModel::from_urdf_file(&args.urdf, &packages)?;
+    let target = library.join(&args.name);
+    if target.exists() && !args.force {
+        bail!(
+            "{} already exists (pass --force to replace it)",
+            target.display()
+        );
+    }
     std::fs::create_dir_all(&library).with_context(|| format!("creating {}", library.display()))?;
-    let added = add_robot(&args.urdf, &packages, &args.name, &library, args.force)?;
-    println!(
-        "added '{}': {} with {} mesh files",
+    // All or nothing: the robot is copied, previewed, checked and cross-checked in a staging
+    // folder that no scenario can name, and moved into the library only when all of that
+    // passed. An error or Ctrl-C leaves the library as it was.
+    // A staging folder left by a killed run is replaced.
+    let staging = Staging(library.join(format!(".{}.staging", args.name)));
+    if staging.0.exists() {
+        std::fs::remove_dir_all(&staging.0)
+            .with_context(|| format!("removing {}", staging.0.display()))?;
+    }
+    std::fs::create_dir_all(&staging.0)
+        .with_context(|| format!("creating {}", staging.0.display()))?;
+    let added = add_robot(&args.urdf, &packages, &args.name, &staging.0, true)?;
+    say!(
+        "copied '{}' with {} mesh files; checking it before it joins the library",
         args.name,
-        added.urdf.display(),
         added.meshes.len()
     );
     // The copy must load on its own (relative mesh paths, no package map).
@@ -165,11 +182,7 @@ pub fn add(args: &AddArgs) -> Result<ExitCode> {
         workcell::render::image::PixelKind::Rgb,
         &rgb,
     )?;
-    println!(
-        "preview (zero and three random configurations): {}",
-        preview.display()
-    );
-    println!();
+    say!();
 
     let urdf = added.urdf.to_string_lossy().into_owned();
     check(&CheckArgs {
@@ -178,7 +191,7 @@ pub fn add(args: &AddArgs) -> Result<ExitCode> {
         fk: None,
         json: false,
     })?;
-    println!();
+    say!();
     let verdict = if cfg!(feature = "mujoco") {
         crate::cli::crosscheck::run(&crate::cli::crosscheck::CrosscheckArgs {
             robot: urdf,
@@ -190,25 +203,53 @@ pub fn add(args: &AddArgs) -> Result<ExitCode> {
             json: false,
         })?
     } else {
-        println!("cross-check skipped: this build has no MuJoCo (feature `mujoco`)");
+        say!("cross-check skipped: this build has no MuJoCo (feature `mujoco`)");
         ExitCode::SUCCESS
     };
+    if verdict != ExitCode::SUCCESS {
+        bail!(
+            "the MuJoCo cross-check of '{}' failed (table above): it was not added",
+            args.name
+        );
+    }
+    if target.exists() {
+        std::fs::remove_dir_all(&target)
+            .with_context(|| format!("removing the old {}", target.display()))?;
+    }
+    let staged = staging.0.join(&args.name);
+    std::fs::rename(&staged, &target)
+        .with_context(|| format!("moving {} to {}", staged.display(), target.display()))?;
+    say!(
+        "added '{}': {}\npreview (zero and three random configurations): {}",
+        args.name,
+        target.join(format!("{}.urdf", args.name)).display(),
+        target.join("preview.png").display()
+    );
     let findable = robot_library()
         .iter()
         .any(|dir| dir.canonicalize().ok() == library.canonicalize().ok());
     if findable {
-        println!(
+        say!(
             "\nuse it in a scenario as [robot] model = \"{}\"",
             args.name
         );
     } else {
-        println!(
+        say!(
             "\n{} is not a robot library folder: add it to {ROBOT_PATH_VAR} to name the robot \"{}\" in scenarios",
             library.display(),
             args.name
         );
     }
     Ok(verdict)
+}
+
+/// A staging folder, removed with everything in it when dropped.
+struct Staging(PathBuf);
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 pub fn check(args: &CheckArgs) -> Result<ExitCode> {
@@ -279,7 +320,7 @@ pub fn check(args: &CheckArgs) -> Result<ExitCode> {
         fk,
     };
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        say!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print_report(&report);
     }
@@ -431,18 +472,20 @@ fn limit(v: f64) -> String {
 }
 
 fn print_report(r: &Report) {
-    println!("robot    {}", r.name);
-    println!("source   {}", r.source);
-    println!(
+    say!("robot    {}", r.name);
+    say!("source   {}", r.source);
+    say!(
         "dof      {}    links {}    mass {:.3} kg",
-        r.dof, r.links, r.mass_kg
+        r.dof,
+        r.links,
+        r.mass_kg
     );
-    println!();
-    println!(
+    say!();
+    say!(
         "joint                    type       coord       lower     upper      vel   effort  parent -> child"
     );
     for j in &r.joints {
-        println!(
+        say!(
             "{:<24} {:<10} {:<7} {:>9} {:>9} {:>8} {:>8}  {} -> {}",
             j.name,
             j.kind,
@@ -455,13 +498,13 @@ fn print_report(r: &Report) {
             j.child
         );
     }
-    println!();
-    println!("geometry");
+    say!();
+    say!("geometry");
     for (kind, count) in &r.meshes {
-        println!("  {count:>4}  {kind}");
+        say!("  {count:>4}  {kind}");
     }
-    println!();
-    println!(
+    say!();
+    say!(
         "rapier   {} bodies, {} colliders, {} multibody dofs; FK mismatch {:.1e} m; error holding a pose for 1 s {:.1e}",
         r.rapier.rigid_bodies,
         r.rapier.colliders,
@@ -469,24 +512,30 @@ fn print_report(r: &Report) {
         r.rapier.fk_mismatch_m,
         r.rapier.hold_error
     );
-    println!();
+    say!();
     if r.problems.is_empty() {
-        println!("problems none found");
+        say!("problems none found");
     } else {
-        println!("problems {}", r.problems.len());
+        say!("problems {}", r.problems.len());
         for p in &r.problems {
-            println!("  - {p}");
+            say!("  - {p}");
         }
     }
     if let Some(fk) = &r.fk {
-        println!();
-        println!(
+        say!();
+        say!(
             "link                          x [m]      y [m]      z [m]      roll     pitch       yaw"
         );
         for p in fk {
-            println!(
+            say!(
                 "{:<24} {:>10.6} {:>10.6} {:>10.6} {:>9.5} {:>9.5} {:>9.5}",
-                p.link, p.xyz[0], p.xyz[1], p.xyz[2], p.rpy[0], p.rpy[1], p.rpy[2]
+                p.link,
+                p.xyz[0],
+                p.xyz[1],
+                p.xyz[2],
+                p.rpy[0],
+                p.rpy[1],
+                p.rpy[2]
             );
         }
     }

@@ -11,13 +11,17 @@ use serde::Serialize;
 use workcell::plot::{Panel, WorldPath, svg_cell_views, svg_panels};
 use workcell::robots::RobotModel;
 use workcell::robots::math::Pose;
+
+/// The longest `--seconds` of a simulation: an hour of simulated time.
+const MAX_SECONDS: f64 = 3600.0;
 use workcell::sim::{CellModel, CellState, RobotCommand, Scenario, step};
 
 /// Files `simulate` writes into `--out`.
-pub const OUTPUTS: [&str; 4] = [
+pub const OUTPUTS: [&str; 5] = [
     "robot_joints.csv",
     "human_poses.csv",
     "trajectories.svg",
+    "cell.svg",
     "summary.json",
 ];
 
@@ -25,7 +29,7 @@ pub const OUTPUTS: [&str; 4] = [
 pub struct SimulateArgs {
     /// Scenario file (TOML), e.g. configs/default.toml.
     pub scenario: Option<PathBuf>,
-    /// Simulated duration, s.
+    /// Simulated duration, s (at most an hour).
     #[arg(long, default_value_t = 10.0)]
     pub seconds: f64,
     /// Seed; overrides the scenario's.
@@ -65,14 +69,17 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
             Some(path) => Scenario::from_file(path)?,
             None => Scenario::default(),
         };
-        print!("{}", scenario.to_toml());
+        say_inline!("{}", scenario.to_toml());
         return Ok(ExitCode::SUCCESS);
     }
     let Some(path) = &args.scenario else {
         bail!("give a scenario file, e.g. `workcell simulate configs/default.toml`");
     };
-    if !(args.seconds > 0.0 && args.seconds.is_finite()) {
-        bail!("--seconds must be > 0, got {}", args.seconds);
+    if !(args.seconds > 0.0 && args.seconds <= MAX_SECONDS) {
+        bail!(
+            "--seconds must be in (0, {MAX_SECONDS}], not {}",
+            args.seconds
+        );
     }
     if !(args.rate_hz > 0.0 && args.rate_hz.is_finite()) {
         bail!("--rate-hz must be > 0, got {}", args.rate_hz);
@@ -82,7 +89,7 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
         scenario.seed = seed;
     }
     let model = CellModel::new(&scenario, path)?;
-    super::prepare_out(&args.out, args.force, &OUTPUTS)?;
+    let out = super::OutputDir::create(&args.out, args.force, &OUTPUTS)?;
 
     let dt = model.time_step_s();
     let steps = (args.seconds / dt).round() as u64;
@@ -108,7 +115,7 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
     let wall_s = started.elapsed().as_secs_f64();
     bar.finish_and_clear();
 
-    let outputs = log.write(&model, &args.out)?;
+    let outputs = log.write(&model, out.path())?;
     let summary = Summary {
         scenario: path.display().to_string(),
         seed: scenario.seed,
@@ -121,13 +128,14 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
         steps_per_s: steps as f64 / wall_s.max(1e-9),
         outputs: outputs.clone(),
     };
-    let summary_path = args.out.join("summary.json");
+    let summary_path = out.path().join("summary.json");
     fs::write(
         &summary_path,
         serde_json::to_string_pretty(&summary)? + "\n",
     )
     .with_context(|| format!("writing {}", summary_path.display()))?;
-    println!(
+    out.commit()?;
+    say!(
         "simulated {:.2} s ({steps} steps of {} ms) in {wall_s:.2} s: {:.0} steps/s",
         state.time_s(),
         dt * 1e3,
@@ -137,7 +145,7 @@ pub fn run(args: &SimulateArgs) -> Result<ExitCode> {
         .iter()
         .chain(std::iter::once(&"summary.json".to_string()))
     {
-        println!("  {}", args.out.join(file).display());
+        say!("  {}", args.out.join(file).display());
     }
     Ok(ExitCode::SUCCESS)
 }

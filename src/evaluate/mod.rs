@@ -95,7 +95,16 @@ impl Evaluation {
             path: path.to_path_buf(),
             source,
         })?;
-        let mut config: EvaluationConfig = toml::from_str(&text).map_err(|e| Error::Parse {
+        Self::from_toml(&text, path)
+    }
+
+    /// Like [`Evaluation::from_file`] on text already read; `path` names it in errors and
+    /// anchors the cell's and the weights' paths.
+    ///
+    /// # Errors
+    /// As [`Evaluation::from_file`], without the I/O of the file itself.
+    pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
+        let mut config: EvaluationConfig = toml::from_str(text).map_err(|e| Error::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
@@ -140,6 +149,20 @@ impl Evaluation {
         };
         positive("task_s", c.task_s)?;
         positive("control_period_s", c.control_period_s)?;
+        // Upper bounds: an episode of more than an hour, or a controller slower than 10 Hz,
+        // is no evaluation of a collaborative cell (and 1e6 s hung the run).
+        for (key, v, most) in [
+            ("task_s", c.task_s, 3600.0),
+            ("control_period_s", c.control_period_s, 0.1),
+            ("timeout_factor", c.timeout_factor, 100.0),
+        ] {
+            if v > most {
+                return Err(Error::config(
+                    key,
+                    format!("{v} is above the limit of {most}"),
+                ));
+            }
+        }
         positive("tracking_gain_per_s", c.tracking_gain_per_s)?;
         positive("progress_tolerance_rad", c.progress_tolerance_rad)?;
         positive("near_m", c.near_m)?;

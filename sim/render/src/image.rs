@@ -89,12 +89,26 @@ pub fn depth_mm_bytes(depth_m: &[f32]) -> Vec<u8> {
 ///
 /// # Errors
 /// [`RenderError::Dataset`] naming `path` for a file that is not such a PNG.
+/// The largest image side read or written, pixels.
+pub const MAX_IMAGE_SIDE: u32 = 4096;
+
 pub fn decode_png(bytes: &[u8], path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
     let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     let mut reader = decoder
         .read_info()
         .map_err(|e| dataset_error(path, format!("not a PNG: {e}")))?;
     let info = reader.info();
+    // The size is checked before the pixels are allocated: a 100-byte PNG may declare
+    // 16000x16000 (760 MB).
+    if info.width > MAX_IMAGE_SIDE || info.height > MAX_IMAGE_SIDE {
+        return Err(dataset_error(
+            path,
+            format!(
+                "PNG of {}x{} pixels; at most {MAX_IMAGE_SIDE} a side is read",
+                info.width, info.height
+            ),
+        ));
+    }
     let kind = match (info.color_type, info.bit_depth) {
         (png::ColorType::Grayscale, png::BitDepth::Eight) => PixelKind::Gray,
         (png::ColorType::Rgb, png::BitDepth::Eight) => PixelKind::Rgb,
@@ -122,10 +136,15 @@ pub fn decode_png(bytes: &[u8], path: &Path) -> Result<(u32, u32, PixelKind, Vec
 /// # Errors
 /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file.
 pub fn read_png(path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
-    let bytes = std::fs::read(path).map_err(|source| RenderError::Io {
+    let io = |source| RenderError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
+    };
+    // A FIFO or a device is never opened (a read would block or never end).
+    if !std::fs::metadata(path).map_err(io)?.is_file() {
+        return Err(dataset_error(path, "not a regular file"));
+    }
+    let bytes = std::fs::read(path).map_err(io)?;
     decode_png(&bytes, path)
 }
 

@@ -5,6 +5,11 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
+
+/// The most sequences per (distance class or camera, occlusion level) pair.
+pub const MAX_SEQUENCES_PER_PAIR: usize = 100_000;
+/// The most distance classes, and the most occlusion levels.
+pub const MAX_CLASSES: usize = 64;
 use crate::scenario::{parse_toml, read_text};
 use workcell_render::occlusion::OccluderKind;
 use workcell_render::roi;
@@ -254,11 +259,18 @@ impl DatasetConfig {
                 invalid(key, format!("{r:?} is not an interval within [{lo}, {hi}]"))
             }
         };
-        if self.frames == 0 || self.frames > 10_000 {
-            return invalid("frames", format!("{} is not in 1..=10000", self.frames));
+        let most = workcell_render::dataset::MAX_SEQUENCE_FRAMES;
+        if !(1..=most).contains(&self.frames) {
+            return invalid("frames", format!("{} is not in 1..={most}", self.frames));
         }
-        if self.sequences_per_pair == 0 {
-            return invalid("sequences_per_pair", "must be at least 1".into());
+        if !(1..=MAX_SEQUENCES_PER_PAIR).contains(&self.sequences_per_pair) {
+            return invalid(
+                "sequences_per_pair",
+                format!(
+                    "{} is not in 1..={MAX_SEQUENCES_PER_PAIR}",
+                    self.sequences_per_pair
+                ),
+            );
         }
         for (key, v) in [
             ("width_px", self.width_px),
@@ -269,8 +281,19 @@ impl DatasetConfig {
                 return invalid(key, format!("{v} px is not in 16..=4096"));
             }
         }
-        if self.sequences_per_episode == 0 {
-            return invalid("sequences_per_episode", "must be at least 1".into());
+        if !(1..=1000).contains(&self.sequences_per_episode) {
+            return invalid(
+                "sequences_per_episode",
+                format!("{} is not in 1..=1000", self.sequences_per_episode),
+            );
+        }
+        for (key, n) in [
+            ("distances", self.distances.len()),
+            ("occlusion_levels", self.occlusion_levels.len()),
+        ] {
+            if n > MAX_CLASSES {
+                return invalid(key, format!("{n} entries, more than {MAX_CLASSES}"));
+            }
         }
         let cc = &self.cell_cameras;
         if !(cc.position_jitter_m.is_finite() && (0.0..=2.0).contains(&cc.position_jitter_m)) {

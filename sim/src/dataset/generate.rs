@@ -893,11 +893,11 @@ impl Generator {
     ///
     /// # Errors
     /// [`SimError::Dataset`] if `out` holds a dataset of another configuration;
-    /// [`SimError::Io`] on write failures; errors of [`Generator::sequence`].
+    /// [`SimError::Write`] on write failures; errors of [`Generator::sequence`].
     pub fn generate(&self, out: &Path, progress: &(dyn Fn(usize) + Sync)) -> Result<Report> {
         let io = |path: &Path| {
             let path = path.to_path_buf();
-            move |source| SimError::Io {
+            move |source| SimError::Write {
                 path: path.clone(),
                 source,
             }
@@ -919,7 +919,22 @@ impl Generator {
                 });
             }
             Ok(_) => {}
-            Err(_) => write_atomic(&stamp, config_text.as_bytes())?,
+            Err(_) => {
+                // Sequences without the stamp that says what made them are not adopted.
+                let sequences = std::fs::read_dir(out)
+                    .map_err(io(out))?
+                    .flatten()
+                    .any(|e| e.file_name().to_string_lossy().starts_with("seq_"));
+                if sequences {
+                    return Err(SimError::Dataset {
+                        path: out.to_path_buf(),
+                        message: "holds sequence folders but no config.toml saying what made \
+                                  them; choose another --out, or delete the folder to start again"
+                            .into(),
+                    });
+                }
+                write_atomic(&stamp, config_text.as_bytes())?;
+            }
         }
         let done = std::sync::atomic::AtomicUsize::new(0);
         let count = self.sequence_count();
@@ -935,9 +950,9 @@ impl Generator {
                     let mut episode: Option<Result<Episode>> = None;
                     let mut out_e = Vec::with_capacity(per);
                     for index in indices {
-                        let entry_path = out.join(sequence_dir(index)).join("sequence.json");
-                        let result = if entry_path.exists() {
-                            read_entry(&entry_path).map(|e| (e, Timing::default(), false))
+                        let kept = self.existing_sequence(out, index);
+                        let result = if let Some(entry) = kept {
+                            Ok((entry, Timing::default(), false))
                         } else {
                             let mut timing = Timing::default();
                             let episode = episode.get_or_insert_with(|| {
@@ -992,6 +1007,33 @@ impl Generator {
     }
 }
 
+impl Generator {
+    /// The entry of sequence `index` when a previous run wrote it whole: its `sequence.json`
+    /// is this index's, of this configuration's length, and every frame file is there. A
+    /// folder that fails any of that is removed, to be generated again.
+    fn existing_sequence(&self, out: &Path, index: usize) -> Option<SequenceEntry> {
+        let dir = out.join(sequence_dir(index));
+        let entry_path = dir.join("sequence.json");
+        if !entry_path.exists() {
+            return None;
+        }
+        let whole = read_entry(&entry_path).ok().filter(|e| {
+            e.index == index
+                && e.frames == self.config.frames
+                && (0..e.frames).all(|f| {
+                    frame_files(f).iter().all(|name| {
+                        std::fs::metadata(dir.join(name)).is_ok_and(|m| m.is_file() && m.len() > 0)
+                    })
+                })
+        });
+        if whole.is_none() {
+            tracing::warn!(dir = %dir.display(), "incomplete sequence folder: generating it again");
+            let _ = std::fs::remove_dir_all(&dir);
+        }
+        whole
+    }
+}
+
 fn read_entry(path: &Path) -> Result<SequenceEntry> {
     let bytes = std::fs::read(path).map_err(|source| SimError::Io {
         path: path.to_path_buf(),
@@ -1010,7 +1052,7 @@ fn write_sequence(out: &Path, s: &GeneratedSequence, timing: &mut Timing) -> Res
     let partial = out.join(format!(".{}.partial", s.entry.dir));
     let io = |path: &Path| {
         let path = path.to_path_buf();
-        move |source| SimError::Io {
+        move |source| SimError::Write {
             path: path.clone(),
             source,
         }

@@ -68,6 +68,11 @@ impl Sequence {
     }
 }
 
+/// The most frames a sequence may have (the generator's limit too).
+pub const MAX_SEQUENCE_FRAMES: usize = 10_000;
+/// The most sequences a dataset may have.
+pub const MAX_SEQUENCES: usize = 1_000_000;
+
 fn invalid(path: &Path, message: impl std::fmt::Display) -> RenderError {
     RenderError::Dataset {
         path: path.to_path_buf(),
@@ -92,7 +97,17 @@ impl Dataset {
                 ),
             )
         })?;
-        let manifest: Manifest = serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))?;
+        Self::from_manifest(root, &bytes)
+    }
+
+    /// The dataset in `root` whose `manifest.json` holds `bytes`, checked as [`Dataset::open`]
+    /// checks it.
+    ///
+    /// # Errors
+    /// As [`Dataset::open`], without the I/O.
+    pub fn from_manifest(root: PathBuf, bytes: &[u8]) -> Result<Self> {
+        let path = root.join("manifest.json");
+        let manifest: Manifest = serde_json::from_slice(bytes).map_err(|e| invalid(&path, e))?;
         if !READS.contains(&manifest.format.as_str()) {
             return Err(invalid(
                 &path,
@@ -103,8 +118,40 @@ impl Dataset {
                 ),
             ));
         }
-        if manifest.width_px == 0 || manifest.height_px == 0 {
-            return Err(invalid(&path, "zero image size"));
+        // Every number is checked before anything is allocated from it.
+        let side = 1..=crate::image::MAX_IMAGE_SIDE;
+        if !side.contains(&manifest.width_px) || !side.contains(&manifest.height_px) {
+            return Err(invalid(
+                &path,
+                format!(
+                    "frames of {}x{} pixels; each side must be 1..={}",
+                    manifest.width_px,
+                    manifest.height_px,
+                    crate::image::MAX_IMAGE_SIDE
+                ),
+            ));
+        }
+        if manifest.sequences.len() > MAX_SEQUENCES {
+            return Err(invalid(
+                &path,
+                format!(
+                    "{} sequences, more than the limit of {MAX_SEQUENCES}",
+                    manifest.sequences.len()
+                ),
+            ));
+        }
+        if let Some(e) = manifest
+            .sequences
+            .iter()
+            .find(|e| !(1..=MAX_SEQUENCE_FRAMES).contains(&e.frames))
+        {
+            return Err(invalid(
+                &path,
+                format!(
+                    "sequence {} has {} frames; a sequence has 1..={MAX_SEQUENCE_FRAMES}",
+                    e.index, e.frames
+                ),
+            ));
         }
         Ok(Self { root, manifest })
     }

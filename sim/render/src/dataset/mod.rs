@@ -27,7 +27,7 @@ pub use labels::{
     CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, READS, RoiLabel,
     SequenceEntry, Split,
 };
-pub use load::{Dataset, Sequence};
+pub use load::{Dataset, MAX_SEQUENCE_FRAMES, MAX_SEQUENCES, Sequence};
 pub use sheet::{PredictionPanel, contact_sheet, prediction_sheet};
 pub use stats::{ForearmStats, forearm_stats};
 

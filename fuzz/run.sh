@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# The fuzz campaign of docs/reliability.md: every target of fuzz/src/targets.rs under AFL++
+# for SECONDS each (default 300), JOBS targets at a time (default 2), starting from the kept
+# corpus in fuzz/corpus/TARGET. Afterwards the queue is minimised back into fuzz/corpus,
+# crashes and hangs are copied to fuzz/out/findings/TARGET, and a table of executions,
+# corpus sizes and findings per target is printed (fuzz/out/campaign.md).
+#
+# Setup (once): `cargo install cargo-afl --locked` (it builds AFL++ for the toolchain).
+# Usage: fuzz/run.sh [SECONDS] [JOBS] [TARGET ...]
+set -euo pipefail
+cd "$(dirname "$0")"
+seconds="${1:-300}"
+jobs="${2:-2}"
+shift $(( $# > 2 ? 2 : $# ))
+if [ $# -gt 0 ]; then
+    targets=("$@")
+else
+    targets=(urdf urdf_rapier stl obj dae png scenario evaluation dataset_config train_config weights manifest)
+fi
+export AFL_SKIP_CPUFREQ=1 AFL_I_DONT_CARE_ABOUT_MISSING_CRASHES=1 AFL_NO_UI=1 AFL_NO_AFFINITY=1
+cargo afl build --release
+mkdir -p out
+
+fuzz_one() {
+    local t="$1"
+    rm -rf "out/$t"
+    # -t: an input slower than 5 s is a hang; -m: one that maps more than 8 GB is a crash.
+    AFL_MAP_SIZE=262144 cargo afl fuzz -i "corpus/$t" -o "out/$t" -V "$seconds" -t 5000 -m 8192 \
+        -- target/release/fuzz "$t" > "out/$t.log" 2>&1 || true
+    mkdir -p "out/findings/$t"
+    cp out/"$t"/default/crashes/id:* "out/findings/$t/" 2>/dev/null || true
+    cp out/"$t"/default/hangs/id:* "out/findings/$t/" 2>/dev/null || true
+    # Keep the smallest inputs that cover what the whole queue covers.
+    rm -rf "out/$t.min"
+    if cargo afl cmin -i "out/$t/default/queue" -o "out/$t.min" -t 5000 -m none \
+        -- target/release/fuzz "$t" > "out/$t.cmin.log" 2>&1; then
+        rm -rf "corpus/$t"
+        mv "out/$t.min" "corpus/$t"
+    fi
+}
+
+running=0
+for t in "${targets[@]}"; do
+    fuzz_one "$t" &
+    running=$((running + 1))
+    if [ "$running" -ge "$jobs" ]; then
+        wait -n
+        running=$((running - 1))
+    fi
+done
+wait
+
+stat() { grep "^$2 " "out/$1/default/fuzzer_stats" | sed 's/.*: //'; }
+{
+    echo "| target | run s | executions | exec/s | corpus kept | paths found | last new path, s before the end | crashes | hangs |"
+    echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|"
+    for t in "${targets[@]}"; do
+        f="out/$t/default/fuzzer_stats"
+        [ -f "$f" ] || { echo "| $t | no run: see fuzz/out/$t.log | | | | | | | |"; continue; }
+        start=$(stat "$t" start_time); last=$(stat "$t" last_update); find=$(stat "$t" last_find)
+        quiet=$(( find > 0 ? last - find : last - start ))
+        echo "| $t | $((last - start)) | $(stat "$t" execs_done) | $(stat "$t" execs_per_sec) | $(ls "corpus/$t" | wc -l) | $(stat "$t" corpus_found) | $quiet | $(stat "$t" saved_crashes) | $(stat "$t" saved_hangs) |"
+    done
+} | tee out/campaign.md

@@ -1,0 +1,443 @@
+//! Hostile input against the `workcell` binary: every input surface, as a careless or
+//! malicious user would drive it. Each case was a crash, a hang or a half-written state
+//! before; each must now be a clear error (exit 1, or clap's 2 for a bad flag) or work.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn workcell_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_workcell"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run workcell")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// `args` fails cleanly: exit 1 (or 2 from clap), `needle` on stderr, no panic.
+fn refused_in(dir: &Path, args: &[&str], needle: &str) {
+    let out = workcell_in(dir, args);
+    let stderr = text(&out.stderr);
+    assert!(
+        matches!(out.status.code(), Some(1 | 2)),
+        "{args:?}: {:?}\n{stderr}",
+        out.status
+    );
+    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    assert!(
+        stderr.contains(needle),
+        "{args:?}: '{needle}' not in\n{stderr}"
+    );
+}
+
+fn refused(args: &[&str], needle: &str) {
+    refused_in(root(), args, needle);
+}
+
+fn s(path: &Path) -> &str {
+    path.to_str().expect("utf-8 path")
+}
+
+#[test]
+fn counts_beyond_their_limits_are_refused_by_the_parser() {
+    // `--batch 0` segfaulted inside the matrix library; the others aborted or hung.
+    for (args, needle) in [
+        (vec!["bench", "--batch", "0"], "0 is not from 1 to 64"),
+        (
+            vec!["bench", "--batch", "100000"],
+            "100000 is not from 1 to 64",
+        ),
+        (vec!["bench", "--frames", "0"], "0 is not from 1 to 100"),
+        (
+            vec!["bench", "--threads", "100000"],
+            "100000 is not from 1 to 256",
+        ),
+        (
+            vec![
+                "evaluate",
+                "configs/evaluate.toml",
+                "--episodes",
+                "18446744073709551615",
+            ],
+            "is not from 1 to 1000000",
+        ),
+        (
+            vec!["simulate", "configs/default.toml", "--seconds", "1e12"],
+            "--seconds must be in (0, 3600]",
+        ),
+        (
+            vec!["dataset", "show", "nowhere", "--columns", "100000"],
+            "100000 is not from 1 to 64",
+        ),
+        (
+            vec!["eval", "pose", "--threads", "0"],
+            "0 is not from 1 to 256",
+        ),
+    ] {
+        refused(&args, needle);
+    }
+}
+
+/// A URDF of two links of 1 kg joined by one revolute joint, with `moment` as each link's
+/// principal moments and `limit` as the joint's `<limit>` element.
+fn two_links(moment: &str, limit: &str) -> String {
+    let link = |name: &str| {
+        format!(
+            "<link name=\"{name}\"><inertial><mass value=\"1\"/><inertia ixx=\"{moment}\" \
+             iyy=\"{moment}\" izz=\"{moment}\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial>\
+             <visual><geometry><box size=\"0.1 0.1 0.3\"/></geometry></visual></link>"
+        )
+    };
+    format!(
+        "<robot name=\"hostile\">{}{}<joint name=\"j\" type=\"revolute\"><parent link=\"a\"/>\
+         <child link=\"b\"/><origin xyz=\"0 0 0.3\"/><axis xyz=\"0 1 0\"/>{limit}</joint></robot>",
+        link("a"),
+        link("b")
+    )
+}
+
+const LIMIT: &str = "<limit lower=\"-1\" upper=\"1\" effort=\"100\" velocity=\"1\"/>";
+
+#[test]
+fn hostile_robots_are_checked_without_a_panic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Inertia of 1e-300 made rapier's motor clamp panic; it is noise, taken as 0.
+    let tiny = dir.path().join("tiny.urdf");
+    std::fs::write(&tiny, two_links("1e-300", LIMIT)).expect("write");
+    let out = workcell_in(dir.path(), &["robot", "check", s(&tiny)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    // 20,000 nested elements overflowed the stack.
+    let deep = dir.path().join("deep.urdf");
+    std::fs::write(
+        &deep,
+        format!(
+            "<robot name=\"r\">{}{}</robot>",
+            "<a>".repeat(20_000),
+            "</a>".repeat(20_000)
+        ),
+    )
+    .expect("write");
+    refused_in(
+        dir.path(),
+        &["robot", "check", s(&deep)],
+        "deeper than 256 levels",
+    );
+    // A COLLADA file of 1 kB that declares 4e9 triangles asked for 51 GB.
+    let dae = dir.path().join("lie.dae");
+    std::fs::write(
+        &dae,
+        "<COLLADA><library_geometries><geometry id=\"g\"><mesh><triangles count=\"4294967295\">\
+         <input semantic=\"VERTEX\" source=\"#v\" offset=\"0\"/><p>0 1 2</p></triangles></mesh>\
+         </geometry></library_geometries></COLLADA>",
+    )
+    .expect("write");
+    let with_mesh = dir.path().join("mesh.urdf");
+    std::fs::write(
+        &with_mesh,
+        two_links("0.01", LIMIT).replace(
+            "<box size=\"0.1 0.1 0.3\"/>",
+            "<mesh filename=\"lie.dae\"/>",
+        ),
+    )
+    .expect("write");
+    refused_in(
+        dir.path(),
+        &["robot", "check", s(&with_mesh)],
+        "claims more values than",
+    );
+    // Meshes outside every package root are not read: /dev/zero read 4.2 GB.
+    for uri in [
+        "/dev/zero",
+        "file:///etc/hostname",
+        "package://root/.bashrc",
+    ] {
+        std::fs::write(
+            &with_mesh,
+            two_links("0.01", LIMIT).replace(
+                "<box size=\"0.1 0.1 0.3\"/>",
+                &format!("<mesh filename=\"{uri}\"/>"),
+            ),
+        )
+        .expect("write");
+        let out = workcell_in(dir.path(), &["robot", "check", s(&with_mesh)]);
+        assert_eq!(out.status.code(), Some(1), "{uri}: {}", text(&out.stderr));
+        assert!(
+            text(&out.stderr).contains(&format!("mesh '{uri}'")),
+            "{}",
+            text(&out.stderr)
+        );
+    }
+    // A chain of 200 joints took minutes (rapier's multibody is O(n^3) per step): refused.
+    let mut chain = String::from("<robot name=\"chain\"><link name=\"l0\"/>");
+    for i in 1..=200 {
+        chain += &format!(
+            "<link name=\"l{i}\"/><joint name=\"j{i}\" type=\"revolute\"><parent link=\"l{}\"/>\
+             <child link=\"l{i}\"/><axis xyz=\"0 0 1\"/>{LIMIT}</joint>",
+            i - 1
+        );
+    }
+    let long = dir.path().join("chain.urdf");
+    std::fs::write(&long, chain + "</robot>").expect("write");
+    refused_in(
+        dir.path(),
+        &["robot", "check", s(&long)],
+        "200 actuated joints",
+    );
+}
+
+#[test]
+fn robot_add_is_all_or_nothing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let library = dir.path().join("library");
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_workcell"))
+            .args(args)
+            .env("WORKCELL_ROBOT_PATH", &library)
+            .current_dir(dir.path())
+            .output()
+            .expect("run workcell")
+    };
+    // Limits of +-1e308 panicked at an unwrap in the preview; they mean "continuous".
+    let wide = dir.path().join("wide.urdf");
+    std::fs::write(
+        &wide,
+        two_links(
+            "0.01",
+            "<limit lower=\"-1e308\" upper=\"1e308\" effort=\"100\" velocity=\"1\"/>",
+        ),
+    )
+    .expect("write");
+    let add = |name: &str| {
+        run(&[
+            "robot",
+            "add",
+            s(&wide),
+            "--name",
+            name,
+            "--into",
+            s(&library),
+        ])
+    };
+    let out = add("wide");
+    assert!(
+        out.status.success(),
+        "{}{}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    assert!(library.join("wide/wide.urdf").is_file());
+    assert!(library.join("wide/preview.png").is_file());
+
+    // Killed half-way (as by Ctrl-C), an add leaves nothing a scenario could name.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_workcell"))
+        .args([
+            "robot",
+            "add",
+            s(&wide),
+            "--name",
+            "killed",
+            "--into",
+            s(&library),
+        ])
+        .env("WORKCELL_ROBOT_PATH", &library)
+        .current_dir(dir.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawn");
+    let staging = library.join(".killed.staging");
+    let started = std::time::Instant::now();
+    while !staging.join("killed/killed.urdf").exists()
+        && started.elapsed() < std::time::Duration::from_secs(60)
+    {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    child.kill().expect("kill");
+    let _ = child.wait();
+    assert!(
+        !library.join("killed").exists(),
+        "a killed add left the robot"
+    );
+    let listed = text(&run(&["robot", "list"]).stdout);
+    assert!(
+        listed.contains("wide") && !listed.contains("killed"),
+        "{listed}"
+    );
+    // The next add of that name replaces the stale staging folder and succeeds.
+    let out = add("killed");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(!staging.exists());
+    assert!(library.join("killed/killed.urdf").is_file());
+}
+
+/// Runs `args` with a standard output whose reading end is already closed.
+fn with_closed_stdout(dir: &Path, args: &[&str]) -> Output {
+    let (reader, writer) = std::io::pipe().expect("pipe");
+    drop(reader);
+    Command::new(env!("CARGO_BIN_EXE_workcell"))
+        .args(args)
+        .current_dir(dir)
+        .stdout(writer)
+        .stderr(Stdio::piped())
+        .output()
+        .expect("run workcell")
+}
+
+#[test]
+fn a_closed_pipe_is_not_a_panic_and_files_are_still_written() {
+    for args in [
+        vec!["robot", "list"],
+        vec!["robot", "check", "ur5e_kinematics"],
+        vec!["simulate", "--print-defaults"],
+        vec!["evaluate", "--print-defaults"],
+        vec!["train", "--print-defaults", "--out", "unused"],
+        vec!["dataset", "generate", "--print-defaults", "--out", "unused"],
+    ] {
+        let out = with_closed_stdout(root(), &args);
+        let stderr = text(&out.stderr);
+        assert!(out.status.success(), "{args:?}: {:?} {stderr}", out.status);
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out_dir = dir.path().join("sim");
+    let scenario = root().join("configs/default.toml");
+    let out = with_closed_stdout(
+        dir.path(),
+        &[
+            "simulate",
+            s(&scenario),
+            "--seconds",
+            "0.05",
+            "--out",
+            s(&out_dir),
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    for file in ["summary.json", "cell.svg", "robot_joints.csv"] {
+        assert!(out_dir.join(file).is_file(), "{file}");
+    }
+    // No staging folder is left behind, and a second run without --force keeps the first
+    // run's files: cell.svg among them (it was overwritten).
+    let names: Vec<String> = std::fs::read_dir(&out_dir)
+        .expect("out")
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(!names.iter().any(|n| n.starts_with('.')), "{names:?}");
+    for file in [
+        "summary.json",
+        "robot_joints.csv",
+        "human_poses.csv",
+        "trajectories.svg",
+    ] {
+        std::fs::remove_file(out_dir.join(file)).expect("remove");
+    }
+    refused_in(
+        dir.path(),
+        &[
+            "simulate",
+            s(&scenario),
+            "--seconds",
+            "0.05",
+            "--out",
+            s(&out_dir),
+        ],
+        "already holds cell.svg",
+    );
+}
+
+/// A small dataset (2 sequences per pair of 4 frames at 32 px) in `dir/data`.
+fn small_dataset(dir: &Path) -> (PathBuf, PathBuf) {
+    let config = dir.join("data.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "scenario = {:?}\nsequences_per_pair = 1\nframes = 4\nwidth_px = 32\nheight_px = 32\n\
+             input_px = 32\nstart_s = [0.5, 1.0]\nsplits = [0.5, 0.0, 0.5]\n[cell_cameras]\n\
+             enabled = false\n",
+            s(&root().join("configs/default.toml"))
+        ),
+    )
+    .expect("config");
+    let data = dir.join("data");
+    let out = workcell_in(
+        dir,
+        &[
+            "dataset",
+            "generate",
+            "--config",
+            s(&config),
+            "--out",
+            s(&data),
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    (config, data)
+}
+
+#[test]
+fn datasets_are_never_trusted_blindly() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (config, data) = small_dataset(dir.path());
+    let generate = [
+        "dataset",
+        "generate",
+        "--config",
+        s(&config),
+        "--out",
+        s(&data),
+    ];
+    // A deleted PNG: the rerun regenerates its sequence instead of certifying the dataset.
+    let png = data.join("seq_00000/frame_002_rgb.png");
+    let before = std::fs::read(&png).expect("png");
+    std::fs::remove_file(&png).expect("delete");
+    let out = workcell_in(dir.path(), &generate);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(std::fs::read(&png).expect("regenerated"), before);
+
+    // Manifest values are checked before anything is allocated from them.
+    let manifest_path = data.join("manifest.json");
+    let honest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&manifest_path).expect("manifest")).expect("json");
+    for (edit, needle) in [
+        (
+            Box::new(|m: &mut serde_json::Value| m["width_px"] = 65535.into())
+                as Box<dyn Fn(&mut serde_json::Value)>,
+            "frames of 65535x32 pixels",
+        ),
+        (
+            Box::new(|m: &mut serde_json::Value| {
+                m["sequences"][0]["frames"] = 1_000_000_000_000_u64.into();
+            }),
+            "has 1000000000000 frames",
+        ),
+        (
+            Box::new(|m: &mut serde_json::Value| {
+                m["sequences"][0]["frames"] = u64::MAX.into();
+            }),
+            "has 18446744073709551615 frames",
+        ),
+    ] {
+        let mut m = honest.clone();
+        edit(&mut m);
+        std::fs::write(&manifest_path, serde_json::to_vec(&m).expect("json")).expect("write");
+        let sheet = dir.path().join("sheet.png");
+        refused_in(
+            dir.path(),
+            &["dataset", "show", s(&data), "--out", s(&sheet)],
+            needle,
+        );
+    }
+    std::fs::write(&manifest_path, serde_json::to_vec(&honest).expect("json")).expect("write");
+
+    // Without config.toml, existing sequences are not adopted under whatever config runs.
+    std::fs::remove_file(data.join("config.toml")).expect("remove stamp");
+    refused_in(dir.path(), &generate, "no config.toml");
+}
