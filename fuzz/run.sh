@@ -18,22 +18,29 @@ else
     targets=(urdf urdf_rapier stl obj dae png scenario evaluation dataset_config train_config weights manifest)
 fi
 export AFL_SKIP_CPUFREQ=1 AFL_I_DONT_CARE_ABOUT_MISSING_CRASHES=1 AFL_NO_UI=1 AFL_NO_AFFINITY=1
+export AFL_MAP_SIZE=262144
+# afl-cmin calls afl-showmap by name: the one cargo-afl built, not an older one on the PATH.
+showmap=$(find ~/.local/share/afl.rs -name afl-showmap -path '*afl/bin/*' 2>/dev/null | head -n 1)
+if [ -n "$showmap" ]; then
+    PATH="$(dirname "$showmap"):$PATH"
+fi
 cargo afl build --release
 mkdir -p out
+here="$PWD"
 
 fuzz_one() {
     local t="$1"
     rm -rf "out/$t"
     # -t: an input slower than 5 s is a hang; -m: one that maps more than 8 GB is a crash.
-    AFL_MAP_SIZE=262144 cargo afl fuzz -i "corpus/$t" -o "out/$t" -V "$seconds" -t 5000 -m 8192 \
+    cargo afl fuzz -i "corpus/$t" -o "out/$t" -V "$seconds" -t 5000 -m 8192 \
         -- target/release/fuzz "$t" > "out/$t.log" 2>&1 || true
     mkdir -p "out/findings/$t"
     cp out/"$t"/default/crashes/id:* "out/findings/$t/" 2>/dev/null || true
     cp out/"$t"/default/hangs/id:* "out/findings/$t/" 2>/dev/null || true
     # Keep the smallest inputs that cover what the whole queue covers.
     rm -rf "out/$t.min"
-    if cargo afl cmin -i "out/$t/default/queue" -o "out/$t.min" -t 5000 -m none \
-        -- target/release/fuzz "$t" > "out/$t.cmin.log" 2>&1; then
+    if timeout 900 cargo afl cmin -i "$here/out/$t/default/queue" -o "$here/out/$t.min" -t 5000 -m 8192 \
+        -- "$here/target/release/fuzz" "$t" > "out/$t.cmin.log" 2>&1; then
         rm -rf "corpus/$t"
         mv "out/$t.min" "corpus/$t"
     fi
@@ -52,13 +59,13 @@ wait
 
 stat() { grep "^$2 " "out/$1/default/fuzzer_stats" | sed 's/.*: //'; }
 {
-    echo "| target | run s | executions | exec/s | corpus kept | paths found | last new path, s before the end | crashes | hangs |"
+    echo "| target | run s | executions | exec/s | paths found | corpus kept | last new path, s before the end | crashes | hangs |"
     echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|"
-    for t in "${targets[@]}"; do
+    for t in urdf urdf_rapier stl obj dae png scenario evaluation dataset_config train_config weights manifest; do
         f="out/$t/default/fuzzer_stats"
-        [ -f "$f" ] || { echo "| $t | no run: see fuzz/out/$t.log | | | | | | | |"; continue; }
+        [ -f "$f" ] || continue
         start=$(stat "$t" start_time); last=$(stat "$t" last_update); find=$(stat "$t" last_find)
         quiet=$(( find > 0 ? last - find : last - start ))
-        echo "| $t | $((last - start)) | $(stat "$t" execs_done) | $(stat "$t" execs_per_sec) | $(ls "corpus/$t" | wc -l) | $(stat "$t" corpus_found) | $quiet | $(stat "$t" saved_crashes) | $(stat "$t" saved_hangs) |"
+        echo "| $t | $((last - start)) | $(stat "$t" execs_done) | $(stat "$t" execs_per_sec) | $(stat "$t" corpus_found) | $(ls "corpus/$t" | wc -l) | $quiet | $(stat "$t" saved_crashes) | $(stat "$t" saved_hangs) |"
     done
 } | tee out/campaign.md

@@ -426,8 +426,9 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
 
     let weights = out.join("procnet.safetensors");
     let weights_s = weights.to_str().expect("utf-8");
-    let eval_test = |extra: &[&str]| {
-        let mut args = vec![
+    // `eval segmentation` of the run's weights on a split of the dataset.
+    let eval_args = |split: &'static str| {
+        vec![
             "eval",
             "segmentation",
             "--weights",
@@ -435,8 +436,11 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "--dataset",
             data_s,
             "--split",
-            "test",
-        ];
+            split,
+        ]
+    };
+    let eval_test = |extra: &[&str]| {
+        let mut args = eval_args("test");
         args.extend_from_slice(extra);
         workcell(&args)
     };
@@ -465,6 +469,44 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     assert!(
         md.contains("(2 of its ") && md.contains("Split `test`: 2 sequences, 6 frames scored"),
         "{md}"
+    );
+    // With standard output closed (`| true`), the table is still written to --out.
+    let table = tmp.path().join("table.md");
+    let (reader, writer) = std::io::pipe().expect("pipe");
+    drop(reader);
+    let closed = Command::new(env!("CARGO_BIN_EXE_workcell"))
+        .args(eval_args("test"))
+        .args(["--out", table.to_str().expect("utf-8")])
+        .stdout(writer)
+        .output()
+        .expect("run");
+    assert!(closed.status.success(), "{}", text(&closed.stderr));
+    assert!(
+        std::fs::read_to_string(&table)
+            .expect("table")
+            .contains("| forearm |")
+    );
+    // A split with no frame is an error, not a scored table (the dataset has no validation
+    // sequences) ...
+    refused(&eval_args("validation"), "has no validation sequences");
+    // ... and so are weights of NaN, which score NaN: every f32 of the data section is NaN.
+    let mut nan = std::fs::read(&weights).expect("weights");
+    let header = u64::from_le_bytes(nan[..8].try_into().expect("8 bytes")) as usize;
+    for chunk in nan[8 + header..].chunks_exact_mut(4) {
+        chunk.copy_from_slice(&f32::NAN.to_le_bytes());
+    }
+    let nan_path = tmp.path().join("nan.safetensors");
+    std::fs::write(&nan_path, nan).expect("write");
+    refused(
+        &[
+            "eval",
+            "segmentation",
+            "--weights",
+            nan_path.to_str().expect("utf-8"),
+            "--dataset",
+            data_s,
+        ],
+        "the scores are not finite",
     );
     let bad = workcell(&[
         "eval",

@@ -308,17 +308,15 @@ fn a_closed_pipe_is_not_a_panic_and_files_are_still_written() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out_dir = dir.path().join("sim");
     let scenario = root().join("configs/default.toml");
-    let out = with_closed_stdout(
-        dir.path(),
-        &[
-            "simulate",
-            s(&scenario),
-            "--seconds",
-            "0.05",
-            "--out",
-            s(&out_dir),
-        ],
-    );
+    let simulate = [
+        "simulate",
+        s(&scenario),
+        "--seconds",
+        "0.05",
+        "--out",
+        s(&out_dir),
+    ];
+    let out = with_closed_stdout(dir.path(), &simulate);
     assert!(out.status.success(), "{}", text(&out.stderr));
     for file in ["summary.json", "cell.svg", "robot_joints.csv"] {
         assert!(out_dir.join(file).is_file(), "{file}");
@@ -339,18 +337,7 @@ fn a_closed_pipe_is_not_a_panic_and_files_are_still_written() {
     ] {
         std::fs::remove_file(out_dir.join(file)).expect("remove");
     }
-    refused_in(
-        dir.path(),
-        &[
-            "simulate",
-            s(&scenario),
-            "--seconds",
-            "0.05",
-            "--out",
-            s(&out_dir),
-        ],
-        "already holds cell.svg",
-    );
+    refused_in(dir.path(), &simulate, "already holds cell.svg");
 }
 
 /// A small dataset (2 sequences per pair of 4 frames at 32 px) in `dir/data`.
@@ -367,33 +354,28 @@ fn small_dataset(dir: &Path) -> (PathBuf, PathBuf) {
     )
     .expect("config");
     let data = dir.join("data");
-    let out = workcell_in(
-        dir,
-        &[
-            "dataset",
-            "generate",
-            "--config",
-            s(&config),
-            "--out",
-            s(&data),
-        ],
-    );
+    let out = workcell_in(dir, &generate_args(&config, &data));
     assert!(out.status.success(), "{}", text(&out.stderr));
     (config, data)
+}
+
+/// `dataset generate --config CONFIG --out OUT`.
+fn generate_args<'a>(config: &'a Path, out: &'a Path) -> [&'a str; 6] {
+    [
+        "dataset",
+        "generate",
+        "--config",
+        s(config),
+        "--out",
+        s(out),
+    ]
 }
 
 #[test]
 fn datasets_are_never_trusted_blindly() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (config, data) = small_dataset(dir.path());
-    let generate = [
-        "dataset",
-        "generate",
-        "--config",
-        s(&config),
-        "--out",
-        s(&data),
-    ];
+    let generate = generate_args(&config, &data);
     // A deleted PNG: the rerun regenerates its sequence instead of certifying the dataset.
     let png = data.join("seq_00000/frame_002_rgb.png");
     let before = std::fs::read(&png).expect("png");
@@ -440,4 +422,10 @@ fn datasets_are_never_trusted_blindly() {
     // Without config.toml, existing sequences are not adopted under whatever config runs.
     std::fs::remove_file(data.join("config.toml")).expect("remove stamp");
     refused_in(dir.path(), &generate, "no config.toml");
+
+    // A folder that cannot be made is a write failure, and says so (it said "cannot read").
+    let blocker = dir.path().join("a-file");
+    std::fs::write(&blocker, "x").expect("write");
+    let inside = blocker.join("data");
+    refused_in(dir.path(), &generate_args(&config, &inside), "cannot write");
 }

@@ -149,3 +149,15 @@ fn lying_counts_and_odd_names_are_told_apart() {
         .expect("ASCII STL with a UTF-8 name");
     assert_eq!(mesh.triangles.len(), 12);
 }
+
+#[test]
+fn deeply_nested_collada_is_an_error_not_a_stack_overflow() {
+    let dae = format!(
+        "<COLLADA>{}{}</COLLADA>",
+        "<node>".repeat(20_000),
+        "</node>".repeat(20_000)
+    );
+    let err =
+        TriMesh::from_bytes(dae.as_bytes(), Path::new("deep.dae"), [1.0; 3]).expect_err("too deep");
+    assert!(err.contains("deeper than 256 levels"), "{err}");
+}

@@ -1,7 +1,6 @@
 //! `workcell evaluate`: closed-loop safety episodes of a cell, with a report.
 
 use std::fs;
-use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Mutex;
@@ -213,15 +212,12 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     out.commit()?;
     let a = Aggregate::of(&episodes);
     // A closed pipe (`| head`) is not an error: the report is already written.
-    let mut stdout = std::io::stdout().lock();
-    let _ = writeln!(
-        stdout,
+    say!(
         "{} episodes, filter {mode}, perception {perception}: {}",
         a.episodes,
         a.headline(evaluation.config.safety.d_min_m)
     );
-    let _ = writeln!(
-        stdout,
+    say!(
         "closed loop at {:.1}x real time per core; report: {}",
         a.real_time_factor,
         args.out.join("summary.md").display()

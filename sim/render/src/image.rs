@@ -180,3 +180,48 @@ pub(crate) fn temporary_name(path: &Path) -> PathBuf {
 pub fn write_png(path: &Path, width: u32, height: u32, kind: PixelKind, data: &[u8]) -> Result<()> {
     write_atomic(path, &encode_png(width, height, kind, data)?)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// CRC-32 (IEEE), as PNG chunks carry it.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = 0xFFFF_FFFF_u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
+    }
+
+    #[test]
+    fn a_png_declaring_a_huge_image_is_refused_before_its_pixels_are_allocated() {
+        let small = encode_png(1, 1, PixelKind::Rgb, &[1, 2, 3]).expect("encode");
+        assert_eq!(
+            decode_png(&small, Path::new("small.png"))
+                .expect("decode")
+                .3,
+            [1, 2, 3]
+        );
+        // The same file with IHDR saying 16000x16000 (760 MB of RGB), its CRC made right.
+        let mut huge = small.clone();
+        huge[16..20].copy_from_slice(&16000_u32.to_be_bytes());
+        huge[20..24].copy_from_slice(&16000_u32.to_be_bytes());
+        let crc = crc32(&huge[12..29]);
+        huge[29..33].copy_from_slice(&crc.to_be_bytes());
+        let err = decode_png(&huge, Path::new("huge.png"))
+            .expect_err("huge")
+            .to_string();
+        assert!(
+            err.contains("PNG of 16000x16000 pixels; at most 4096"),
+            "{err}"
+        );
+    }
+}
