@@ -6,9 +6,16 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
-    /// A file could not be read or written.
-    #[error("{path}: cannot read or write")]
+    /// A file could not be read.
+    #[error("{path}: cannot read")]
     Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file could not be written.
+    #[error("{path}: cannot write")]
+    Write {
         path: PathBuf,
         #[source]
         source: std::io::Error,

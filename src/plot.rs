@@ -370,8 +370,7 @@ mod hull_tests {
 /// without any installed font the text is left out and the lines still drawn).
 ///
 /// # Errors
-/// [`crate::Error::Plot`] for a document resvg cannot read; [`crate::Error::Io`] when the
-/// file cannot be written.
+/// [`crate::Error::Plot`] for a document resvg cannot read or a PNG that cannot be written.
 pub fn svg_to_png(svg: &str, path: &std::path::Path) -> crate::Result<()> {
     use resvg::{tiny_skia, usvg};
     let mut options = usvg::Options::default();

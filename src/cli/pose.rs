@@ -59,8 +59,8 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
             let weights = args.weights.clone().unwrap_or_else(|| {
                 PathBuf::from(format!("perception/weights/{kind}-cpu.safetensors"))
             });
-            let net = ProcNet::load(&weights, Backend::parse(&args.backend)?)
-                .with_context(|| format!("loading {}", weights.display()))?;
+            // The error names the file already.
+            let net = ProcNet::load(&weights, Backend::parse(&args.backend)?)?;
             if net.config().is_feed_forward() != (kind == "baseline") {
                 anyhow::bail!(
                     "--masks {kind}, but {} holds a {}",

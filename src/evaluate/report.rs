@@ -378,7 +378,7 @@ pub fn write_plots(
     ] {
         let svg = svg_panels(&x, "time [s]", &[panel]);
         let svg_path = out.join(format!("{name}.svg"));
-        std::fs::write(&svg_path, &svg).map_err(|source| crate::Error::Io {
+        std::fs::write(&svg_path, &svg).map_err(|source| crate::Error::Write {
             path: svg_path.clone(),
             source,
         })?;

@@ -151,9 +151,9 @@ pub fn read_png(path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
 /// Writes `bytes` to `path` atomically: into a temporary file beside it, synced, then renamed.
 ///
 /// # Errors
-/// [`RenderError::Io`] naming the file.
+/// [`RenderError::Write`] naming the file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let io = |source| RenderError::Io {
+    let io = |source| RenderError::Write {
         path: path.to_path_buf(),
         source,
     };
