@@ -2,8 +2,9 @@
 # The fuzz campaign of docs/reliability.md: every target of fuzz/src/targets.rs under AFL++
 # for SECONDS each (default 300), JOBS targets at a time (default 2), starting from the kept
 # corpus in fuzz/corpus/TARGET. Afterwards the queue is minimised back into fuzz/corpus,
-# crashes and hangs are copied to fuzz/out/findings/TARGET, and a table of executions,
-# corpus sizes and findings per target is printed (fuzz/out/campaign.md).
+# crashes and hangs are copied to fuzz/out/findings/TARGET (fix each, then keep it in
+# fuzz/regressions/TARGET, where tests/fuzz_corpora.rs replays it), and a table of
+# executions, corpus sizes and findings per target is printed (fuzz/out/campaign.md).
 #
 # Setup (once): `cargo install cargo-afl --locked` (it builds AFL++ for the toolchain).
 # Usage: fuzz/run.sh [SECONDS] [JOBS] [TARGET ...]
@@ -35,14 +36,19 @@ fuzz_one() {
     cargo afl fuzz -i "corpus/$t" -o "out/$t" -V "$seconds" -t 5000 -m 8192 \
         -- target/release/fuzz "$t" > "out/$t.log" 2>&1 || true
     mkdir -p "out/findings/$t"
-    cp out/"$t"/default/crashes/id:* "out/findings/$t/" 2>/dev/null || true
-    cp out/"$t"/default/hangs/id:* "out/findings/$t/" 2>/dev/null || true
+    for f in out/"$t"/default/crashes/id:* out/"$t"/default/hangs/id:*; do
+        [ -f "$f" ] && cp "$f" "out/findings/$t/$(sha256sum "$f" | cut -c1-16)"
+    done
     # Keep the smallest inputs that cover what the whole queue covers.
     rm -rf "out/$t.min"
     if timeout 900 cargo afl cmin -i "$here/out/$t/default/queue" -o "$here/out/$t.min" -t 5000 -m 8192 \
         -- "$here/target/release/fuzz" "$t" > "out/$t.cmin.log" 2>&1; then
         rm -rf "corpus/$t"
         mv "out/$t.min" "corpus/$t"
+        # Files named by their content (AFL's names hold ':' and ','), one of each.
+        for f in "corpus/$t"/*; do
+            mv -n "$f" "corpus/$t/$(sha256sum "$f" | cut -c1-16)" 2>/dev/null || true
+        done
     fi
 }
 

@@ -62,8 +62,10 @@ impl TriMesh {
         // triangles pointed at the first one's vertices (a UR5 upper arm lost its tube).
         let loader = mesh_loader::Loader::default();
         // OBJ files may name material libraries; those are not needed for geometry. The
-        // decoder panics on some corrupted files (seen on COLLADA with dangling references):
-        // a broken file must be an error, so the panic is caught here.
+        // decoder panics on some corrupted files (seen on COLLADA with dangling references,
+        // and by the fuzz campaign in its iterators and instancing): a broken file must be an
+        // error, so the panic is caught here. That needs unwinding panics, the default; a
+        // build with `panic = "abort"` would turn such a file into a crash.
         let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             loader.load_from_slice_with_reader(bytes, path, |_| Ok(Vec::new()))
         }));
