@@ -63,15 +63,8 @@ for t in "${targets[@]}"; do
 done
 wait
 
-stat() { grep "^$2 " "out/$1/default/fuzzer_stats" | sed 's/.*: //'; }
-{
-    echo "| target | run s | executions | exec/s | paths found | corpus kept | last new path, s before the end | crashes | hangs |"
-    echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|"
-    for t in urdf urdf_rapier stl obj dae png scenario evaluation dataset_config train_config weights manifest; do
-        f="out/$t/default/fuzzer_stats"
-        [ -f "$f" ] || continue
-        start=$(stat "$t" start_time); last=$(stat "$t" last_update); find=$(stat "$t" last_find)
-        quiet=$(( find > 0 ? last - find : last - start ))
-        echo "| $t | $((last - start)) | $(stat "$t" execs_done) | $(stat "$t" execs_per_sec) | $(stat "$t" corpus_found) | $(ls "corpus/$t" | wc -l) | $quiet | $(stat "$t" saved_crashes) | $(stat "$t" saved_hangs) |"
-    done
-} | tee out/campaign.md
+pairs=()
+for t in "${targets[@]}"; do
+    [ -f "out/$t/default/fuzzer_stats" ] && pairs+=("$t=out/$t")
+done
+python3 table.py "${pairs[@]}" | tee out/campaign.md
