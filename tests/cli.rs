@@ -1,5 +1,7 @@
 //! The `workcell` binary end to end, as a user runs it.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -802,10 +804,8 @@ fn robot_add_copies_a_vendor_arm_that_scenarios_can_name() {
     let dir = tempfile::tempdir().expect("temp");
     let library = dir.path().join("library");
     let run = |args: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_workcell"))
+        common::workcell_with_library(dir.path(), &library)
             .args(args)
-            .env("WORKCELL_ROBOT_PATH", &library)
-            .current_dir(dir.path())
             .output()
             .expect("run workcell")
     };

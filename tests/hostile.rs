@@ -2,6 +2,8 @@
 //! malicious user would drive it. Each case was a crash, a hang or a half-written state
 //! before; each must now be a clear error (exit 1, or clap's 2 for a bad flag) or work.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
@@ -197,10 +199,8 @@ fn robot_add_is_all_or_nothing() {
     let dir = tempfile::tempdir().expect("tempdir");
     let library = dir.path().join("library");
     let run = |args: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_workcell"))
+        common::workcell_with_library(dir.path(), &library)
             .args(args)
-            .env("WORKCELL_ROBOT_PATH", &library)
-            .current_dir(dir.path())
             .output()
             .expect("run workcell")
     };
@@ -236,7 +236,7 @@ fn robot_add_is_all_or_nothing() {
     assert!(library.join("wide/preview.png").is_file());
 
     // Killed half-way (as by Ctrl-C), an add leaves nothing a scenario could name.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_workcell"))
+    let mut child = common::workcell_with_library(dir.path(), &library)
         .args([
             "robot",
             "add",
@@ -246,8 +246,6 @@ fn robot_add_is_all_or_nothing() {
             "--into",
             s(&library),
         ])
-        .env("WORKCELL_ROBOT_PATH", &library)
-        .current_dir(dir.path())
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
