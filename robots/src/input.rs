@@ -190,12 +190,21 @@ pub fn check_collada_counts(doc: &roxmltree::Document<'_>, len: usize) -> Result
             "triangles" | "polylist" | "polygons" | "lines" | "linestrips" | "tristrips"
             | "trifans" => {
                 let vertices = match name {
-                    "triangles" => 3,
+                    "triangles" => 3_u128,
                     "lines" => 2,
                     _ => 1,
                 };
-                let inputs = node.children().filter(|c| c.has_tag_name("input")).count();
-                vertices * inputs.max(1) as u128
+                // Each vertex of the index list `<p>` has as many indices as the largest
+                // input `offset` plus one (the decoder reserves for that).
+                let mut width = 1_u128;
+                for input in node.children().filter(|c| c.has_tag_name("input")) {
+                    let offset = input.attribute("offset").unwrap_or("0");
+                    let offset: u128 = offset.trim().parse().map_err(|_| {
+                        format!("<input offset=\"{offset}\"> is not a non-negative integer")
+                    })?;
+                    width = width.max(offset.saturating_add(1));
+                }
+                vertices.saturating_mul(width)
             }
             _ => {
                 let stride = node.attribute("stride").unwrap_or("1");
@@ -277,6 +286,12 @@ mod tests {
             "<COLLADA><triangles count=\"4294967295\"><input/><p>0 1 2</p></triangles></COLLADA>";
         let doc = parse_xml(lie).expect("xml");
         let err = check_collada_counts(&doc, lie.len()).expect_err("lie");
+        // An input offset the file cannot back (the decoder reserved 576 GB for one; found by
+        // the fuzz campaign).
+        let offset = "<COLLADA><triangles count=\"12\"><input offset=\"4000000000\"/>\
+                      <p>0 1 2</p></triangles></COLLADA>";
+        let offset_doc = parse_xml(offset).expect("xml");
+        assert!(check_collada_counts(&offset_doc, offset.len()).is_err());
         assert!(err.contains("<triangles count=\"4294967295\">"), "{err}");
     }
 
