@@ -106,6 +106,25 @@ fn check_nesting(text: &[u8]) -> Result<(), String> {
             .and_then(|rest| rest.windows(needle.len()).position(|w| w == needle))
             .map_or(text.len(), |at| from + at + needle.len())
     };
+    // The `>` that closes a tag begun before `from`: not one inside quotes, nor (for a
+    // declaration) one inside brackets.
+    let tag_end = |from: usize, brackets_nest: bool| -> usize {
+        let (mut brackets, mut quote) = (0_usize, None);
+        let mut j = from;
+        while j < text.len() {
+            match (quote, text[j]) {
+                (Some(q), c) if c == q => quote = None,
+                (Some(_), _) => {}
+                (None, c @ (b'"' | b'\'')) => quote = Some(c),
+                (None, b'[') if brackets_nest => brackets += 1,
+                (None, b']') if brackets_nest => brackets = brackets.saturating_sub(1),
+                (None, b'>') if brackets == 0 => break,
+                _ => {}
+            }
+            j += 1;
+        }
+        j
+    };
     let mut depth = 0_usize;
     let mut i = 0;
     while i < text.len() {
@@ -122,37 +141,12 @@ fn check_nesting(text: &[u8]) -> Result<(), String> {
             i = find(i + 2, b"?>");
         } else if rest.starts_with(b"<!") {
             // A declaration, with an internal subset in brackets for a DOCTYPE.
-            let mut j = i + 2;
-            let (mut brackets, mut quote) = (0_usize, None);
-            while j < text.len() {
-                match (quote, text[j]) {
-                    (Some(q), c) if c == q => quote = None,
-                    (Some(_), _) => {}
-                    (None, c @ (b'"' | b'\'')) => quote = Some(c),
-                    (None, b'[') => brackets += 1,
-                    (None, b']') => brackets = brackets.saturating_sub(1),
-                    (None, b'>') if brackets == 0 => break,
-                    _ => {}
-                }
-                j += 1;
-            }
-            i = j + 1;
+            i = tag_end(i + 2, true) + 1;
         } else if rest.starts_with(b"</") {
             depth = depth.saturating_sub(1);
             i = find(i + 2, b">");
         } else {
-            let mut j = i + 1;
-            let mut quote = None;
-            while j < text.len() {
-                match (quote, text[j]) {
-                    (Some(q), c) if c == q => quote = None,
-                    (Some(_), _) => {}
-                    (None, c @ (b'"' | b'\'')) => quote = Some(c),
-                    (None, b'>') => break,
-                    _ => {}
-                }
-                j += 1;
-            }
+            let j = tag_end(i + 1, false);
             if text.get(j.wrapping_sub(1)) != Some(&b'/') {
                 depth += 1;
                 if depth > MAX_XML_DEPTH {
