@@ -52,6 +52,34 @@ pub struct PairConstraint {
     /// the normal (the normal points from human to robot); a withdrawing part counts as
     /// standing.
     pub human_normal_speed_m_s: f64,
+    /// Power and force limiting: the robot's witness point may approach the part at most
+    /// this fast, m/s (ISO/TS 15066's transient contact speed of the part's body region);
+    /// infinite outside the filter's `pfl_distance_m`.
+    pub max_approach_m_s: f64,
+}
+
+impl PairConstraint {
+    /// The fastest the robot's witness point may approach the part, m/s (negative: it must
+    /// move away): the barrier `gamma (d - d_min) - v_human`, capped by
+    /// [`PairConstraint::max_approach_m_s`]. Its row reads `-normal_jacobian . qdot <= bound`.
+    #[must_use]
+    #[inline]
+    pub fn approach_bound_m_s(&self, gamma_per_s: f64, d_min_m: f64) -> f64 {
+        (gamma_per_s * (self.pair.distance_m - d_min_m) - self.human_normal_speed_m_s)
+            .min(self.max_approach_m_s)
+    }
+
+    /// How fast joint velocities `qdot` move the robot's witness point toward the part, m/s.
+    #[must_use]
+    #[inline]
+    pub fn approach_m_s(&self, qdot: &[f64]) -> f64 {
+        -self
+            .normal_jacobian
+            .iter()
+            .zip(qdot)
+            .map(|(a, v)| a * v)
+            .sum::<f64>()
+    }
 }
 
 /// The robot's geometry for distance queries: a bounding capsule per link (used by the
@@ -186,6 +214,7 @@ impl RobotGeometry {
                             .nhat_BA_W
                             .dot(estimate.velocity_at(p.t_B))
                             .max(0.0),
+                        max_approach_m_s: f64::INFINITY,
                     });
                 };
                 push(pair);

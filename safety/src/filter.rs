@@ -7,8 +7,8 @@ use workcell_robots::{KinematicState, RobotModel};
 
 use crate::distance::{PairConstraint, RobotGeometry};
 use crate::error::{Result, invalid};
-use crate::human::HumanEstimate;
-use crate::iso::SsmConfig;
+use crate::human::{HumanEstimate, HumanPart};
+use crate::iso::{BodyRegion, SsmConfig, effective_robot_mass_kg};
 use crate::qp::{QpFailure, QpFilter};
 
 /// Which filter guards the robot.
@@ -60,11 +60,20 @@ pub struct FilterConfig {
     /// the command within their own acceleration limits.
     pub bound_acceleration: bool,
     /// When no command keeps every pair row (the human approaches faster than the arm can
-    /// retreat), the filter takes the command that breaks them least if it breaks them by at
-    /// most this much, m/s ([`FilterStatus::Relaxed`]); beyond, it brakes. Default 1.
+    /// retreat), the filter takes the command that protects the closest pair most (farther
+    /// pairs give way first) if it breaks the closest pair's row by at most this much, m/s
+    /// ([`FilterStatus::Relaxed`]); beyond, it brakes. Default 1.
     pub max_relaxation_m_s: f64,
     /// Joint position limits become velocity bounds `gain (q_max - q)`, 1/s. Default 10.
     pub position_gain_per_s: f64,
+    /// Power and force limiting: within this capsule distance of a human part the robot
+    /// may approach that part at most at ISO/TS 15066's transient contact speed of its body
+    /// region (QP: a cap on the pair's row; SSM: on the scale), m. 0 turns it off.
+    /// Default 0.3.
+    pub pfl_distance_m: f64,
+    /// Payload at the tool for the effective robot mass of power and force limiting
+    /// (M/2 + payload), kg. Default 0.
+    pub payload_kg: f64,
     /// Speed and separation monitoring.
     pub ssm: SsmConfig,
 }
@@ -80,6 +89,8 @@ impl Default for FilterConfig {
             bound_acceleration: false,
             max_relaxation_m_s: 1.0,
             position_gain_per_s: 10.0,
+            pfl_distance_m: 0.3,
+            payload_kg: 0.0,
             ssm: SsmConfig::default(),
         }
     }
@@ -108,6 +119,14 @@ impl FilterConfig {
         positive("safety.gamma_per_s", self.gamma_per_s)?;
         positive("safety.acceleration_rad_s2", self.acceleration_rad_s2)?;
         positive("safety.position_gain_per_s", self.position_gain_per_s)?;
+        for (key, v) in [
+            ("safety.pfl_distance_m", self.pfl_distance_m),
+            ("safety.payload_kg", self.payload_kg),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(key, format!("must be finite and >= 0, got {v}")));
+            }
+        }
         if !(self.max_relaxation_m_s.is_finite() && self.max_relaxation_m_s >= 0.0) {
             return Err(invalid(
                 "safety.max_relaxation_m_s",
@@ -185,8 +204,9 @@ pub enum FilterStatus {
     Pass,
     /// The command was changed to keep the separation (or the joint bounds).
     Modified,
-    /// No command keeps every pair row: the one that breaks them least (by `slack_m_s` of
-    /// [`FilterOutput`]) moves the arm away as fast as its limits allow.
+    /// No command keeps every pair row: the one that protects the closest pair most (its
+    /// row broken by `slack_m_s` of [`FilterOutput`]) moves the arm away as fast as its
+    /// limits allow.
     Relaxed,
     /// Fail-safe: braking toward standstill within the acceleration bound.
     Braking(BrakeReason),
@@ -216,7 +236,8 @@ pub struct FilterOutput {
     pub min_distance_m: f64,
     /// SSM: the factor applied to the nominal command; QP: 1 (see the command itself).
     pub scale: f64,
-    /// QP: by how much the worst pair row is broken, m/s (0 unless [`FilterStatus::Relaxed`]).
+    /// QP: by how much the closest pair's row is broken, m/s (0 unless
+    /// [`FilterStatus::Relaxed`]).
     pub slack_m_s: f64,
 }
 
@@ -237,14 +258,18 @@ pub struct SafetyFilter {
     velocity_limit: Vec<f64>,
     acceleration_limit: Vec<f64>,
     position_limits: Vec<[f64; 2]>,
+    /// Power and force limiting: the largest approach speed per part, indexed by
+    /// [`HumanPart::ALL`] (infinite when PFL is off).
+    pfl_limits_m_s: [f64; 4],
 }
 
 impl SafetyFilter {
     /// A filter for `robot` with its root at `X_WB`.
     ///
     /// # Errors
-    /// [`SafetyError`] for an invalid configuration, a robot without collision geometry, or
-    /// with too many joints.
+    /// [`SafetyError`] for an invalid configuration, a robot without collision geometry, with
+    /// too many joints, or without mass while power and force limiting is on (its contact
+    /// speeds depend on the robot's effective mass).
     pub fn new(
         robot: &RobotModel,
         X_WB: Pose,
@@ -285,7 +310,26 @@ impl SafetyFilter {
                 }
             })
             .collect();
+        let mut pfl_limits_m_s = [f64::INFINITY; 4];
+        if config.pfl_distance_m > 0.0 {
+            let m_r = effective_robot_mass_kg(robot.mass_kg(), config.payload_kg);
+            if !(m_r.is_finite() && m_r > 0.0) {
+                return Err(invalid(
+                    "safety.pfl_distance_m",
+                    format!(
+                        "robot '{}' has no mass in its description: power and force limiting \
+                         needs it (give the links <inertial> masses, or set \
+                         safety.pfl_distance_m = 0)",
+                        robot.name()
+                    ),
+                ));
+            }
+            for (limit, part) in pfl_limits_m_s.iter_mut().zip(HumanPart::ALL) {
+                *limit = BodyRegion::of(part).max_contact_speed_m_s(m_r, true);
+            }
+        }
         Ok(Self {
+            pfl_limits_m_s,
             mode,
             geometry,
             qp,
@@ -447,6 +491,11 @@ impl SafetyFilter {
             self.config.detection_m,
             &mut self.pairs,
         );
+        for c in &mut self.pairs {
+            if c.pair.distance_m < self.config.pfl_distance_m {
+                c.max_approach_m_s = self.pfl_limits_m_s[part_index(c.pair.part)];
+            }
+        }
         out.active_pairs = self.pairs.len();
         out.min_distance_m = self
             .pairs
@@ -461,15 +510,10 @@ impl SafetyFilter {
             .zip(self.lb.iter().zip(&self.ub))
             .all(|(v, (lo, hi))| lo <= v && v <= hi);
         let (gamma, d_min) = (self.config.gamma_per_s, self.config.d_min_m);
-        let satisfied = self.pairs.iter().all(|c| {
-            let rate: f64 = c
-                .normal_jacobian
-                .iter()
-                .zip(qdot_nom)
-                .map(|(a, v)| a * v)
-                .sum();
-            rate - c.human_normal_speed_m_s >= -gamma * (c.pair.distance_m - d_min)
-        });
+        let satisfied = self
+            .pairs
+            .iter()
+            .all(|c| c.approach_m_s(qdot_nom) <= c.approach_bound_m_s(gamma, d_min));
         if within && satisfied {
             self.qdot.copy_from_slice(qdot_nom);
             return out;
@@ -508,20 +552,15 @@ impl SafetyFilter {
         // are inflated by it), so Z_d is 0 here.
         let mut scale: f64 = 1.0;
         for c in &self.pairs {
-            let rate: f64 = c
-                .normal_jacobian
-                .iter()
-                .zip(qdot_nom)
-                .map(|(a, v)| a * v)
-                .sum();
-            let approach = (-rate).max(0.0);
+            let approach = c.approach_m_s(qdot_nom);
             if approach <= 0.0 {
                 continue;
             }
             let allowed = self
                 .config
                 .ssm
-                .max_robot_speed_m_s(c.pair.distance_m - self.config.d_min_m, 0.0);
+                .max_robot_speed_m_s(c.pair.distance_m - self.config.d_min_m, 0.0)
+                .min(c.max_approach_m_s);
             scale = scale.min(allowed / approach);
         }
         out.scale = scale;
@@ -566,5 +605,15 @@ impl SafetyFilter {
         out.status = FilterStatus::Braking(reason);
         out.scale = 0.0;
         out
+    }
+}
+
+/// Index of `part` in [`HumanPart::ALL`].
+fn part_index(part: HumanPart) -> usize {
+    match part {
+        HumanPart::Torso => 0,
+        HumanPart::UpperArm => 1,
+        HumanPart::Forearm => 2,
+        HumanPart::Hand => 3,
     }
 }

@@ -3,6 +3,7 @@
 //! ```text
 //! minimize    1/2 ||qdot - qdot_nom||^2
 //! subject to  nhat^T (J qdot - v_B) >= -gamma (d - d_min)    one row per pair (padded)
+//!             -nhat^T J qdot <= v_pfl                          within the PFL distance
 //!             lb <= qdot <= ub                                 velocity, acceleration and
 //!                                                              position limits
 //! ```
@@ -11,11 +12,20 @@
 //! approach speed, which filters that assume a static obstacle leave out.
 //!
 //! A human can approach faster than the arm can retreat; then no command satisfies every
-//! row. The pair rows therefore share one slack `s >= 0` (in m/s) with an exact penalty
-//! `rho s` in the cost: whenever the hard problem is feasible its solution is returned
-//! unchanged (`s = 0`), and otherwise the command that breaks the rows least, which moves
-//! the arm away as fast as its limits allow instead of freezing it in the human's path. The
-//! caller decides what slack is acceptable ([`crate::FilterConfig::max_relaxation_m_s`]).
+//! row. The pair rows therefore share one slack `s >= 0` with an exact penalty `rho s` in
+//! the cost, each row relaxed by `w_i s` with `w_i` proportional to `max(d_i - d_min, 0) +
+//! w_0` (1 for the closest pair): whenever
+//! the hard problem is feasible its solution is returned unchanged (`s = 0`), and otherwise
+//! the command that minimises the largest weighted violation. A pair with room to spare
+//! gives way first, the closest pair last (its row is nearly hard): relaxing row i by
+//! `(d_i - d_min) s` is the same as raising its barrier rate from gamma to gamma + s. The
+//! arm thus moves away from the closest part as fast as its limits allow instead of trading
+//! that pair's distance against a far one. The caller decides what violation of the closest
+//! pair's row is acceptable ([`crate::FilterConfig::max_relaxation_m_s`]).
+//!
+//! Power and force limiting needs no rows of its own: its cap on the approach speed of a
+//! pair's witness point has the same coefficients as the pair's barrier row, so each row's
+//! bound is the smaller of the two ([`PairConstraint::approach_bound_m_s`]).
 //!
 //! clarabel's form is `A x + s = b, s >= 0`, so every row is written as `a^T qdot <= b`.
 //! The matrix `A` has, column by column, `max_pairs` pair entries (explicit zeros on unused
@@ -87,9 +97,12 @@ impl std::fmt::Display for QpFailure {
 
 /// Tolerance on a row of the returned solution, in the row's units (m/s or rad/s).
 const ROW_TOLERANCE: f64 = 1e-5;
-/// Cost of one m/s of slack: far above any multiplier of a row at these scales (the exact
-/// penalty then reproduces the hard solution whenever one exists).
+/// Cost of one m/s of slack in the closest pair's row: far above any multiplier of a row at
+/// these scales (the exact penalty then reproduces the hard solution whenever one exists).
 const SLACK_WEIGHT: f64 = 1e4;
+/// A pair's slack weight is its room `max(d - d_min, 0)` plus this, m: pairs at d_min still
+/// give way in proportion, so that a command exists even when none can be kept.
+const SLACK_FLOOR_M: f64 = 0.01;
 /// Small quadratic weight on the slack, keeping the cost strictly convex.
 const SLACK_CURVATURE: f64 = 1e-6;
 
@@ -185,10 +198,11 @@ impl QpFilter {
     }
 
     /// Solves for the command closest to `qdot_nom` within `lb..=ub` that keeps every pair
-    /// of `pairs` from closing faster than `gamma_per_s (d - d_min_m)`. When there are more
-    /// pairs than rows, the closest ones are kept (`pairs` is reordered). Writes the command
-    /// into `qdot` and returns the slack: 0 when every row holds, otherwise by how much (m/s)
-    /// the least-violating command breaks the worst row.
+    /// of `pairs` from closing faster than `gamma_per_s (d - d_min_m)` and from approaching
+    /// faster than its PFL cap. When there are more pairs than rows, the closest ones are
+    /// kept (`pairs` is reordered). Writes the command into `qdot` and returns the
+    /// violation: 0 when every row holds, otherwise by how much (m/s) the least-violating
+    /// command breaks the closest pair's row.
     ///
     /// # Errors
     /// [`QpFailure`] when the solver does not return a solution that satisfies every row:
@@ -212,17 +226,24 @@ impl QpFilter {
             });
         }
         let used = pairs.len().min(rows);
+        // Slack weights relative to the closest pair's (1 for it): the slack stays in m/s
+        // of the closest row, which keeps the solver's accuracy where it matters.
+        let room = |c: &PairConstraint| (c.pair.distance_m - d_min_m).max(0.0) + SLACK_FLOOR_M;
+        let closest_room = pairs[..used].iter().map(room).fold(f64::INFINITY, f64::min);
         for i in 0..rows {
+            let slack_entry = n * per_column + i;
             if let Some(c) = pairs.get(i) {
                 for j in 0..n {
                     self.a_values[j * per_column + i] = -c.normal_jacobian[j];
                 }
-                self.b[i] = gamma_per_s * (c.pair.distance_m - d_min_m) - c.human_normal_speed_m_s;
+                self.b[i] = c.approach_bound_m_s(gamma_per_s, d_min_m);
+                self.a_values[slack_entry] = -room(c) / closest_room;
             } else {
                 for j in 0..n {
                     self.a_values[j * per_column + i] = 0.0;
                 }
                 self.b[i] = 1.0;
+                self.a_values[slack_entry] = -1.0;
             }
         }
         for j in 0..n {
@@ -248,13 +269,21 @@ impl QpFilter {
             return Err(QpFailure::BadSolution);
         }
         let slack = x[n].max(0.0);
-        // Check every row ourselves: a safety command is never taken on trust.
-        for i in 0..used {
+        // Check every row ourselves: a safety command is never taken on trust. What the
+        // caller judges is the violation of the closest pair's row (the far rows give way
+        // first, on purpose).
+        let (mut violation, mut closest) = (0.0, f64::INFINITY);
+        for (i, c) in pairs.iter().enumerate().take(used) {
             let lhs: f64 = (0..n)
                 .map(|j| self.a_values[j * per_column + i] * x[j])
                 .sum();
-            if lhs > self.b[i] + slack + ROW_TOLERANCE {
+            let weight = -self.a_values[n * per_column + i];
+            if lhs > self.b[i] + weight * slack + ROW_TOLERANCE {
                 return Err(QpFailure::BadSolution);
+            }
+            if c.pair.distance_m < closest {
+                closest = c.pair.distance_m;
+                violation = (lhs - self.b[i]).max(0.0);
             }
         }
         for j in 0..n {
@@ -264,7 +293,11 @@ impl QpFilter {
             // Clarabel's interior point stops within its tolerance of the boundary.
             qdot[j] = x[j].clamp(lb[j], ub[j]);
         }
-        // Below the solver's tolerance the slack is zero.
-        Ok(if slack > ROW_TOLERANCE { slack } else { 0.0 })
+        // Below the solver's tolerance the command keeps every row.
+        Ok(if violation > ROW_TOLERANCE {
+            violation
+        } else {
+            0.0
+        })
     }
 }

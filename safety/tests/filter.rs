@@ -27,6 +27,7 @@ fn row(normal_jacobian: &[f64], distance_m: f64, human_normal_speed_m_s: f64) ->
         },
         normal_jacobian: nj,
         human_normal_speed_m_s,
+        max_approach_m_s: f64::INFINITY,
     }
 }
 
@@ -123,6 +124,125 @@ fn qp_keeps_the_closest_pairs_when_rows_run_out() {
         .expect("solved");
     // Binding row: qdot >= 0.3 - 0.02 = 0.28.
     assert_abs_diff_eq!(qdot[0], 0.28, epsilon = 1e-6);
+}
+
+/// Two pairs that no command keeps: the closest (at d_min, the human closing at 1.5 m/s)
+/// wants qdot_0 >= 1.5, a far one (0.4 m of room at gamma 2, closing at 1.5 m/s) wants
+/// qdot_0 <= -0.7. The far pair gives way: the arm retreats from the closest at its bound,
+/// 1 rad/s, breaking the closest row by 0.5 m/s (one shared unweighted slack would split
+/// the difference at qdot_0 = 0.4 and break both by 1.1 m/s).
+#[test]
+fn qp_gives_way_on_the_far_pair_before_the_closest() {
+    let mut qp = QpFilter::new(2, 4).expect("setup");
+    let mut qdot = [0.0; 2];
+    let mut pairs = [row(&[1.0, 0.0], 0.1, 1.5), row(&[-1.0, 0.0], 0.5, 1.5)];
+    let violation = qp
+        .solve(
+            &[0.0, 0.2],
+            &mut pairs,
+            &[-1.0; 2],
+            &[1.0; 2],
+            2.0,
+            0.1,
+            &mut qdot,
+        )
+        .expect("relaxed");
+    assert_abs_diff_eq!(qdot[0], 1.0, epsilon = 1e-5);
+    assert_abs_diff_eq!(qdot[1], 0.2, epsilon = 1e-5);
+    assert_abs_diff_eq!(violation, 0.5, epsilon = 1e-4);
+}
+
+/// Power and force limiting caps a pair's approach speed below what its barrier allows:
+/// the nominal command approaches at 2 m/s, the barrier allows 4 (0.25 - 0.1) = 0.6 m/s,
+/// the cap 0.5 m/s; the projection keeps the other joint.
+#[test]
+fn qp_caps_the_approach_speed_of_a_pair() {
+    let mut qp = QpFilter::new(2, 4).expect("setup");
+    let mut qdot = [0.0; 2];
+    for (cap, expected) in [(0.5, -0.5), (f64::INFINITY, -0.6), (0.9, -0.6)] {
+        let mut pairs = [PairConstraint {
+            max_approach_m_s: cap,
+            ..row(&[1.0, 0.0], 0.25, 0.0)
+        }];
+        let violation = qp
+            .solve(
+                &[-2.0, 0.3],
+                &mut pairs,
+                &[-3.0; 2],
+                &[3.0; 2],
+                4.0,
+                0.1,
+                &mut qdot,
+            )
+            .expect("solved");
+        assert_eq!(violation, 0.0);
+        assert_abs_diff_eq!(qdot[0], expected, epsilon = 1e-6);
+        assert_abs_diff_eq!(qdot[1], 0.3, epsilon = 1e-6);
+    }
+}
+
+/// In the filter, every pair within `pfl_distance_m` gets its body region's ISO/TS 15066
+/// transient contact speed (effective mass M/2 for this robot) as its cap, the pairs beyond
+/// none, and the command keeps the caps: an iiwa driven straight at a chest (the torso's
+/// 0.55 m/s, the strictest region) 0.35 m ahead of its tool.
+#[test]
+fn filter_caps_the_approach_speed_near_each_part() {
+    let robot = iiwa();
+    let config = FilterConfig {
+        gamma_per_s: 40.0,
+        ..FilterConfig::default()
+    };
+    let mut filter =
+        SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config.clone()).expect("filter");
+    let q = [0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+    let mut k = KinematicState::new(&robot);
+    robot.forward_kinematics(&q, &mut k).expect("fk");
+    let tool = robot.links().len() - 1;
+    let p_tool = k.link_pose(tool).translation;
+    let chest = |at: Vector| HumanEstimate {
+        parts: vec![PartEstimate {
+            part: HumanPart::Torso,
+            capsule: Capsule::new(at, at + Vector::new(0.0, 0.1, 0.0), 0.04),
+            v_a_W: Vector::ZERO,
+            v_b_W: Vector::ZERO,
+        }],
+        uncertainty_m: 0.0,
+    };
+    // Joints 1, 2, 4 and 6 near their velocity limits, in the combination that moves the
+    // tool fastest; the chest waits 0.35 m ahead of the tool on that line.
+    let mut jacobian = workcell_robots::Jacobian::zeros(7);
+    robot.point_jacobian(&k, tool, p_tool, &mut jacobian);
+    let (nominal, v_tool) = (0..16)
+        .map(|signs: u32| {
+            let sign = |bit: u32| if signs & (1 << bit) == 0 { 1.0 } else { -1.0 };
+            [1.4 * sign(0), 1.4 * sign(1), 0.0, 1.25 * sign(2), 0.0, 2.0 * sign(3), 0.0]
+        })
+        .map(|qdot| (qdot, jacobian.linear_velocity(&qdot)))
+        .max_by(|x, y| x.1.length().total_cmp(&y.1.length()))
+        .expect("candidates");
+    let human = chest(p_tool + v_tool.normalize() * 0.35);
+    let out = filter.tick(&robot, &q, &nominal, &human, 0.004);
+    assert!(
+        matches!(out.status, FilterStatus::Modified),
+        "{:?}",
+        out.status
+    );
+    let limit = BodyRegion::of(HumanPart::Torso)
+        .max_contact_speed_m_s(effective_robot_mass_kg(robot.mass_kg(), 0.0), true);
+    assert!(v_tool.length() > 2.0 * limit, "the nominal must approach faster than the cap");
+    let (mut capped, mut binding) = (0, 0);
+    for c in filter.pairs() {
+        let approach = c.approach_m_s(filter.command());
+        if c.pair.distance_m < config.pfl_distance_m {
+            assert_eq!(c.max_approach_m_s, limit);
+            assert!(approach <= limit + 1e-5, "{approach} > {limit}");
+            capped += 1;
+            binding += usize::from(approach > limit - 1e-4);
+        } else {
+            assert_eq!(c.max_approach_m_s, f64::INFINITY);
+        }
+    }
+    assert!(capped > 0 && binding > 0, "{capped} capped, {binding} binding");
 }
 
 fn iiwa() -> RobotModel {

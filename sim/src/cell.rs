@@ -135,7 +135,8 @@ impl CellModel {
         let human_motion = HumanMotion::generate(
             &scenario.human.motions,
             scenario.human.shuffle,
-            &human.position_limits(),
+            &human,
+            scenario.human.peak_speed_m_s,
             scenario.seed,
         )
         .with_speed(scenario.human.speed_scale);

@@ -1,15 +1,34 @@
 //! Seeded motions of the human arm: resting, reaching into the shared space, waving,
 //! withdrawing. Joint order of the catalogue `human_arm`: shoulder abduction, shoulder
 //! flexion, elbow flexion (radians; 0 is the arm hanging straight down).
+//!
+//! Every point-to-point movement follows the minimum-jerk time profile
+//! `s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5` (Flash and Hogan 1985, J. Neurosci. 5(7)
+//! 1688-1703), here in joint space: the hand's speed is bell-shaped, as measured in
+//! unrestrained arm movements (Atkeson and Hollerbach 1985, J. Neurosci. 5(9) 2318-2330).
+//! Durations are drawn first, nearly independent of distance as in natural prehension
+//! (Jeannerod 1984, J. Mot. Behav. 16(3) 235-254); then each movement draws the peak speed its
+//! fastest point may reach from `human.peak_speed_m_s` (default 1.0 to 2.0 m/s, never above
+//! ISO 13855's 2.0 m/s approach speed of hands and arms) and is stretched until it keeps it. A
+//! wave swings less far instead.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use workcell_robots::collision::link_bounding_capsule;
+use workcell_robots::math::Vector;
+use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
 
 use crate::scenario::HumanMotionKind;
 use crate::trajectory::quintic;
 
 /// Number of phases generated before the motion repeats.
 const PHASES: usize = 24;
+/// Samples per second (at least 96 per transition or hold) when a phase's peak speed is
+/// measured: a 2 Hz wave gets 200 per swing.
+const SPEED_SAMPLES_PER_S: f64 = 400.0;
+/// The cap a phase is fitted to, as a fraction of the drawn peak speed: room for the true
+/// peak between two samples.
+const CAP_MARGIN: f64 = 0.99;
 
 #[derive(Debug, Clone, PartialEq)]
 struct Phase {
@@ -25,6 +44,116 @@ struct Phase {
     wave: Option<(f64, f64)>,
 }
 
+impl Phase {
+    /// Joint positions and velocities `local_s` after the phase began (as generated).
+    fn sample(&self, local_s: f64, q: &mut [f64], qd: &mut [f64]) {
+        let tau = (local_s / self.transition_s).clamp(0.0, 1.0);
+        let (s, ds, _) = quintic(tau);
+        let ds = if local_s < self.transition_s {
+            ds / self.transition_s
+        } else {
+            0.0
+        };
+        for j in 0..q.len() {
+            let d = self.q_to[j] - self.q_from[j];
+            q[j] = self.q_from[j] + d * s;
+            qd[j] = d * ds;
+        }
+        // Waving: the elbow swings about its target, faded in and out with sin^2 envelopes.
+        if let Some((amplitude, frequency_hz)) = self.wave
+            && local_s > self.transition_s
+            && q.len() > 2
+        {
+            use std::f64::consts::PI;
+            let h = local_s - self.transition_s;
+            let w = 2.0 * PI * frequency_hz;
+            let envelope = (PI * h / self.hold_s).sin();
+            let d_envelope = PI / self.hold_s * (PI * h / self.hold_s).cos();
+            let e2 = envelope * envelope;
+            q[2] += amplitude * e2 * (w * h).sin();
+            qd[2] +=
+                amplitude * (2.0 * envelope * d_envelope * (w * h).sin() + e2 * w * (w * h).cos());
+        }
+    }
+
+    /// Peak speed of the arm's fastest point over `from_s..to_s` of the phase, m/s.
+    fn peak_speed(&self, arm: &mut ArmSpeed, from_s: f64, to_s: f64) -> f64 {
+        let (mut q, mut qd) = (vec![0.0; self.q_to.len()], vec![0.0; self.q_to.len()]);
+        let n = ((to_s - from_s) * SPEED_SAMPLES_PER_S).ceil().max(96.0) as usize;
+        (0..=n)
+            .map(|k| {
+                let t = from_s + (to_s - from_s) * k as f64 / n as f64;
+                self.sample(t, &mut q, &mut qd);
+                arm.fastest(&q, &qd)
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Stretches the transition, then shrinks the wave, until no point of the arm moves
+    /// faster than `cap_m_s`.
+    fn keep_below(&mut self, arm: &mut ArmSpeed, cap_m_s: f64) {
+        let cap_m_s = CAP_MARGIN * cap_m_s;
+        // A path's speed scales with the inverse of its duration: one stretch suffices.
+        let peak = self.peak_speed(arm, 0.0, self.transition_s);
+        if peak > cap_m_s {
+            self.transition_s *= peak / cap_m_s;
+        }
+        if self.wave.is_some() {
+            let (from, to) = (self.transition_s, self.transition_s + self.hold_s);
+            // Nearly linear in the amplitude (the Jacobian changes a little with the swing).
+            for _ in 0..16 {
+                let peak = self.peak_speed(arm, from, to);
+                match &mut self.wave {
+                    Some((amplitude, _)) if peak > cap_m_s => *amplitude *= CAP_MARGIN * cap_m_s / peak,
+                    _ => break,
+                }
+            }
+        }
+    }
+}
+
+/// The speed of an arm's fastest point: the axis end points of the bounding capsule of
+/// each link with collision geometry (the points the safety layer tracks).
+pub struct ArmSpeed<'a> {
+    arm: &'a RobotModel,
+    points_L: Vec<(LinkId, Vector)>,
+    kinematics: KinematicState,
+    jacobian: Jacobian,
+}
+
+impl<'a> ArmSpeed<'a> {
+    /// The tracked points of `arm`.
+    #[must_use]
+    pub fn new(arm: &'a RobotModel) -> Self {
+        let points_L = (0..arm.links().len())
+            .filter_map(|link| link_bounding_capsule(arm, link))
+            .flat_map(|c| [(c.link, c.a_L), (c.link, c.b_L)])
+            .collect();
+        Self {
+            arm,
+            points_L,
+            kinematics: KinematicState::new(arm),
+            jacobian: Jacobian::zeros(arm.dof()),
+        }
+    }
+
+    /// Speed of the fastest tracked point with the arm at `q` moving at `qd`, m/s; 0 when
+    /// `q` is not a configuration of the arm.
+    pub fn fastest(&mut self, q: &[f64], qd: &[f64]) -> f64 {
+        if self.arm.forward_kinematics(q, &mut self.kinematics).is_err() {
+            return 0.0;
+        }
+        let mut peak: f64 = 0.0;
+        for &(link, p_L) in &self.points_L {
+            let p_W = self.kinematics.link_pose(link).transform_point(p_L);
+            self.arm
+                .point_jacobian(&self.kinematics, link, p_W, &mut self.jacobian);
+            peak = peak.max(self.jacobian.linear_velocity(qd).length());
+        }
+        peak
+    }
+}
+
 /// A periodic sequence of human motion phases, fixed by the seed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HumanMotion {
@@ -36,16 +165,22 @@ pub struct HumanMotion {
 }
 
 impl HumanMotion {
-    /// Generates the motion for an arm with position limits `limits` (at least 3 joints for
-    /// the motion primitives; extra joints stay at 0), cycling through `kinds`.
+    /// Generates the motion of `arm` (at least 3 joints for the motion primitives; extra
+    /// joints stay at 0, every joint within its position limits), cycling through `kinds`.
+    /// Each movement's fastest point peaks at a speed drawn from `peak_speed_m_s` (m/s, low
+    /// and high end) or slower.
     #[must_use]
     pub fn generate(
         kinds: &[HumanMotionKind],
         shuffle: bool,
-        limits: &[[f64; 2]],
+        arm: &RobotModel,
+        peak_speed_m_s: [f64; 2],
         seed: u64,
     ) -> Self {
+        let limits = arm.position_limits();
         let dof = limits.len();
+        let mut speed = ArmSpeed::new(arm);
+        let [slowest, fastest] = peak_speed_m_s;
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4855_4d41_4e00_0000); // "HUMAN"
         let clamp = |q: [f64; 3]| -> Vec<f64> {
             (0..dof)
@@ -98,7 +233,7 @@ impl HumanMotion {
                     Some((rng.random_range(0.3..0.5), rng.random_range(1.2..2.0))),
                 ),
             };
-            phases.push(Phase {
+            let mut phase = Phase {
                 kind,
                 t0_s: t,
                 transition_s,
@@ -106,12 +241,14 @@ impl HumanMotion {
                 q_from: q.clone(),
                 q_to: q_to.clone(),
                 wave,
-            });
-            t += transition_s + hold_s;
+            };
+            phase.keep_below(&mut speed, rng.random_range(slowest..=fastest));
+            t += phase.transition_s + phase.hold_s;
+            phases.push(phase);
             q = q_to;
         }
         // Close the cycle back at rest.
-        phases.push(Phase {
+        let mut closing = Phase {
             kind: HumanMotionKind::Withdraw,
             t0_s: t,
             transition_s: 0.8,
@@ -119,8 +256,10 @@ impl HumanMotion {
             q_from: q,
             q_to: rest,
             wave: None,
-        });
-        t += 1.0;
+        };
+        closing.keep_below(&mut speed, slowest);
+        t += closing.transition_s + closing.hold_s;
+        phases.push(closing);
         Self {
             phases,
             period_s: t,
@@ -164,42 +303,11 @@ impl HumanMotion {
 
     /// Joint positions and velocities at `t_s` (slices of the arm's dof).
     pub fn sample(&self, t_s: f64, q: &mut [f64], qd: &mut [f64]) {
-        self.sample_generated(t_s * self.speed, q, qd);
+        let t = (t_s * self.speed).rem_euclid(self.period_s * self.speed);
+        let p = self.phase(t);
+        p.sample(t - p.t0_s, &mut q[..self.dof], &mut qd[..self.dof]);
         for v in qd.iter_mut() {
             *v *= self.speed;
-        }
-    }
-
-    fn sample_generated(&self, t_s: f64, q: &mut [f64], qd: &mut [f64]) {
-        let t = t_s.rem_euclid(self.period_s * self.speed);
-        let p = self.phase(t);
-        let local = t - p.t0_s;
-        let tau = (local / p.transition_s).clamp(0.0, 1.0);
-        let (s, ds, _) = quintic(tau);
-        let ds = if local < p.transition_s {
-            ds / p.transition_s
-        } else {
-            0.0
-        };
-        for j in 0..self.dof {
-            let d = p.q_to[j] - p.q_from[j];
-            q[j] = p.q_from[j] + d * s;
-            qd[j] = d * ds;
-        }
-        // Waving: the elbow swings about its target, faded in and out with sin^2 envelopes.
-        if let Some((amplitude, frequency_hz)) = p.wave
-            && local > p.transition_s
-            && self.dof > 2
-        {
-            let h = local - p.transition_s;
-            let w = 2.0 * std::f64::consts::PI * frequency_hz;
-            let envelope = (std::f64::consts::PI * h / p.hold_s).sin();
-            let d_envelope =
-                std::f64::consts::PI / p.hold_s * (std::f64::consts::PI * h / p.hold_s).cos();
-            let e2 = envelope * envelope;
-            q[2] += amplitude * e2 * (w * h).sin();
-            qd[2] +=
-                amplitude * (2.0 * envelope * d_envelope * (w * h).sin() + e2 * w * (w * h).cos());
         }
     }
 }
@@ -208,9 +316,11 @@ impl HumanMotion {
 mod tests {
     use super::*;
 
-    fn limits() -> Vec<[f64; 2]> {
-        vec![[-0.3, 2.6], [-0.87, 3.1], [0.0, 2.53]]
+    fn arm() -> RobotModel {
+        RobotModel::from_catalogue("human_arm").expect("catalogue")
     }
+
+    const ISO_13855: [f64; 2] = [1.0, 2.0];
 
     #[test]
     fn same_seed_same_motion_other_seed_other_motion() {
@@ -219,9 +329,10 @@ mod tests {
             HumanMotionKind::Wave,
             HumanMotionKind::Withdraw,
         ];
-        let a = HumanMotion::generate(&kinds, true, &limits(), 5);
-        let b = HumanMotion::generate(&kinds, true, &limits(), 5);
-        let c = HumanMotion::generate(&kinds, true, &limits(), 6);
+        let arm = arm();
+        let a = HumanMotion::generate(&kinds, true, &arm, ISO_13855, 5);
+        let b = HumanMotion::generate(&kinds, true, &arm, ISO_13855, 5);
+        let c = HumanMotion::generate(&kinds, true, &arm, ISO_13855, 6);
         assert_eq!(a, b);
         assert_ne!(a, c);
     }
@@ -233,7 +344,8 @@ mod tests {
             HumanMotionKind::Wave,
             HumanMotionKind::Withdraw,
         ];
-        let m = HumanMotion::generate(&kinds, true, &limits(), 2);
+        let arm = arm();
+        let m = HumanMotion::generate(&kinds, true, &arm, ISO_13855, 2);
         let slow = m.clone().with_speed(0.5);
         assert!((slow.period_s() - 2.0 * m.period_s()).abs() < 1e-9);
         let (mut q, mut qd, mut q2, mut qd2) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
@@ -257,7 +369,8 @@ mod tests {
             HumanMotionKind::Wave,
             HumanMotionKind::Withdraw,
         ];
-        let m = HumanMotion::generate(&kinds, false, &limits(), 1);
+        let arm = arm();
+        let m = HumanMotion::generate(&kinds, false, &arm, ISO_13855, 1);
         let (mut q0, mut q1, mut qd, mut scratch) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
         let h = 1e-6;
         let n = 20_000;
@@ -284,5 +397,64 @@ mod tests {
             })
             .fold(f64::MIN, f64::max);
         assert!(max_flexion > 1.0);
+    }
+
+    /// No point of the arm moves faster than the top of the drawn range, sampled at 1 kHz
+    /// (finer than the generator's own sampling) over whole periods of many seeds; and the
+    /// range is used: some movement comes within 10 % of it, and a slow range gives slow
+    /// motions.
+    #[test]
+    fn every_movement_keeps_its_peak_speed() {
+        let arm = arm();
+        let mut speed = ArmSpeed::new(&arm);
+        let kinds = [
+            HumanMotionKind::Rest,
+            HumanMotionKind::Reach,
+            HumanMotionKind::Withdraw,
+            HumanMotionKind::Wave,
+        ];
+        let (mut q, mut qd) = ([0.0; 3], [0.0; 3]);
+        for range in [ISO_13855, [0.5, 0.8]] {
+            let mut fastest: f64 = 0.0;
+            for seed in 0..12 {
+                let m = HumanMotion::generate(&kinds, true, &arm, range, seed);
+                let n = (m.period_s() * 1000.0) as usize;
+                for k in 0..n {
+                    m.sample(k as f64 * 1e-3, &mut q, &mut qd);
+                    let v = speed.fastest(&q, &qd);
+                    assert!(v <= range[1], "seed {seed}, t {} s: {v} m/s", k as f64 * 1e-3);
+                    fastest = fastest.max(v);
+                }
+            }
+            assert!(fastest > 0.9 * range[1], "{range:?}: fastest {fastest}");
+        }
+    }
+
+    /// The tracked points are the capsule end points: a pure elbow rotation at 1 rad/s moves
+    /// the farthest of them at its distance from the elbow's axis (which the upper arm's
+    /// points lie on or behind).
+    #[test]
+    fn arm_speed_is_the_fastest_capsule_end() {
+        let arm = arm();
+        let mut speed = ArmSpeed::new(&arm);
+        let q = [0.0, 0.0, 0.0];
+        let v = speed.fastest(&q, &[0.0, 0.0, 1.0]);
+        // Farthest capsule end point from the elbow, from the capsules themselves.
+        let mut kinematics = KinematicState::new(&arm);
+        arm.forward_kinematics(&q, &mut kinematics).expect("fk");
+        let joint = &arm.joints()[arm.joint_id("elbow_flexion").expect("an elbow joint")];
+        let X_WE = kinematics.link_pose(joint.child);
+        let (p_elbow, axis) = (X_WE.translation, X_WE.rotation * joint.axis);
+        let reach = (0..arm.links().len())
+            .filter_map(|l| link_bounding_capsule(&arm, l))
+            .filter(|c| c.link != 0)
+            .flat_map(|c| {
+                let X = kinematics.link_pose(c.link);
+                [X.transform_point(c.a_L), X.transform_point(c.b_L)]
+            })
+            .map(|p| (p - p_elbow).cross(axis).length())
+            .fold(0.0, f64::max);
+        assert!((v - reach).abs() < 1e-9, "{v} vs {reach}");
+        assert_eq!(speed.fastest(&[0.0; 2], &[0.0; 2]), 0.0);
     }
 }

@@ -202,6 +202,10 @@ impl Default for RobotMotionConfig {
     }
 }
 
+/// Largest `human.peak_speed_m_s` a scenario may ask for, m/s: five times ISO 13855's
+/// 2.0 m/s, a bound against typos rather than a fact about arms.
+pub const MAX_HUMAN_PEAK_SPEED_M_S: f64 = 10.0;
+
 /// The human arm.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -218,8 +222,13 @@ pub struct HumanConfig {
     pub motions: Vec<HumanMotionKind>,
     /// Shuffle the order of `motions` with the seed. Default false.
     pub shuffle: bool,
-    /// Playback speed of the motions: 1 as generated (reaches peak at about 3 m/s at the
-    /// hand), 0.5 half as fast. Default 1.
+    /// Range of the peak speed of the arm's fastest point in each motion, m/s: each phase
+    /// draws its peak from it, and a phase whose drawn duration would move faster is
+    /// stretched (a wave swings less far). Default `[1.0, 2.0]`: at most ISO 13855's 2.0 m/s
+    /// approach speed of hands and arms.
+    pub peak_speed_m_s: [f64; 2],
+    /// Playback speed of the motions: 1 as generated, 0.5 half as fast, 1.5 a deliberately
+    /// fast intrusion (peaks up to 1.5 times `peak_speed_m_s`). Default 1.
     pub speed_scale: f64,
 }
 
@@ -236,6 +245,7 @@ impl Default for HumanConfig {
                 HumanMotionKind::Wave,
             ],
             shuffle: false,
+            peak_speed_m_s: [1.0, 2.0],
             speed_scale: 1.0,
         }
     }
@@ -414,6 +424,15 @@ impl Scenario {
         let s = self.human.speed_scale;
         if !(s > 0.0 && s <= 4.0) {
             return Err(bad("human.speed_scale", format!("{s} must be in (0, 4]")));
+        }
+        let [lo, hi] = self.human.peak_speed_m_s;
+        if !(lo > 0.0 && lo <= hi && hi <= MAX_HUMAN_PEAK_SPEED_M_S) {
+            return Err(bad(
+                "human.peak_speed_m_s",
+                format!(
+                    "[{lo}, {hi}] must be a range within (0, {MAX_HUMAN_PEAK_SPEED_M_S}] m/s"
+                ),
+            ));
         }
         let a = self.robot.servo_acceleration_rad_s2;
         if !(a > 0.0 && a.is_finite()) {

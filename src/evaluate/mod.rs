@@ -40,7 +40,7 @@ pub struct EvaluationConfig {
     /// Length of the task: the first `task_s` seconds of the robot's nominal motion. Default 12.
     pub task_s: f64,
     /// Plays the cell's human motions at this speed instead of the cell's
-    /// `human.speed_scale` (the generated motions peak near 5 m/s at the hand; ISO 13855
+    /// `human.speed_scale` (the generated motions peak at `human.peak_speed_m_s`; ISO 13855
     /// assumes 1.6 to 2.0 m/s). Default: the cell's.
     pub human_speed_scale: Option<f64>,
     /// An episode ends unfinished after `timeout_factor * task_s`. Default 3.
