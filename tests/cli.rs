@@ -644,6 +644,31 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     }
 }
 
+/// A POSIX shell's word splitting of plain words and single-quoted strings (all the replay
+/// commands use).
+fn shell_words(command: &str) -> Vec<String> {
+    let (mut words, mut word, mut quoted, mut any) = (Vec::new(), String::new(), false, false);
+    for c in command.chars() {
+        match c {
+            '\'' => {
+                quoted = !quoted;
+                any = true;
+            }
+            ' ' if !quoted => {
+                if any || !word.is_empty() {
+                    words.push(std::mem::take(&mut word));
+                }
+                any = false;
+            }
+            _ => word.push(c),
+        }
+    }
+    if any || !word.is_empty() {
+        words.push(word);
+    }
+    words
+}
+
 #[test]
 fn evaluate_writes_the_report_and_refuses_bad_input() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -652,10 +677,7 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     let cell = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/default.toml");
     std::fs::write(
         &eval,
-        format!(
-            "cell = {:?}\ntask_s = 2.0\nhuman_speed_scale = 0.5\n",
-            cell.display().to_string()
-        ),
+        format!("cell = {:?}\ntask_s = 2.0\n", cell.display().to_string()),
     )
     .expect("write");
     let out_dir = dir.path().join("report");
@@ -731,6 +753,53 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         text(&again.stderr)
     );
 
+    // Every violating episode is listed with a command that replays exactly it. A d_min of
+    // 0.5 m makes the unfiltered robot violate within the short task.
+    let violating_dir = dir.path().join("violating");
+    let mut violating = args("none");
+    violating.truncate(violating.len() - 1);
+    violating.push(violating_dir.display().to_string());
+    violating.extend(
+        [
+            "--set",
+            "safety.d_min_m=0.5",
+            "--set",
+            "safety.detection_m = 1.2",
+        ]
+        .map(String::from),
+    );
+    let out = run(violating);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("replay the first: workcell evaluate"));
+    let listed = std::fs::read_to_string(violating_dir.join("violations.txt")).expect("list");
+    let first = listed
+        .lines()
+        .find(|l| !l.starts_with('#'))
+        .expect("a violating episode");
+    let fields: Vec<&str> = first.split('\t').collect();
+    let (seed, command) = (fields[0], fields[3]);
+    // The override with spaces comes back quoted, as a shell needs it.
+    assert!(command.contains("'safety.detection_m = 1.2'"), "{command}");
+    let words = shell_words(command);
+    assert_eq!(words[..2], ["workcell", "evaluate"]);
+    assert!(words.windows(2).any(|w| w == ["--seed", seed]), "{command}");
+    let out = workcell(&words[1..].iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    // The replay's row equals the original's for that seed, but for the episode index and
+    // the wall time.
+    let row_of = |csv: &str, seed: &str| -> Vec<String> {
+        let row = csv
+            .lines()
+            .find(|l| l.split(',').nth(1) == Some(seed))
+            .expect("row of the seed");
+        let cells: Vec<String> = row.split(',').map(String::from).collect();
+        cells[1..cells.len() - 1].to_vec()
+    };
+    let replay_dir = violating_dir.join(format!("replay-{seed}"));
+    let original = std::fs::read_to_string(violating_dir.join("metrics.csv")).expect("csv");
+    let replayed = std::fs::read_to_string(replay_dir.join("metrics.csv")).expect("csv");
+    assert_eq!(row_of(&original, seed), row_of(&replayed, seed));
+
     // Bad input: clear errors naming the problem.
     let bad = |content: &str, expected: &str| {
         let path = dir.path().join("bad.toml");
@@ -784,6 +853,21 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         "no camera named \"ceiling\"",
     );
     bad("cell = \"missing.toml\"\n", "missing.toml");
+    for (set, expected) in [
+        ("safety", "an override is KEY=VALUE"),
+        ("cell.x=1", "'cell' is not a table"),
+        ("safety.nope=1", "unknown field `nope`"),
+        ("safety..gamma_per_s=1", "empty key"),
+        ("safety.gamma_per_s=-2", "safety.gamma_per_s"),
+    ] {
+        let out = workcell(&["evaluate", &eval.display().to_string(), "--set", set]);
+        assert!(!out.status.success(), "{set}");
+        assert!(
+            text(&out.stderr).contains(expected),
+            "{set}: {}",
+            text(&out.stderr)
+        );
+    }
     let out = workcell(&["evaluate", &eval.display().to_string(), "--episodes", "0"]);
     assert!(
         text(&out.stderr).contains("--episodes"),

@@ -7,7 +7,7 @@ use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
 
 use crate::error::{Result, SafetyError};
 use crate::geometry::{Capsule, SignedDistancePair, capsule_capsule, shape_capsule};
-use crate::human::HumanEstimate;
+use crate::human::{HumanEstimate, PartEstimate};
 
 /// A segment-end row joins a pair's rows when it is within this of the pair's distance, m.
 const END_ROW_MARGIN_M: f64 = 0.02;
@@ -245,35 +245,53 @@ impl RobotGeometry {
         max_distance_m: f64,
     ) -> Option<SignedDistancePair> {
         let mut best: Option<SignedDistancePair> = None;
+        for part in &human.parts {
+            let limit = best.map_or(max_distance_m, |b| b.distance_m.min(max_distance_m));
+            if let Some(pair) = self.min_exact_distance_to(kinematics, part, limit)
+                && best.is_none_or(|b| pair.distance_m < b.distance_m)
+            {
+                best = Some(pair);
+            }
+        }
+        best
+    }
+
+    /// As [`RobotGeometry::min_exact_distance`] for one part of the human.
+    #[must_use]
+    pub fn min_exact_distance_to(
+        &self,
+        kinematics: &KinematicState,
+        part: &PartEstimate,
+        max_distance_m: f64,
+    ) -> Option<SignedDistancePair> {
+        let mut best: Option<SignedDistancePair> = None;
         for g in &self.links {
             let X_WL = kinematics.link_pose(g.capsule.link);
-            for p in &human.parts {
-                let limit = best.map_or(max_distance_m, |b| b.distance_m.min(max_distance_m));
-                let pair = match &g.shape {
-                    Some(shape) => shape_capsule(
+            let limit = best.map_or(max_distance_m, |b| b.distance_m.min(max_distance_m));
+            let pair = match &g.shape {
+                Some(shape) => shape_capsule(
+                    g.capsule.link,
+                    X_WL,
+                    shape.as_ref(),
+                    part.part,
+                    &part.capsule,
+                    limit,
+                ),
+                None => {
+                    let (a_W, b_W) = g.capsule.segment_in_world(X_WL);
+                    Some(capsule_capsule(
                         g.capsule.link,
-                        X_WL,
-                        shape.as_ref(),
-                        p.part,
-                        &p.capsule,
-                        limit,
-                    ),
-                    None => {
-                        let (a_W, b_W) = g.capsule.segment_in_world(X_WL);
-                        Some(capsule_capsule(
-                            g.capsule.link,
-                            &Capsule::new(a_W, b_W, g.capsule.radius_m),
-                            p.part,
-                            &p.capsule,
-                        ))
-                    }
-                };
-                if let Some(pair) = pair
-                    && pair.distance_m <= limit
-                    && best.is_none_or(|b| pair.distance_m < b.distance_m)
-                {
-                    best = Some(pair);
+                        &Capsule::new(a_W, b_W, g.capsule.radius_m),
+                        part.part,
+                        &part.capsule,
+                    ))
                 }
+            };
+            if let Some(pair) = pair
+                && pair.distance_m <= limit
+                && best.is_none_or(|b| pair.distance_m < b.distance_m)
+            {
+                best = Some(pair);
             }
         }
         best

@@ -215,7 +215,15 @@ fn filter_caps_the_approach_speed_near_each_part() {
     let (nominal, v_tool) = (0..16)
         .map(|signs: u32| {
             let sign = |bit: u32| if signs & (1 << bit) == 0 { 1.0 } else { -1.0 };
-            [1.4 * sign(0), 1.4 * sign(1), 0.0, 1.25 * sign(2), 0.0, 2.0 * sign(3), 0.0]
+            [
+                1.4 * sign(0),
+                1.4 * sign(1),
+                0.0,
+                1.25 * sign(2),
+                0.0,
+                2.0 * sign(3),
+                0.0,
+            ]
         })
         .map(|qdot| (qdot, jacobian.linear_velocity(&qdot)))
         .max_by(|x, y| x.1.length().total_cmp(&y.1.length()))
@@ -229,7 +237,10 @@ fn filter_caps_the_approach_speed_near_each_part() {
     );
     let limit = BodyRegion::of(HumanPart::Torso)
         .max_contact_speed_m_s(effective_robot_mass_kg(robot.mass_kg(), 0.0), true);
-    assert!(v_tool.length() > 2.0 * limit, "the nominal must approach faster than the cap");
+    assert!(
+        v_tool.length() > 2.0 * limit,
+        "the nominal must approach faster than the cap"
+    );
     let (mut capped, mut binding) = (0, 0);
     for c in filter.pairs() {
         let approach = c.approach_m_s(filter.command());
@@ -242,7 +253,10 @@ fn filter_caps_the_approach_speed_near_each_part() {
             assert_eq!(c.max_approach_m_s, f64::INFINITY);
         }
     }
-    assert!(capped > 0 && binding > 0, "{capped} capped, {binding} binding");
+    assert!(
+        capped > 0 && binding > 0,
+        "{capped} capped, {binding} binding"
+    );
 }
 
 fn iiwa() -> RobotModel {

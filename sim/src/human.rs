@@ -104,7 +104,9 @@ impl Phase {
             for _ in 0..16 {
                 let peak = self.peak_speed(arm, from, to);
                 match &mut self.wave {
-                    Some((amplitude, _)) if peak > cap_m_s => *amplitude *= CAP_MARGIN * cap_m_s / peak,
+                    Some((amplitude, _)) if peak > cap_m_s => {
+                        *amplitude *= CAP_MARGIN * cap_m_s / peak
+                    }
                     _ => break,
                 }
             }
@@ -140,7 +142,11 @@ impl<'a> ArmSpeed<'a> {
     /// Speed of the fastest tracked point with the arm at `q` moving at `qd`, m/s; 0 when
     /// `q` is not a configuration of the arm.
     pub fn fastest(&mut self, q: &[f64], qd: &[f64]) -> f64 {
-        if self.arm.forward_kinematics(q, &mut self.kinematics).is_err() {
+        if self
+            .arm
+            .forward_kinematics(q, &mut self.kinematics)
+            .is_err()
+        {
             return 0.0;
         }
         let mut peak: f64 = 0.0;
@@ -422,7 +428,11 @@ mod tests {
                 for k in 0..n {
                     m.sample(k as f64 * 1e-3, &mut q, &mut qd);
                     let v = speed.fastest(&q, &qd);
-                    assert!(v <= range[1], "seed {seed}, t {} s: {v} m/s", k as f64 * 1e-3);
+                    assert!(
+                        v <= range[1],
+                        "seed {seed}, t {} s: {v} m/s",
+                        k as f64 * 1e-3
+                    );
                     fastest = fastest.max(v);
                 }
             }

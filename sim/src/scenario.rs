@@ -429,9 +429,7 @@ impl Scenario {
         if !(lo > 0.0 && lo <= hi && hi <= MAX_HUMAN_PEAK_SPEED_M_S) {
             return Err(bad(
                 "human.peak_speed_m_s",
-                format!(
-                    "[{lo}, {hi}] must be a range within (0, {MAX_HUMAN_PEAK_SPEED_M_S}] m/s"
-                ),
+                format!("[{lo}, {hi}] must be a range within (0, {MAX_HUMAN_PEAK_SPEED_M_S}] m/s"),
             ));
         }
         let a = self.robot.servo_acceleration_rad_s2;

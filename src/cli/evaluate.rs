@@ -15,8 +15,9 @@ use workcell::safety::iso::effective_robot_mass_kg;
 use workcell::safety::{BodyRegion, FilterMode, HumanPart};
 
 /// Files `evaluate` writes into `--out`.
-pub const OUTPUTS: [&str; 9] = [
+pub const OUTPUTS: [&str; 10] = [
     "summary.md",
+    "violations.txt",
     "metrics.csv",
     "evaluation.toml",
     "separation.png",
@@ -78,12 +79,72 @@ pub struct EvaluateArgs {
     /// Print the evaluation file with every default filled in, then exit.
     #[arg(long)]
     pub print_defaults: bool,
+    /// Override a key of the evaluation file, e.g. `--set safety.gamma_per_s=8`
+    /// (repeatable; TOML values).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+}
+
+impl EvaluateArgs {
+    /// The command that replays episode `seed` exactly: the same file, overrides, filter and
+    /// perception, one episode.
+    #[must_use]
+    pub fn replay_command(&self, path: &std::path::Path, seed: u64) -> String {
+        let mut words = vec![
+            "workcell".to_string(),
+            "evaluate".to_string(),
+            path.display().to_string(),
+            "--episodes".to_string(),
+            "1".to_string(),
+            "--seed".to_string(),
+            seed.to_string(),
+            "--filter".to_string(),
+            value_name(self.filter),
+        ];
+        if let Some(p) = self.perception {
+            words.extend(["--perception".to_string(), value_name(p)]);
+        }
+        for o in &self.overrides {
+            words.extend(["--set".to_string(), o.clone()]);
+        }
+        words.extend([
+            "--out".to_string(),
+            self.out
+                .join(format!("replay-{seed}"))
+                .display()
+                .to_string(),
+        ]);
+        words
+            .iter()
+            .map(|w| shell_quote(w))
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+}
+
+/// The name clap gives a value on the command line.
+fn value_name(v: impl clap::ValueEnum) -> String {
+    v.to_possible_value()
+        .map_or_else(String::new, |p| p.get_name().to_string())
+}
+
+/// `word` quoted for a POSIX shell when it needs it.
+fn shell_quote(word: &str) -> String {
+    let plain = !word.is_empty()
+        && word
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c));
+    if plain {
+        word.to_string()
+    } else {
+        format!("'{}'", word.replace('\'', "'\\''"))
+    }
 }
 
 pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     if args.print_defaults {
         let config = match &args.evaluation {
-            Some(path) => Evaluation::from_file(path)?.config,
+            Some(path) => Evaluation::from_file_with(path, &args.overrides)?.config,
             None => EvaluationConfig::default(),
         };
         say_inline!(
@@ -98,7 +159,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     if args.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let mut evaluation = Evaluation::from_file(path)?;
+    let mut evaluation = Evaluation::from_file_with(path, &args.overrides)?;
     if let Some(p) = args.perception {
         let perception = &mut evaluation.config.perception;
         perception.kind = match p {
@@ -166,7 +227,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         ),
         &workcell::robots::PackageMap::from_env(),
     )?;
-    let m_r = effective_robot_mass_kg(robot.mass_kg(), 0.0);
+    let m_r = effective_robot_mass_kg(robot.mass_kg(), evaluation.config.safety.payload_kg);
     let limits: Vec<(String, f64)> = if m_r > 0.0 {
         HumanPart::ARM
             .iter()
@@ -189,6 +250,11 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         perception: &perception,
         d_min_m: evaluation.config.safety.d_min_m,
         near_m: evaluation.config.near_m,
+        pfl_distance_m: if evaluation.config.safety.pfl_distance_m > 0.0 {
+            evaluation.config.safety.pfl_distance_m
+        } else {
+            evaluation.config.near_m
+        },
         contact_speed_limits: &limits,
         command: &command,
     };
@@ -197,6 +263,22 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
     };
     write("summary.md", &summary_markdown(&context, &episodes))?;
+    let violating: Vec<_> = episodes.iter().filter(|e| e.violations > 0).collect();
+    let mut replay = format!(
+        "# Episodes that came closer than d_min = {} m: seed, violations, smallest separation, \
+         and the command that replays exactly that episode.\n",
+        evaluation.config.safety.d_min_m
+    );
+    for e in &violating {
+        replay.push_str(&format!(
+            "{}\t{}\t{:.4}\t{}\n",
+            e.seed,
+            e.violations,
+            e.min_separation_m,
+            args.replay_command(path, e.seed)
+        ));
+    }
+    write("violations.txt", &replay)?;
     write("metrics.csv", &metrics_csv(&episodes))?;
     write(
         "evaluation.toml",
@@ -222,6 +304,14 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         a.real_time_factor,
         args.out.join("summary.md").display()
     );
+    if let Some(first) = violating.first() {
+        say!(
+            "{} violating episodes (seeds in {}); replay the first: {}",
+            violating.len(),
+            args.out.join("violations.txt").display(),
+            args.replay_command(path, first.seed)
+        );
+    }
     if args.fail_on_violation && a.violations > 0 {
         return Ok(ExitCode::from(2));
     }

@@ -2,9 +2,11 @@
 
 use std::time::Instant;
 
+use workcell_robots::math::Vector;
 use workcell_robots::{Jacobian, KinematicState, LinkId};
 use workcell_safety::{
     BrakeReason, FilterMode, FilterStatus, HumanEstimate, HumanGeometry, HumanPart, SafetyFilter,
+    SignedDistancePair,
 };
 use workcell_sim::{CellModel, CellState, RobotCommand, step};
 
@@ -87,6 +89,8 @@ struct Run<'a> {
     trace: EpisodeTrace,
     /// Below d_min at the last tick.
     below: bool,
+    /// In contact (true separation <= 0) at the last tick.
+    touching: bool,
     /// The closest pair so far (formatted once at the end: no allocation per tick).
     closest: Option<(LinkId, HumanPart, f64)>,
     braking: Vec<(BrakeReason, usize)>,
@@ -127,6 +131,9 @@ impl<'a> Run<'a> {
             peak_speed_near_human_m_s: 0.0,
             peak_approach_speed_m_s: 0.0,
             peak_human_speed_m_s: 0.0,
+            peak_approach_by_part_m_s: [0.0; 3],
+            contacts_moving: 0,
+            contacts_standing: 0,
             ticks_pass: 0,
             ticks_modified: 0,
             ticks_relaxed: 0,
@@ -155,6 +162,7 @@ impl<'a> Run<'a> {
             metrics,
             trace: EpisodeTrace::default(),
             below: false,
+            touching: false,
             closest: None,
             braking: Vec::new(),
             error_sum: 0.0,
@@ -188,14 +196,44 @@ impl<'a> Run<'a> {
         model
             .robot
             .forward_kinematics(state.q(), &mut self.robot_kinematics)?;
-        let Some(pair) =
-            self.filter
-                .geometry()
-                .min_exact_distance(&self.robot_kinematics, &self.truth, 5.0)
-        else {
+        // Each part's closest pair: the robot's approach toward that part within the power
+        // and force limiting distance (its body region's contact speed applies there).
+        let pfl_m = if c.safety.pfl_distance_m > 0.0 {
+            c.safety.pfl_distance_m
+        } else {
+            c.near_m
+        };
+        let mut closest: Option<SignedDistancePair> = None;
+        for part in &self.truth.parts {
+            let Some(pair) =
+                self.filter
+                    .geometry()
+                    .min_exact_distance_to(&self.robot_kinematics, part, 5.0)
+            else {
+                continue;
+            };
+            if pair.distance_m < pfl_m {
+                let v = robot_point_velocity(
+                    model,
+                    state,
+                    &self.robot_kinematics,
+                    &mut self.jacobian,
+                    &pair,
+                );
+                if let Some(i) = HumanPart::ARM.iter().position(|&p| p == pair.part) {
+                    let peak = &mut self.metrics.peak_approach_by_part_m_s[i];
+                    *peak = peak.max(-pair.nhat_BA_W.dot(v));
+                }
+            }
+            if closest.is_none_or(|b| pair.distance_m < b.distance_m) {
+                closest = Some(pair);
+            }
+        }
+        let Some(pair) = closest else {
             self.trace.separation_m.push(f64::NAN);
             return Ok(());
         };
+        let metrics = &mut self.metrics;
         let d = pair.distance_m;
         if d < metrics.min_separation_m {
             metrics.min_separation_m = d;
@@ -203,19 +241,35 @@ impl<'a> Run<'a> {
         }
         let mut speed = 0.0;
         if d < c.near_m.max(d_min) {
-            model.robot.point_jacobian(
+            let v = robot_point_velocity(
+                model,
+                state,
                 &self.robot_kinematics,
-                pair.link,
-                pair.p_WA,
                 &mut self.jacobian,
+                &pair,
             );
-            let v = self.jacobian.linear_velocity(state.qd());
             speed = v.length();
+            let metrics = &mut self.metrics;
             if d < c.near_m {
                 metrics.peak_speed_near_human_m_s = metrics.peak_speed_near_human_m_s.max(speed);
                 metrics.peak_approach_speed_m_s =
                     metrics.peak_approach_speed_m_s.max(-pair.nhat_BA_W.dot(v));
             }
+        }
+        let metrics = &mut self.metrics;
+        // SSM permits contact only with a robot at standstill (ISO/TS 15066 5.5.4): count
+        // each contact by the robot's speed when it began.
+        if d <= 0.0 {
+            if !self.touching {
+                if speed > MOVING_M_S {
+                    metrics.contacts_moving += 1;
+                } else {
+                    metrics.contacts_standing += 1;
+                }
+            }
+            self.touching = true;
+        } else {
+            self.touching = false;
         }
         if d < d_min {
             if !self.below {
@@ -365,6 +419,20 @@ impl<'a> Run<'a> {
         metrics.wall_s = started.elapsed().as_secs_f64();
         (self.metrics, self.trace)
     }
+}
+
+/// Velocity of the robot's witness point of `pair` in the world, m/s.
+fn robot_point_velocity(
+    model: &CellModel,
+    state: &CellState,
+    kinematics: &KinematicState,
+    jacobian: &mut Jacobian,
+    pair: &SignedDistancePair,
+) -> Vector {
+    model
+        .robot
+        .point_jacobian(kinematics, pair.link, pair.p_WA, jacobian);
+    jacobian.linear_velocity(state.qd())
 }
 
 /// The mean distance of the estimated parts' end points from the true ones, m; `None`

@@ -98,6 +98,20 @@ impl Evaluation {
         Self::from_toml(&text, path)
     }
 
+    /// Like [`Evaluation::from_file`], with `KEY=VALUE` overrides applied to the file's
+    /// text first (see [`apply_overrides`]).
+    ///
+    /// # Errors
+    /// As [`Evaluation::from_file`], and for an override that is not `KEY=VALUE` or names a
+    /// key inside a value that is not a table.
+    pub fn from_file_with(path: &Path, overrides: &[String]) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml(&apply_overrides(&text, overrides, path)?, path)
+    }
+
     /// Like [`Evaluation::from_file`] on text already read; `path` names it in errors and
     /// anchors the cell's and the weights' paths.
     ///
@@ -208,6 +222,54 @@ impl Evaluation {
     }
 }
 
+/// Sets dotted keys of a TOML document: `safety.gamma_per_s=8` sets `gamma_per_s` in the
+/// `[safety]` table (created when missing). A value is parsed as TOML (`8`, `true`,
+/// `[1.0, 2.0]`, `"text"`); one that does not parse is taken as a string. The result is
+/// checked as the file itself would be: an unknown key is refused there.
+///
+/// # Errors
+/// [`Error::Parse`] when the text is not TOML; [`Error::Config`] naming the override when it
+/// has no `=`, an empty key part, or walks into a value that is not a table.
+pub fn apply_overrides(text: &str, overrides: &[String], path: &Path) -> Result<String> {
+    if overrides.is_empty() {
+        return Ok(text.to_string());
+    }
+    let mut document: toml::Table = toml::from_str(text).map_err(|e| Error::Parse {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    for item in overrides {
+        let bad = |message: &str| Error::config(item.clone(), message.to_string()).in_file(path);
+        let Some((key, value)) = item.split_once('=') else {
+            return Err(bad("an override is KEY=VALUE, e.g. safety.gamma_per_s=8"));
+        };
+        let parts: Vec<&str> = key.trim().split('.').map(str::trim).collect();
+        if parts.iter().any(|p| p.is_empty()) {
+            return Err(bad("empty key"));
+        }
+        let value = value.trim();
+        let value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
+            Ok(mut t) => t.remove("v").unwrap_or_else(|| value.into()),
+            Err(_) => toml::Value::String(value.to_string()),
+        };
+        let (last, tables) = parts.split_last().ok_or_else(|| bad("empty key"))?;
+        let mut table = &mut document;
+        for name in tables {
+            let entry = table
+                .entry((*name).to_string())
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            table = entry
+                .as_table_mut()
+                .ok_or_else(|| bad(&format!("'{name}' is not a table")))?;
+        }
+        table.insert((*last).to_string(), value);
+    }
+    toml::to_string(&document).map_err(|e| Error::Parse {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
 /// What happened in one episode.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EpisodeMetrics {
@@ -236,6 +298,19 @@ pub struct EpisodeMetrics {
     pub peak_approach_speed_m_s: f64,
     /// Fastest end point of any human part, m/s (the human's speed envelope).
     pub peak_human_speed_m_s: f64,
+    /// Per arm part (upper arm, forearm, hand: [`HumanPart::ARM`]): the robot's fastest
+    /// approach toward it at its closest point while the part's true separation was below
+    /// the filter's `pfl_distance_m` (`near_m` when PFL is off), m/s. Compare with the
+    /// part's ISO/TS 15066 transient contact speed.
+    ///
+    /// [`HumanPart::ARM`]: workcell_safety::HumanPart::ARM
+    pub peak_approach_by_part_m_s: [f64; 3],
+    /// Contacts (true separation down to 0) that began with the robot's closest point
+    /// moving faster than 0.05 m/s: what speed and separation monitoring forbids.
+    pub contacts_moving: usize,
+    /// Contacts that began with the robot at standstill (SSM permits these: the human
+    /// walked into a stopped robot).
+    pub contacts_standing: usize,
     /// Ticks per filter status: pass, modified, braking (all reasons).
     pub ticks_pass: usize,
     pub ticks_modified: usize,

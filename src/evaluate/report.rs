@@ -22,6 +22,11 @@ pub struct Aggregate {
     pub peak_speed_near_human_m_s: f64,
     pub peak_approach_speed_m_s: f64,
     pub peak_human_speed_m_s: f64,
+    /// Per arm part ([`workcell_safety::HumanPart::ARM`]): the robot's fastest approach
+    /// within the PFL distance, m/s.
+    pub peak_approach_by_part_m_s: [f64; 3],
+    pub contacts_moving: usize,
+    pub contacts_standing: usize,
     pub ticks_pass: usize,
     pub ticks_modified: usize,
     pub ticks_relaxed: usize,
@@ -66,6 +71,14 @@ impl Aggregate {
                 .iter()
                 .map(|e| e.peak_human_speed_m_s)
                 .fold(0.0, f64::max),
+            peak_approach_by_part_m_s: std::array::from_fn(|i| {
+                episodes
+                    .iter()
+                    .map(|e| e.peak_approach_by_part_m_s[i])
+                    .fold(0.0, f64::max)
+            }),
+            contacts_moving: episodes.iter().map(|e| e.contacts_moving).sum(),
+            contacts_standing: episodes.iter().map(|e| e.contacts_standing).sum(),
             ticks_pass: episodes.iter().map(|e| e.ticks_pass).sum(),
             ticks_modified: episodes.iter().map(|e| e.ticks_modified).sum(),
             ticks_relaxed: episodes.iter().map(|e| e.ticks_relaxed).sum(),
@@ -106,7 +119,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,simulated_s,wall_s";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,simulated_s,wall_s";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -121,7 +134,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{},{},{},{},\"{}\",{:.5},{:.3},{:.3}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.3},{:.3}",
             e.episode,
             e.seed,
             e.filter,
@@ -137,6 +150,11 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             e.peak_speed_near_human_m_s,
             e.peak_approach_speed_m_s,
             e.peak_human_speed_m_s,
+            e.peak_approach_by_part_m_s[0],
+            e.peak_approach_by_part_m_s[1],
+            e.peak_approach_by_part_m_s[2],
+            e.contacts_moving,
+            e.contacts_standing,
             e.ticks_pass,
             e.ticks_modified,
             e.ticks_relaxed,
@@ -159,7 +177,10 @@ pub struct SummaryContext<'a> {
     pub perception: &'a str,
     pub d_min_m: f64,
     pub near_m: f64,
-    /// ISO/TS 15066 transient contact speed limits per body region, m/s, for the robot.
+    /// Distance within which the peaks per body region are taken, m.
+    pub pfl_distance_m: f64,
+    /// ISO/TS 15066 transient contact speed limits per arm part
+    /// ([`workcell_safety::HumanPart::ARM`] order), m/s, for the robot.
     pub contact_speed_limits: &'a [(String, f64)],
     pub command: &'a str,
 }
@@ -222,18 +243,39 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         100.0 * a.ticks_relaxed as f64 / ticks,
         100.0 * a.ticks_braking as f64 / ticks
     );
+    let _ = writeln!(
+        md,
+        "Contact (true separation down to 0): {} with the robot moving, {} with the robot at standstill (speed and separation monitoring permits only the second).\n",
+        a.contacts_moving, a.contacts_standing
+    );
+    let _ = writeln!(
+        md,
+        "Peak speeds near the human count the robot's closest surface point while the true separation is below {:.2} m (approach: its speed toward the human).\n",
+        context.near_m
+    );
     if !context.contact_speed_limits.is_empty() {
-        let limits: Vec<String> = context
-            .contact_speed_limits
-            .iter()
-            .map(|(r, v)| format!("{r} {v:.2} m/s"))
-            .collect();
         let _ = writeln!(
             md,
-            "Peak speeds count the robot's closest surface point while the true separation is below {:.2} m (approach: its speed toward the human). ISO/TS 15066 transient contact limits for this robot: {}.\n",
-            context.near_m,
-            limits.join(", ")
+            "### Power and force limiting\n\nThe robot's fastest approach toward each part at its closest point while that part was within {:.2} m, against ISO/TS 15066's transient contact speed of its body region for this robot:\n",
+            context.pfl_distance_m
         );
+        let _ = writeln!(
+            md,
+            "| body region | peak approach (m/s) | limit (m/s) | within |"
+        );
+        let _ = writeln!(md, "|---|---|---|---|");
+        for ((region, limit), peak) in context
+            .contact_speed_limits
+            .iter()
+            .zip(a.peak_approach_by_part_m_s)
+        {
+            let _ = writeln!(
+                md,
+                "| {region} | {peak:.3} | {limit:.3} | {} |",
+                if peak <= *limit { "yes" } else { "NO" }
+            );
+        }
+        let _ = writeln!(md);
     }
     let _ = writeln!(
         md,
