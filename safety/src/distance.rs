@@ -53,8 +53,9 @@ pub struct PairConstraint {
     /// standing.
     pub human_normal_speed_m_s: f64,
     /// Power and force limiting: the robot's witness point may approach the part at most
-    /// this fast, m/s (ISO/TS 15066's transient contact speed of the part's body region);
-    /// infinite outside the filter's `pfl_distance_m`.
+    /// this fast, m/s: ISO/TS 15066's transient contact speed of the part's body region
+    /// within the filter's `pfl_distance_m`, a braking ramp up from it beyond; infinite when
+    /// power and force limiting is off.
     pub max_approach_m_s: f64,
 }
 

@@ -68,9 +68,14 @@ pub struct FilterConfig {
     pub position_gain_per_s: f64,
     /// Power and force limiting: within this capsule distance of a human part the robot
     /// may approach that part at most at ISO/TS 15066's transient contact speed of its body
-    /// region (QP: a cap on the pair's row; SSM: on the scale), m. 0 turns it off.
-    /// Default 0.3.
+    /// region (QP: a cap on the pair's row; SSM: on the scale), m; farther out the cap
+    /// rises as a braking ramp (`pfl_deceleration_m_s2`). 0 turns it off. Default 0.3.
     pub pfl_distance_m: f64,
+    /// Deceleration the robot's points can be assumed to manage toward a part, m/s^2: beyond
+    /// `pfl_distance_m` the cap rises as `sqrt(v_limit^2 + 2 a (d - pfl_distance_m))`, so
+    /// that a point that may approach at the cap can slow to the region's limit by the time
+    /// it enters the PFL distance. Default 2.5.
+    pub pfl_deceleration_m_s2: f64,
     /// Payload at the tool for the effective robot mass of power and force limiting
     /// (M/2 + payload), kg. Default 0.
     pub payload_kg: f64,
@@ -90,6 +95,7 @@ impl Default for FilterConfig {
             max_relaxation_m_s: 1.0,
             position_gain_per_s: 10.0,
             pfl_distance_m: 0.3,
+            pfl_deceleration_m_s2: 2.5,
             payload_kg: 0.0,
             ssm: SsmConfig::default(),
         }
@@ -119,6 +125,7 @@ impl FilterConfig {
         positive("safety.gamma_per_s", self.gamma_per_s)?;
         positive("safety.acceleration_rad_s2", self.acceleration_rad_s2)?;
         positive("safety.position_gain_per_s", self.position_gain_per_s)?;
+        positive("safety.pfl_deceleration_m_s2", self.pfl_deceleration_m_s2)?;
         for (key, v) in [
             ("safety.pfl_distance_m", self.pfl_distance_m),
             ("safety.payload_kg", self.payload_kg),
@@ -491,9 +498,12 @@ impl SafetyFilter {
             self.config.detection_m,
             &mut self.pairs,
         );
-        for c in &mut self.pairs {
-            if c.pair.distance_m < self.config.pfl_distance_m {
-                c.max_approach_m_s = self.pfl_limits_m_s[part_index(c.pair.part)];
+        if self.config.pfl_distance_m > 0.0 {
+            let a = self.config.pfl_deceleration_m_s2;
+            for c in &mut self.pairs {
+                let limit = self.pfl_limits_m_s[part_index(c.pair.part)];
+                let room = (c.pair.distance_m - self.config.pfl_distance_m).max(0.0);
+                c.max_approach_m_s = (limit * limit + 2.0 * a * room).sqrt();
             }
         }
         out.active_pairs = self.pairs.len();

@@ -25,7 +25,9 @@
 //!
 //! Power and force limiting needs no rows of its own: its cap on the approach speed of a
 //! pair's witness point has the same coefficients as the pair's barrier row, so each row's
-//! bound is the smaller of the two ([`PairConstraint::approach_bound_m_s`]).
+//! bound is the smaller of the two ([`PairConstraint::approach_bound_m_s`]). A row that its
+//! cap binds gets no slack: slowing down never needs relaxing, and a relaxed cap would let
+//! the arm hit one part at full speed while it evades another.
 //!
 //! clarabel's form is `A x + s = b, s >= 0`, so every row is written as `a^T qdot <= b`.
 //! The matrix `A` has, column by column, `max_pairs` pair entries (explicit zeros on unused
@@ -237,7 +239,10 @@ impl QpFilter {
                     self.a_values[j * per_column + i] = -c.normal_jacobian[j];
                 }
                 self.b[i] = c.approach_bound_m_s(gamma_per_s, d_min_m);
-                self.a_values[slack_entry] = -room(c) / closest_room;
+                // A row bound by its PFL cap stays hard: slowing down is always possible.
+                let capped = c.max_approach_m_s
+                    < gamma_per_s * (c.pair.distance_m - d_min_m) - c.human_normal_speed_m_s;
+                self.a_values[slack_entry] = if capped { 0.0 } else { -room(c) / closest_room };
             } else {
                 for j in 0..n {
                     self.a_values[j * per_column + i] = 0.0;

@@ -183,7 +183,7 @@ fn qp_caps_the_approach_speed_of_a_pair() {
 
 /// In the filter, every pair within `pfl_distance_m` gets its body region's ISO/TS 15066
 /// transient contact speed (effective mass M/2 for this robot) as its cap, the pairs beyond
-/// none, and the command keeps the caps: an iiwa driven straight at a chest (the torso's
+/// a braking ramp up from it, and the command keeps the caps: an iiwa driven straight at a chest (the torso's
 /// 0.55 m/s, the strictest region) 0.35 m ahead of its tool.
 #[test]
 fn filter_caps_the_approach_speed_near_each_part() {
@@ -250,7 +250,12 @@ fn filter_caps_the_approach_speed_near_each_part() {
             capped += 1;
             binding += usize::from(approach > limit - 1e-4);
         } else {
-            assert_eq!(c.max_approach_m_s, f64::INFINITY);
+            // Beyond, the cap rises as a braking ramp toward the limit.
+            let ramp = (limit * limit
+                + 2.0 * config.pfl_deceleration_m_s2 * (c.pair.distance_m - config.pfl_distance_m))
+                .sqrt();
+            assert_abs_diff_eq!(c.max_approach_m_s, ramp, epsilon = 1e-12);
+            assert!(approach <= ramp + 1e-5, "{approach} > {ramp}");
         }
     }
     assert!(
