@@ -3,9 +3,27 @@
 //! The result type follows Drake's `SignedDistancePair`: a distance with a documented sign,
 //! a witness point on each body and the unit normal. Capsule pairs use the exact closed form
 //! (closest points of two segments, minus the radii): parry's generic GJK is slower there and
-//! only accurate to about 1e-5 m. General convex shapes (boxes, mesh hulls) go through parry's
-//! `query::contact`, which also reports penetration depth (its `query::distance` returns 0 for
-//! overlapping shapes).
+//! only accurate to about 1e-5 m. General convex shapes (boxes, cylinders, mesh hulls) go
+//! through parry's `query::contact`, which also reports penetration depth (its
+//! `query::distance` returns 0 for overlapping shapes).
+//!
+//! # Distances that never flatter
+//!
+//! Every distance returned here is at most the true signed distance: a safety layer may be
+//! told that shapes are closer than they are, never farther. The certificate is the
+//! separating-axis bound: for convex A and B and any unit `n` pointing from B toward A,
+//!
+//! ```text
+//! s(n) = min_{a in A} a.n - max_{b in B} b.n  <=  signed distance(A, B)
+//! ```
+//!
+//! with equality for the best `n` (for separated shapes by the separating axis theorem; for
+//! overlapping ones the depth is the smallest overlap over all directions). Each query takes
+//! the normal of its candidate answer, evaluates `s(n)` with exact support functions, and
+//! returns the smaller of the two. The error is then one-sided and bounded by how far the
+//! candidate's normal is from the best one: near-parallel segments, where the closed form's
+//! parallel fallback picks one of many closest pairs, come out exact; parry's EPA stopping
+//! early on a penetrating pair reports a depth at least the true one.
 
 use parry3d_f64::query;
 use parry3d_f64::shape::Shape;
@@ -13,6 +31,16 @@ use workcell_robots::LinkId;
 use workcell_robots::math::{Pose, Vector};
 
 use crate::human::HumanPart;
+
+/// Separating-axis bound of a capsule pair along `n` (unit, from B toward A): at most the
+/// true signed distance for every `n` (see the module documentation).
+#[must_use]
+#[inline]
+pub fn capsule_separation_along(a: &Capsule, b: &Capsule, n: Vector) -> f64 {
+    let min_a = a.a_W.dot(n).min(a.b_W.dot(n)) - a.radius_m;
+    let max_b = b.a_W.dot(n).max(b.b_W.dot(n)) + b.radius_m;
+    min_a - max_b
+}
 
 /// Below this squared length a segment is treated as a point.
 const DEGENERATE_SQ: f64 = 1e-18;
@@ -164,21 +192,31 @@ pub fn capsule_capsule(
             })
         }
     };
+    // The closed form is exact but where the axes are (nearly) parallel: its fallback then
+    // picks one closest pair of many, off by up to length x angle. The bound along the
+    // chosen normal is exact there.
+    let distance_m = (gap - a.radius_m - b.radius_m).min(capsule_separation_along(a, b, nhat_BA_W));
+    let p_WB = c_B + nhat_BA_W * b.radius_m;
     SignedDistancePair {
         link,
         part,
-        distance_m: gap - a.radius_m - b.radius_m,
-        p_WA: c_A - nhat_BA_W * a.radius_m,
-        p_WB: c_B + nhat_BA_W * b.radius_m,
+        distance_m,
+        // A's witness moves with the certified distance, keeping p_WA - p_WB = d n.
+        p_WA: p_WB + nhat_BA_W * distance_m,
+        p_WB,
         nhat_BA_W,
         t_B: t,
     }
 }
 
-/// Signed distance between any convex parry shape A at `X_WA` (a robot link's exact collision
-/// shape) and human capsule B, by parry's `query::contact` (GJK, EPA when penetrating).
-/// Returns `None` when the pair is farther apart than `max_distance_m` (a negative bound
-/// counts as 0), an input is not finite, or parry does not support the shape.
+/// Signed distance between a parry shape A at `X_WA` (a robot link's exact collision shape:
+/// a convex shape or a compound of them) and human capsule B. Convex parts go through
+/// parry's `query::contact` (GJK, EPA when penetrating), certified by the separating-axis
+/// bound along its normal (never farther than the truth). A compound's distance is its
+/// closest part's; when parts overlap B, its depth is the deepest part's (a lower bound on
+/// the union's depth). Returns `None` when the pair is farther apart than `max_distance_m`
+/// (a negative bound counts as 0), an input is not finite, or parry does not support the
+/// shape.
 #[must_use]
 pub fn shape_capsule(
     link: LinkId,
@@ -188,23 +226,68 @@ pub fn shape_capsule(
     b: &Capsule,
     max_distance_m: f64,
 ) -> Option<SignedDistancePair> {
-    // parry's capsule: a segment in its own frame; place it at the identity.
-    let capsule_B = parry3d_f64::shape::Capsule::new(b.a_W, b.b_W, b.radius_m);
+    if !b.is_valid() || !X_WA.translation.is_finite() || !X_WA.rotation.is_finite() {
+        return None;
+    }
     // parry panics on a negative (or NaN) prediction margin.
     let margin = if max_distance_m > 0.0 {
         max_distance_m
     } else {
         0.0
     };
-    if !b.is_valid() || !X_WA.translation.is_finite() || !X_WA.rotation.is_finite() {
-        return None;
+    let Some(compound) = shape_A.as_compound() else {
+        return convex_capsule(link, X_WA, shape_A, part, b, margin);
+    };
+    let mut best: Option<SignedDistancePair> = None;
+    for (X_AP, shape_P) in compound.shapes() {
+        let limit = best.map_or(margin, |p| p.distance_m.clamp(0.0, margin));
+        let X_WP = *X_WA * *X_AP;
+        if let Some(pair) = convex_capsule(link, &X_WP, shape_P.as_ref(), part, b, limit)
+            && best.is_none_or(|p| pair.distance_m < p.distance_m)
+        {
+            best = Some(pair);
+        }
     }
-    let contact = query::contact(X_WA, shape_A, &Pose::IDENTITY, &capsule_B, margin).ok()??;
-    if contact.dist > margin {
-        return None;
-    }
+    best
+}
+
+/// Room above the caller's bound given to parry's query, m: a pair that parry places just
+/// beyond the bound but whose certified distance is within it is still found.
+const QUERY_MARGIN_M: f64 = 1e-3;
+
+/// [`shape_capsule`] for one convex shape.
+fn convex_capsule(
+    link: LinkId,
+    X_WA: &Pose,
+    shape_A: &dyn Shape,
+    part: HumanPart,
+    b: &Capsule,
+    margin: f64,
+) -> Option<SignedDistancePair> {
+    // parry's capsule: a segment in its own frame; place it at the identity.
+    let capsule_B = parry3d_f64::shape::Capsule::new(b.a_W, b.b_W, b.radius_m);
+    let contact = query::contact(
+        X_WA,
+        shape_A,
+        &Pose::IDENTITY,
+        &capsule_B,
+        margin + QUERY_MARGIN_M,
+    )
+    .ok()??;
     // normal1 points from A toward B.
     let nhat_BA_W = -contact.normal1;
+    let mut distance_m = contact.dist;
+    if let Some(support) = shape_A.as_support_map()
+        && (nhat_BA_W.length() - 1.0).abs() < 1e-9
+    {
+        // min over A of a.n is A's support point toward -n.
+        let min_a = support.support_point(X_WA, -nhat_BA_W).dot(nhat_BA_W);
+        let max_b = b.a_W.dot(nhat_BA_W).max(b.b_W.dot(nhat_BA_W)) + b.radius_m;
+        distance_m = distance_m.min(min_a - max_b);
+    }
+    if !distance_m.is_finite() || distance_m > margin {
+        return None;
+    }
     let axis = b.b_W - b.a_W;
     let len_sq = axis.length_squared();
     let t_B = if len_sq > DEGENERATE_SQ {
@@ -215,8 +298,9 @@ pub fn shape_capsule(
     Some(SignedDistancePair {
         link,
         part,
-        distance_m: contact.dist,
-        p_WA: contact.point1,
+        distance_m,
+        // A's witness moves with the certified distance, keeping p_WA - p_WB = d n.
+        p_WA: contact.point2 + nhat_BA_W * distance_m,
         p_WB: contact.point2,
         nhat_BA_W,
         t_B,

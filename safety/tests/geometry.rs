@@ -227,6 +227,13 @@ fn closed_form_agrees_with_parry_gjk_on_random_capsules() {
         let gjk = shape_capsule(0, &Pose::IDENTITY, &shape, HumanPart::Forearm, &b, 10.0)
             .expect("within range");
         worst = worst.max((exact.distance_m - gjk.distance_m).abs());
+        // Certified: never farther than the closed form.
+        assert!(
+            gjk.distance_m <= exact.distance_m + EXACT,
+            "{} > {}",
+            gjk.distance_m,
+            exact.distance_m
+        );
     }
     // SAFETY.md anchor: GJK capsule distances were measured with errors up to 1.3e-5 m.
     assert!(worst < 2e-5, "largest difference {worst}");
@@ -327,4 +334,131 @@ fn parallel_capsules_get_a_row_at_each_end() {
     for r in &rows {
         assert_abs_diff_eq!(r.pair.distance_m, 0.3, epsilon = 1e-9);
     }
+}
+
+/// A rotation about a unit axis and a translation, drawn from `rng`.
+fn random_pose(rng: &mut ChaCha8Rng) -> Pose {
+    let axis = v(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    )
+    .normalize_or(Vector::Z);
+    let rotation =
+        workcell_robots::math::Rotation::from_axis_angle(axis, rng.random_range(0.0..6.28));
+    let translation = v(
+        rng.random_range(-2.0..2.0),
+        rng.random_range(-2.0..2.0),
+        rng.random_range(-2.0..2.0),
+    );
+    Pose::from_translation(translation) * Pose::from_rotation(rotation)
+}
+
+/// Nearly parallel capsules longer than 1 m, where the closed form's parallel fallback picks
+/// one of many closest pairs: B starts h above A's start and leans toward A by theta, so the
+/// gap is h - L sin(theta) at B's far end (then minus the radii). In random rigid poses the
+/// answer may err only toward contact, and by no more than rounding.
+#[test]
+fn near_parallel_long_capsules_are_never_reported_farther() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let (h, r_a, r_b) = (0.3, 0.05, 0.04);
+    let mut worst_under: f64 = 0.0;
+    for length in [1.0, 1.5, 2.0, 4.0] {
+        for theta in [0.0, 1e-9, 1e-7, 5e-7, 1e-6, 3e-6, 1e-5, 1e-3] {
+            let expected = h - length * f64::sin(theta) - r_a - r_b;
+            for _ in 0..25 {
+                let X = random_pose(&mut rng);
+                let a = Capsule::new(
+                    X.transform_point(v(0.0, 0.0, 0.0)),
+                    X.transform_point(v(length, 0.0, 0.0)),
+                    r_a,
+                );
+                let b = Capsule::new(
+                    X.transform_point(v(0.0, h, 0.0)),
+                    X.transform_point(v(length * theta.cos(), h - length * theta.sin(), 0.0)),
+                    r_b,
+                );
+                for d in [pair(a, b).distance_m, pair(b, a).distance_m] {
+                    assert!(
+                        d <= expected + 1e-12,
+                        "L {length}, theta {theta}: {d} reported, {expected} true"
+                    );
+                    worst_under = worst_under.max(expected - d);
+                }
+            }
+        }
+    }
+    // And exact up to rounding (the bound along the chosen normal is the answer here).
+    assert!(worst_under < 1e-12, "conservative by up to {worst_under} m");
+}
+
+/// Signed distance between a segment and a box by the separating axis theorem: the box's
+/// three face normals and the segment's direction crossed with each box edge are the only
+/// candidate axes for two convex polytopes; the smallest overlap is the penetration depth.
+/// Independent of parry; exact for overlapping pairs.
+fn segment_box_depth(half: Vector, p0: Vector, p1: Vector) -> Option<f64> {
+    let d = p1 - p0;
+    let mut axes = vec![Vector::X, Vector::Y, Vector::Z];
+    for e in [Vector::X, Vector::Y, Vector::Z] {
+        let c = d.cross(e);
+        if c.length() > 1e-9 {
+            axes.push(c.normalize());
+        }
+    }
+    let mut depth = f64::INFINITY;
+    for u in axes {
+        let extent = half.x * u.x.abs() + half.y * u.y.abs() + half.z * u.z.abs();
+        let (lo, hi) = (p0.dot(u).min(p1.dot(u)), p0.dot(u).max(p1.dot(u)));
+        let overlap = (extent - lo).min(hi + extent);
+        if overlap <= 0.0 {
+            return None;
+        }
+        depth = depth.min(overlap);
+    }
+    Some(depth)
+}
+
+/// Penetrating capsule-box pairs: parry's EPA may stop before the deepest direction; the
+/// certified distance is never shallower than the exact depth (separating axes), and within
+/// 1 mm of it.
+#[test]
+fn penetrating_capsule_box_pairs_are_never_reported_shallower() {
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let (mut cases, mut worst_deeper) = (0, 0.0f64);
+    while cases < 2200 {
+        let half = v(
+            rng.random_range(0.02..0.4),
+            rng.random_range(0.02..0.4),
+            rng.random_range(0.02..0.4),
+        );
+        let mut point = || {
+            v(
+                rng.random_range(-0.6..0.6),
+                rng.random_range(-0.6..0.6),
+                rng.random_range(-0.6..0.6),
+            )
+        };
+        let (p0, p1) = (point(), point());
+        let Some(depth) = segment_box_depth(half, p0, p1) else {
+            continue;
+        };
+        cases += 1;
+        let radius = rng.random_range(0.01..0.3);
+        let exact = -depth - radius;
+        let X = random_pose(&mut rng);
+        let capsule = Capsule::new(X.transform_point(p0), X.transform_point(p1), radius);
+        let p = shape_capsule(1, &X, &Cuboid::new(half), HumanPart::Hand, &capsule, 1.0)
+            .expect("overlapping");
+        assert!(
+            p.distance_m <= exact + 1e-9,
+            "case {cases}: {} reported, {exact} exact",
+            p.distance_m
+        );
+        worst_deeper = worst_deeper.max(exact - p.distance_m);
+        check_invariants(&p, 1e-9);
+    }
+    assert!(
+        worst_deeper < 1e-3,
+        "deeper than exact by up to {worst_deeper} m"
+    );
 }
