@@ -58,6 +58,7 @@ fn main() -> anyhow::Result<()> {
                 v_b_W: v,
             }],
             uncertainty_m: 0.02,
+            uncertainty_rate_m_s: 0.0,
         };
         let out = filter.tick(&robot, &q, &qdot_nom, &human, dt);
         for (qi, vi) in q.iter_mut().zip(filter.command()) {

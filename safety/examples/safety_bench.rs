@@ -108,6 +108,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 part(HumanPart::Hand, wrist, hand_end, 0.045),
             ],
             uncertainty_m: 0.02,
+            uncertainty_rate_m_s: 0.0,
         };
         // Nominal: joints moving the tool toward the human (the tool's Jacobian transposed).
         let jac = robot.link_jacobian(&kinematics, tool);

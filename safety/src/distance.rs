@@ -48,9 +48,10 @@ pub struct PairConstraint {
     /// `nhat_BA_W^T J_A(q)`: how fast each joint moves the robot witness point away from the
     /// human part (m/s per rad/s). Entries past the robot's dof are zero.
     pub normal_jacobian: [f64; MAX_DOF],
-    /// `max(0, nhat_BA_W^T v_B)`: the human part's approach speed at its witness point along
-    /// the normal (the normal points from human to robot); a withdrawing part counts as
-    /// standing.
+    /// `max(0, nhat_BA_W^T v_B) + du/dt`: the approach speed of the inflated part's surface at
+    /// its witness point along the normal (the normal points from human to robot): the part's
+    /// own speed, a withdrawing part counting as standing, plus the growth rate of the
+    /// uncertainty it is inflated by.
     pub human_normal_speed_m_s: f64,
     /// Power and force limiting: the robot's witness point may approach the part at most
     /// this fast, m/s: ISO/TS 15066's transient contact speed of the part's body region
@@ -214,7 +215,8 @@ impl RobotGeometry {
                         human_normal_speed_m_s: p
                             .nhat_BA_W
                             .dot(estimate.velocity_at(p.t_B))
-                            .max(0.0),
+                            .max(0.0)
+                            + human.uncertainty_rate_m_s,
                         max_approach_m_s: f64::INFINITY,
                     });
                 };

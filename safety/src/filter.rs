@@ -445,6 +445,8 @@ impl SafetyFilter {
         }
         let human_ok = human.uncertainty_m.is_finite()
             && human.uncertainty_m >= 0.0
+            && human.uncertainty_rate_m_s.is_finite()
+            && human.uncertainty_rate_m_s >= 0.0
             && human.parts.iter().all(|p| p.is_valid());
         if !human_ok {
             return self.brake(out, BrakeReason::InvalidHumanEstimate, dt_s);

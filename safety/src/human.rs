@@ -42,6 +42,10 @@ pub struct HumanEstimate {
     pub parts: Vec<PartEstimate>,
     /// The sensing uncertainty Z_d of ISO/TS 15066, m: every capsule is inflated by it.
     pub uncertainty_m: f64,
+    /// How fast the uncertainty grows until the next measurement, m/s (an ageing estimate
+    /// of a human who may accelerate): the inflated surface approaches the robot at this
+    /// rate on top of the part's own speed, and the barrier rows count it.
+    pub uncertainty_rate_m_s: f64,
 }
 
 impl HumanEstimate {
@@ -99,6 +103,7 @@ impl HumanGeometry {
     ) {
         out.parts.clear();
         out.uncertainty_m = 0.0;
+        out.uncertainty_rate_m_s = 0.0;
         for (part, c) in &self.parts {
             let (a_W, b_W) = c.segment_in_world(kinematics.link_pose(c.link));
             human.point_jacobian(kinematics, c.link, a_W, &mut self.jacobian);

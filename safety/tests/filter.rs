@@ -207,6 +207,7 @@ fn filter_caps_the_approach_speed_near_each_part() {
             v_b_W: Vector::ZERO,
         }],
         uncertainty_m: 0.0,
+        uncertainty_rate_m_s: 0.0,
     };
     // Joints 1, 2, 4 and 6 near their velocity limits, in the combination that moves the
     // tool fastest; the chest waits 0.35 m ahead of the tool on that line.
@@ -277,6 +278,7 @@ fn forearm(a: Vector, b: Vector, v: Vector) -> HumanEstimate {
             v_b_W: v,
         }],
         uncertainty_m: 0.0,
+        uncertainty_rate_m_s: 0.0,
     }
 }
 
@@ -354,6 +356,57 @@ fn barrier_holds_d_min_against_a_moving_human_only_with_the_velocity_term() {
     assert!(
         without_term < d_min - 5e-3,
         "without the human velocity the gap was {without_term}"
+    );
+}
+
+/// A standing human whose estimate ages: its uncertainty grows at 0.4 m/s, so the inflated
+/// surface closes in on the arm although nothing moves. With the growth rate told, the
+/// barrier keeps the inflated gap at d_min; without it, the gap falls below.
+#[test]
+fn barrier_counts_the_growth_of_the_uncertainty() {
+    let robot = iiwa();
+    let config = FilterConfig {
+        acceleration_rad_s2: 100.0,
+        ..FilterConfig::default()
+    };
+    let d_min = config.d_min_m;
+    let run = |tell_rate: bool| {
+        let mut filter = SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config.clone())
+            .expect("filter");
+        let dt = 0.001;
+        let mut q = vec![0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+        let (a, b) = (Vector::new(0.95, -0.3, 0.6), Vector::new(0.95, 0.3, 0.6));
+        let rate = 0.4;
+        let mut min_gap = f64::INFINITY;
+        for k in 0..600 {
+            let uncertainty = rate * k as f64 * dt;
+            let mut told = forearm(a, b, Vector::ZERO);
+            told.uncertainty_m = uncertainty;
+            told.uncertainty_rate_m_s = if tell_rate { rate } else { 0.0 };
+            filter.tick(&robot, &q, &[0.0; 7], &told, dt);
+            for (qi, v) in q.iter_mut().zip(filter.command()) {
+                *qi += v * dt;
+            }
+            // The inflated surface at the end of the tick.
+            let mut inflated = forearm(a, b, Vector::ZERO);
+            inflated.parts[0].capsule.radius_m += uncertainty + rate * dt;
+            let gap = capsule_gap(&filter, &robot, &q, &inflated);
+            // From the first tick the pair is within reach of the barrier.
+            if k > 0 {
+                min_gap = min_gap.min(gap);
+            }
+        }
+        min_gap
+    };
+    let with_rate = run(true);
+    assert!(
+        with_rate >= d_min - 1e-3,
+        "gap {with_rate} fell below d_min {d_min}"
+    );
+    let without_rate = run(false);
+    assert!(
+        without_rate < d_min - 5e-3,
+        "without the growth rate the gap was {without_rate}"
     );
 }
 

@@ -253,6 +253,7 @@ fn normal_jacobian_rows_are_distance_gradients() {
             v_b_W: Vector::ZERO,
         }],
         uncertainty_m: 0.01,
+        uncertainty_rate_m_s: 0.0,
     };
     let q = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
     let mut kinematics = KinematicState::new(&robot);
@@ -326,6 +327,7 @@ fn parallel_capsules_get_a_row_at_each_end() {
             v_b_W: Vector::ZERO,
         }],
         uncertainty_m: 0.0,
+        uncertainty_rate_m_s: 0.0,
     };
     let mut pairs = Vec::new();
     geometry.pair_constraints(&robot, &kinematics, &human, 0.5, &mut pairs);

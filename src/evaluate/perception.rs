@@ -285,6 +285,7 @@ impl HumanPerception for NoisyCamera {
         out.parts.clear();
         let Some((t0, measured)) = &self.latest else {
             out.uncertainty_m = 0.0;
+            out.uncertainty_rate_m_s = 0.0;
             return; // nothing yet: the filter brakes
         };
         let age = (t - t0).max(0.0);
@@ -292,6 +293,8 @@ impl HumanPerception for NoisyCamera {
         out.uncertainty_m = k * self.config.position_noise_m
             + k * self.config.velocity_noise_m_s * age
             + 0.5 * self.config.human_acceleration_m_s2 * age * age;
+        out.uncertainty_rate_m_s =
+            k * self.config.velocity_noise_m_s + self.config.human_acceleration_m_s2 * age;
         out.parts
             .extend(measured.parts.iter().map(|p| PartEstimate {
                 capsule: workcell_safety::Capsule::new(

@@ -152,6 +152,7 @@ impl HumanPerception for ProcNetCamera {
         out.parts.clear();
         let Some((t0, m)) = &self.latest else {
             out.uncertainty_m = 0.0;
+            out.uncertainty_rate_m_s = 0.0;
             return; // nothing yet: the filter brakes
         };
         let age = (t - t0).max(0.0);
@@ -167,6 +168,7 @@ impl HumanPerception for ProcNetCamera {
             }
         };
         out.uncertainty_m = m.uncertainty_m + 0.5 * self.config.human_acceleration_m_s2 * age * age;
+        out.uncertainty_rate_m_s = self.config.human_acceleration_m_s2 * age;
         for (k, &(part, a, b, r)) in m.parts.iter().enumerate() {
             let (va, vb) = (velocity(k, 0), velocity(k, 1));
             out.parts.push(PartEstimate {

@@ -103,12 +103,14 @@ impl Aggregate {
     #[must_use]
     pub fn headline(&self, d_min_m: f64) -> String {
         format!(
-            "min separation {:.4} m (d_min {d_min_m:.3}), {} violations in {} episodes ({:.3} s below d_min, {:.3} s of it moving), {}/{} finished, task time {} of unfiltered, peak speed near the human {:.3} m/s (approach {:.3} m/s)",
+            "min separation {:.4} m (d_min {d_min_m:.3}), {} violations in {} episodes ({:.3} s below d_min, {:.3} s of it moving), contacts: {} with the robot moving, {} at standstill, {}/{} finished, task time {} of unfiltered, peak speed near the human {:.3} m/s (approach {:.3} m/s)",
             self.min_separation_m,
             self.violations,
             self.episodes_with_violation,
             self.violation_s,
             self.violation_moving_s,
+            self.contacts_moving,
+            self.contacts_standing,
             self.finished,
             self.episodes,
             task_ratio(self.mean_task_ratio, "x"),
@@ -450,15 +452,23 @@ mod tests {
             peak_speed_near_human_m_s: 0.1,
             peak_approach_speed_m_s: 0.1,
             peak_human_speed_m_s: 1.0,
+            peak_approach_by_part_m_s: [0.0; 3],
+            contacts_moving: 1,
+            contacts_standing: 2,
             ticks_pass: 10,
             ticks_modified: 0,
             ticks_relaxed: 0,
             ticks_braking: 0,
             real_time_factor: 1.0,
         };
+        let line = a.headline(0.1);
         assert!(
-            a.headline(0.1)
-                .contains("2/2 finished, task time x1.250 of unfiltered")
+            line.contains("2/2 finished, task time x1.250 of unfiltered"),
+            "{line}"
+        );
+        assert!(
+            line.contains("contacts: 1 with the robot moving, 2 at standstill"),
+            "{line}"
         );
         (a.finished, a.mean_task_ratio) = (0, f64::NAN);
         let line = a.headline(0.1);
