@@ -37,6 +37,27 @@ fn end_pairs(
     ]
 }
 
+/// A static box of the cell the arm must not be pushed into.
+#[derive(Debug, Clone)]
+pub struct Obstacle {
+    /// Pose of the box centre in the world.
+    pub X_WO: workcell_robots::math::Pose,
+    pub shape: parry3d_f64::shape::Cuboid,
+}
+
+impl Obstacle {
+    /// A box with centre pose `X_WO` and half extents `half_extents_m`.
+    #[must_use]
+    pub fn cuboid(X_WO: workcell_robots::math::Pose, half_extents_m: [f64; 3]) -> Self {
+        Self {
+            X_WO,
+            shape: parry3d_f64::shape::Cuboid::new(workcell_robots::math::Vector::from_array(
+                half_extents_m,
+            )),
+        }
+    }
+}
+
 /// Most joints a guarded robot may have (rows are fixed-size arrays to keep the tick free of
 /// allocation).
 pub const MAX_DOF: usize = 16;
@@ -58,6 +79,11 @@ pub struct PairConstraint {
     /// within the filter's `pfl_distance_m`, a braking ramp up from it beyond; infinite when
     /// power and force limiting is off.
     pub max_approach_m_s: f64,
+    /// A row against a static obstacle of the cell (a table, a shelf) instead of a human
+    /// part: its bound is [`PairConstraint::max_approach_m_s`] alone and `pair.part` means
+    /// nothing. The filter keeps the arm from being pushed into the furniture while it
+    /// evades the human.
+    pub obstacle: bool,
 }
 
 impl PairConstraint {
@@ -67,6 +93,9 @@ impl PairConstraint {
     #[must_use]
     #[inline]
     pub fn approach_bound_m_s(&self, gamma_per_s: f64, d_min_m: f64) -> f64 {
+        if self.obstacle {
+            return self.max_approach_m_s;
+        }
         (gamma_per_s * (self.pair.distance_m - d_min_m) - self.human_normal_speed_m_s)
             .min(self.max_approach_m_s)
     }
@@ -218,6 +247,7 @@ impl RobotGeometry {
                             .max(0.0)
                             + human.uncertainty_rate_m_s,
                         max_approach_m_s: f64::INFINITY,
+                        obstacle: false,
                     });
                 };
                 push(pair);
@@ -233,6 +263,69 @@ impl RobotGeometry {
                         push(end);
                     }
                 }
+            }
+        }
+    }
+
+    /// The rows of every movable link's capsule against every obstacle box closer than
+    /// `detection_m`, appended to `out`: the link may approach the box at most at
+    /// `gamma_per_s (d - clearance_m)`, and not at all once closer than `clearance_m` (a link
+    /// that starts closer, such as the first link above the table the robot stands on, is
+    /// not pushed out). The filter raises the bound to the nominal command's own approach.
+    #[allow(clippy::too_many_arguments)]
+    pub fn obstacle_constraints(
+        &mut self,
+        robot: &RobotModel,
+        kinematics: &KinematicState,
+        obstacles: &[Obstacle],
+        detection_m: f64,
+        clearance_m: f64,
+        gamma_per_s: f64,
+        out: &mut Vec<PairConstraint>,
+    ) {
+        for g in &self.links {
+            if !g.movable {
+                continue;
+            }
+            let (a_W, b_W) = g
+                .capsule
+                .segment_in_world(kinematics.link_pose(g.capsule.link));
+            // The link's capsule as B, the box as A: flip the pair afterwards.
+            let link_capsule = Capsule::new(a_W, b_W, g.capsule.radius_m);
+            for o in obstacles {
+                let Some(p) = shape_capsule(
+                    g.capsule.link,
+                    &o.X_WO,
+                    &o.shape,
+                    crate::human::HumanPart::Torso,
+                    &link_capsule,
+                    detection_m,
+                ) else {
+                    continue;
+                };
+                // The robot's witness is on the capsule (p_WB); its normal points away from
+                // the box.
+                let n = -p.nhat_BA_W;
+                robot.point_jacobian(kinematics, g.capsule.link, p.p_WB, &mut self.jacobian);
+                let mut normal_jacobian = [0.0; MAX_DOF];
+                for (j, col) in self.jacobian.columns().iter().enumerate() {
+                    normal_jacobian[j] = n.x * col[0] + n.y * col[1] + n.z * col[2];
+                }
+                out.push(PairConstraint {
+                    pair: SignedDistancePair {
+                        link: g.capsule.link,
+                        part: crate::human::HumanPart::Torso,
+                        distance_m: p.distance_m,
+                        p_WA: p.p_WB,
+                        p_WB: p.p_WA,
+                        nhat_BA_W: n,
+                        t_B: 0.0,
+                    },
+                    normal_jacobian,
+                    human_normal_speed_m_s: 0.0,
+                    max_approach_m_s: gamma_per_s * (p.distance_m - clearance_m).max(0.0),
+                    obstacle: true,
+                });
             }
         }
     }

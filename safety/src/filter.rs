@@ -76,6 +76,11 @@ pub struct FilterConfig {
     /// that a point that may approach at the cap can slow to the region's limit by the time
     /// it enters the PFL distance. Default 2.5.
     pub pfl_deceleration_m_s2: f64,
+    /// The QP keeps each link this far from the cell's static obstacles
+    /// ([`SafetyFilter::set_obstacles`]) while it evades the human, m. Default 0.02.
+    pub obstacle_clearance_m: f64,
+    /// Obstacle boxes closer to a link than this get a row, m. Default 0.2.
+    pub obstacle_detection_m: f64,
     /// Payload at the tool for the effective robot mass of power and force limiting
     /// (M/2 + payload), kg. Default 0.
     pub payload_kg: f64,
@@ -96,6 +101,8 @@ impl Default for FilterConfig {
             position_gain_per_s: 10.0,
             pfl_distance_m: 0.3,
             pfl_deceleration_m_s2: 2.5,
+            obstacle_clearance_m: 0.02,
+            obstacle_detection_m: 0.2,
             payload_kg: 0.0,
             ssm: SsmConfig::default(),
         }
@@ -129,6 +136,8 @@ impl FilterConfig {
         for (key, v) in [
             ("safety.pfl_distance_m", self.pfl_distance_m),
             ("safety.payload_kg", self.payload_kg),
+            ("safety.obstacle_clearance_m", self.obstacle_clearance_m),
+            ("safety.obstacle_detection_m", self.obstacle_detection_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(key, format!("must be finite and >= 0, got {v}")));
@@ -268,6 +277,7 @@ pub struct SafetyFilter {
     /// Power and force limiting: the largest approach speed per part, indexed by
     /// [`HumanPart::ALL`] (infinite when PFL is off).
     pfl_limits_m_s: [f64; 4],
+    obstacles: Vec<crate::distance::Obstacle>,
 }
 
 impl SafetyFilter {
@@ -336,6 +346,7 @@ impl SafetyFilter {
             }
         }
         Ok(Self {
+            obstacles: Vec::new(),
             pfl_limits_m_s,
             mode,
             geometry,
@@ -351,6 +362,12 @@ impl SafetyFilter {
             position_limits: robot.position_limits(),
             config,
         })
+    }
+
+    /// The cell's static obstacles (tables, shelves): the QP filter does not push the arm
+    /// into them while it evades the human. Replaces any earlier set.
+    pub fn set_obstacles(&mut self, obstacles: Vec<crate::distance::Obstacle>) {
+        self.obstacles = obstacles;
     }
 
     /// The filter's mode.
@@ -485,7 +502,24 @@ impl SafetyFilter {
 
         match self.mode {
             FilterMode::None => unreachable!("handled above"),
-            FilterMode::Qp => self.tick_qp(qdot_nom, out, dt_s),
+            FilterMode::Qp => {
+                self.geometry.obstacle_constraints(
+                    robot,
+                    &self.kinematics,
+                    &self.obstacles,
+                    self.config.obstacle_detection_m,
+                    self.config.obstacle_clearance_m,
+                    self.config.gamma_per_s,
+                    &mut self.pairs,
+                );
+                // The planned motion keeps its own clearance (from the exact links, which
+                // the capsules overestimate): an obstacle row only forbids approaching the
+                // furniture faster than the nominal command does.
+                for c in self.pairs.iter_mut().filter(|c| c.obstacle) {
+                    c.max_approach_m_s = c.max_approach_m_s.max(c.approach_m_s(qdot_nom));
+                }
+                self.tick_qp(qdot_nom, out, dt_s)
+            }
             FilterMode::Ssm => self.tick_ssm(qdot_nom, out, dt_s),
         }
     }

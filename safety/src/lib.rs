@@ -27,7 +27,7 @@ mod human;
 pub mod iso;
 mod qp;
 
-pub use distance::{MAX_DOF, PairConstraint, RobotGeometry};
+pub use distance::{MAX_DOF, Obstacle, PairConstraint, RobotGeometry};
 pub use error::{Result, SafetyError};
 pub use filter::{BrakeReason, FilterConfig, FilterMode, FilterOutput, FilterStatus, SafetyFilter};
 pub use geometry::{Capsule, SignedDistancePair};

@@ -223,15 +223,22 @@ impl QpFilter {
         let (n, rows) = (self.dof, self.max_pairs);
         let per_column = rows + 2;
         if pairs.len() > rows {
+            // The human's pairs first, closest first; obstacles fill the rows left.
             pairs.select_nth_unstable_by(rows - 1, |x, y| {
-                x.pair.distance_m.total_cmp(&y.pair.distance_m)
+                x.obstacle
+                    .cmp(&y.obstacle)
+                    .then(x.pair.distance_m.total_cmp(&y.pair.distance_m))
             });
         }
         let used = pairs.len().min(rows);
         // Slack weights relative to the closest pair's (1 for it): the slack stays in m/s
         // of the closest row, which keeps the solver's accuracy where it matters.
         let room = |c: &PairConstraint| (c.pair.distance_m - d_min_m).max(0.0) + SLACK_FLOOR_M;
-        let closest_room = pairs[..used].iter().map(room).fold(f64::INFINITY, f64::min);
+        let closest_room = pairs[..used]
+            .iter()
+            .filter(|c| !c.obstacle)
+            .map(room)
+            .fold(f64::INFINITY, f64::min);
         for i in 0..rows {
             let slack_entry = n * per_column + i;
             if let Some(c) = pairs.get(i) {
@@ -239,9 +246,11 @@ impl QpFilter {
                     self.a_values[j * per_column + i] = -c.normal_jacobian[j];
                 }
                 self.b[i] = c.approach_bound_m_s(gamma_per_s, d_min_m);
-                // A row bound by its PFL cap stays hard: slowing down is always possible.
-                let capped = c.max_approach_m_s
-                    < gamma_per_s * (c.pair.distance_m - d_min_m) - c.human_normal_speed_m_s;
+                // A row bound by its PFL cap stays hard: slowing down is always possible. So
+                // do obstacle rows: the furniture does not give way.
+                let capped = c.obstacle
+                    || c.max_approach_m_s
+                        < gamma_per_s * (c.pair.distance_m - d_min_m) - c.human_normal_speed_m_s;
                 self.a_values[slack_entry] = if capped { 0.0 } else { -room(c) / closest_room };
             } else {
                 for j in 0..n {
@@ -286,7 +295,7 @@ impl QpFilter {
             if lhs > self.b[i] + weight * slack + ROW_TOLERANCE {
                 return Err(QpFailure::BadSolution);
             }
-            if c.pair.distance_m < closest {
+            if !c.obstacle && c.pair.distance_m < closest {
                 closest = c.pair.distance_m;
                 violation = (lhs - self.b[i]).max(0.0);
             }

@@ -28,6 +28,7 @@ fn row(normal_jacobian: &[f64], distance_m: f64, human_normal_speed_m_s: f64) ->
         normal_jacobian: nj,
         human_normal_speed_m_s,
         max_approach_m_s: f64::INFINITY,
+        obstacle: false,
     }
 }
 

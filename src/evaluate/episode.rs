@@ -5,8 +5,8 @@ use std::time::Instant;
 use workcell_robots::math::Vector;
 use workcell_robots::{Jacobian, KinematicState, LinkId};
 use workcell_safety::{
-    BrakeReason, FilterMode, FilterStatus, HumanEstimate, HumanGeometry, HumanPart, SafetyFilter,
-    SignedDistancePair,
+    BrakeReason, FilterMode, FilterStatus, HumanEstimate, HumanGeometry, HumanPart, Obstacle,
+    SafetyFilter, SignedDistancePair,
 };
 use workcell_sim::{CellModel, CellState, RobotCommand, step};
 
@@ -110,7 +110,15 @@ impl<'a> Run<'a> {
         let state = CellState::new(&model)?;
         let robot = &model.robot;
         let dof = robot.dof();
-        let filter = SafetyFilter::new(robot, model.X_WR, mode, c.safety.clone())?;
+        let mut filter = SafetyFilter::new(robot, model.X_WR, mode, c.safety.clone())?;
+        // The cell's furniture: evading the human must not push the arm into it.
+        filter.set_obstacles(
+            model
+                .clutter
+                .iter()
+                .map(|b| Obstacle::cuboid(b.X_WC, b.half_extents_m))
+                .collect(),
+        );
         let human_geometry = HumanGeometry::new(&model.human)?;
         let mut human_kinematics = KinematicState::new(&model.human);
         human_kinematics.X_WB = model.X_WH;

@@ -167,8 +167,8 @@ impl HumanPerception for ProcNetCamera {
                 _ => Vector::ZERO,
             }
         };
-        out.uncertainty_m = m.uncertainty_m + 0.5 * self.config.human_acceleration_m_s2 * age * age;
-        out.uncertainty_rate_m_s = self.config.human_acceleration_m_s2 * age;
+        out.uncertainty_m = self.config.aged_uncertainty(m.uncertainty_m, 0.0, age);
+        out.uncertainty_rate_m_s = 0.0;
         for (k, &(part, a, b, r)) in m.parts.iter().enumerate() {
             let (va, vb) = (velocity(k, 0), velocity(k, 1));
             out.parts.push(PartEstimate {
