@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use workcell::evaluate::report::Aggregate;
-use workcell::evaluate::{Evaluation, run_episode};
+use workcell::evaluate::{EpisodeMetrics, Evaluation, run_episode};
 use workcell::safety::FilterMode;
 
 #[derive(Debug, Deserialize)]
@@ -25,6 +25,8 @@ struct Case {
     max_violations: Option<usize>,
     min_violations: Option<usize>,
     min_separation_m: Option<f64>,
+    max_violation_moving_s: Option<f64>,
+    min_violation_moving_s: Option<f64>,
     min_finished: Option<usize>,
     max_task_ratio: Option<f64>,
 }
@@ -33,24 +35,20 @@ fn scenarios() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenarios")
 }
 
-fn run(case: &Case) -> Aggregate {
+/// Episode `e` of `case`: seed `case.seed + e`.
+fn episode(case: &Case, e: usize) -> EpisodeMetrics {
     let evaluation =
         Evaluation::from_file(&scenarios().join(&case.scenario)).expect("scenario loads");
-    let metrics: Vec<_> = (0..case.episodes)
-        .map(|e| {
-            run_episode(
-                &evaluation,
-                case.filter,
-                e,
-                case.seed + e as u64,
-                None,
-                |_| {},
-            )
-            .expect("episode runs")
-            .0
-        })
-        .collect();
-    Aggregate::of(&metrics)
+    run_episode(
+        &evaluation,
+        case.filter,
+        e,
+        case.seed + e as u64,
+        None,
+        |_| {},
+    )
+    .expect("episode runs")
+    .0
 }
 
 #[test]
@@ -58,10 +56,41 @@ fn closed_loop_scenarios_stay_within_their_bounds() {
     let text =
         std::fs::read_to_string(scenarios().join("expectations.toml")).expect("expectations");
     let expectations: Expectations = toml::from_str(&text).expect("expectations parse");
-    assert!(expectations.case.len() >= 2);
+    assert!(expectations.case.len() >= 6);
+    // The episodes run on every core (each one is independent).
+    let aggregates: Vec<Aggregate> = std::thread::scope(|scope| {
+        let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
+        let jobs: Vec<(usize, usize)> = expectations
+            .case
+            .iter()
+            .enumerate()
+            .flat_map(|(c, case)| (0..case.episodes).map(move |e| (c, e)))
+            .collect();
+        let chunks: Vec<Vec<(usize, usize)>> = (0..workers)
+            .map(|w| jobs.iter().copied().skip(w).step_by(workers).collect())
+            .collect();
+        let handles: Vec<_> = chunks
+            .into_iter()
+            .map(|chunk| {
+                let cases = &expectations.case;
+                scope.spawn(move || {
+                    chunk
+                        .into_iter()
+                        .map(|(c, e)| (c, episode(&cases[c], e)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        let mut per_case: Vec<Vec<EpisodeMetrics>> = vec![Vec::new(); expectations.case.len()];
+        for h in handles {
+            for (c, m) in h.join().expect("episodes run") {
+                per_case[c].push(m);
+            }
+        }
+        per_case.iter().map(|m| Aggregate::of(m)).collect()
+    });
     let mut failures = Vec::new();
-    for case in &expectations.case {
-        let a = run(case);
+    for (case, a) in expectations.case.iter().zip(aggregates) {
         let mut check = |ok: bool, what: String| {
             if !ok {
                 failures.push(format!("{}: {what}", case.name));
@@ -71,6 +100,18 @@ fn closed_loop_scenarios_stay_within_their_bounds() {
             check(
                 a.violations <= max,
                 format!("{} violations > {max}", a.violations),
+            );
+        }
+        if let Some(max) = case.max_violation_moving_s {
+            check(
+                a.violation_moving_s <= max,
+                format!("{:.3} s below d_min moving > {max} s", a.violation_moving_s),
+            );
+        }
+        if let Some(min) = case.min_violation_moving_s {
+            check(
+                a.violation_moving_s >= min,
+                format!("{:.3} s below d_min moving < {min} s", a.violation_moving_s),
             );
         }
         if let Some(min) = case.min_violations {

@@ -411,6 +411,77 @@ fn barrier_counts_the_growth_of_the_uncertainty() {
     );
 }
 
+/// A hand closing in on the tool from +x and a wall just behind it (-x): without the wall
+/// the filter retreats straight into it; told about it, no link approaches the wall faster
+/// than its row allows (gamma (d - clearance), the nominal command standing still).
+#[test]
+fn evading_the_human_does_not_push_the_arm_into_an_obstacle() {
+    let robot = iiwa();
+    let q = [0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+    let mut k = KinematicState::new(&robot);
+    robot.forward_kinematics(&q, &mut k).expect("fk");
+    let tool = robot.links().len() - 1;
+    let p_tool = k.link_pose(tool).translation;
+    let hand = HumanEstimate {
+        parts: vec![PartEstimate {
+            part: HumanPart::Hand,
+            capsule: Capsule::new(
+                p_tool + Vector::new(0.2, -0.05, 0.0),
+                p_tool + Vector::new(0.2, 0.05, 0.0),
+                0.04,
+            ),
+            v_a_W: Vector::new(-1.5, 0.0, 0.0),
+            v_b_W: Vector::new(-1.5, 0.0, 0.0),
+        }],
+        uncertainty_m: 0.0,
+        uncertainty_rate_m_s: 0.0,
+    };
+    let wall = workcell_safety::Obstacle::cuboid(
+        Pose::from_translation(p_tool - Vector::new(0.25, 0.0, 0.0)),
+        [0.05, 0.5, 0.5],
+    );
+    let config = FilterConfig::default();
+    let approach_to_wall = |with_wall: bool| {
+        let mut filter = SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config.clone())
+            .expect("filter");
+        filter.set_obstacles(if with_wall {
+            vec![wall.clone()]
+        } else {
+            Vec::new()
+        });
+        let out = filter.tick(&robot, &q, &[0.0; 7], &hand, 0.004);
+        assert!(
+            !matches!(out.status, FilterStatus::Braking(_)),
+            "{:?}",
+            out.status
+        );
+        // The wall's rows, measured whether or not the filter was told.
+        let mut told = SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config.clone())
+            .expect("filter");
+        told.set_obstacles(vec![wall.clone()]);
+        told.tick(&robot, &q, &[0.0; 7], &hand, 0.004);
+        told.pairs()
+            .iter()
+            .filter(|c| c.obstacle)
+            .map(|c| {
+                let bound =
+                    config.gamma_per_s * (c.pair.distance_m - config.obstacle_clearance_m).max(0.0);
+                c.approach_m_s(filter.command()) - bound
+            })
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
+    let excess_without = approach_to_wall(false);
+    assert!(
+        excess_without > 0.05,
+        "the unaware filter should back into the wall: {excess_without}"
+    );
+    let excess_with = approach_to_wall(true);
+    assert!(
+        excess_with <= 1e-5,
+        "a link approached the wall {excess_with} m/s beyond its row"
+    );
+}
+
 /// What is wrong, q, the nominal command, the human estimate, the expected reason.
 type BadInput<'a> = (&'a str, &'a [f64], &'a [f64], HumanEstimate, BrakeReason);
 

@@ -346,8 +346,10 @@ fn random_pose(rng: &mut ChaCha8Rng) -> Pose {
         rng.random_range(-1.0..1.0),
     )
     .normalize_or(Vector::Z);
-    let rotation =
-        workcell_robots::math::Rotation::from_axis_angle(axis, rng.random_range(0.0..6.28));
+    let rotation = workcell_robots::math::Rotation::from_axis_angle(
+        axis,
+        rng.random_range(0.0..std::f64::consts::TAU),
+    );
     let translation = v(
         rng.random_range(-2.0..2.0),
         rng.random_range(-2.0..2.0),
