@@ -84,6 +84,10 @@ pub struct PairConstraint {
     /// nothing. The filter keeps the arm from being pushed into the furniture while it
     /// evades the human.
     pub obstacle: bool,
+    /// Extra separation this pair keeps beyond d_min, m: where the arm cannot move its
+    /// witness point away along the normal as fast as a human may approach, the shortfall
+    /// times the filter's `escape_horizon_s` (0 elsewhere).
+    pub escape_margin_m: f64,
 }
 
 impl PairConstraint {
@@ -96,7 +100,8 @@ impl PairConstraint {
         if self.obstacle {
             return self.max_approach_m_s;
         }
-        (gamma_per_s * (self.pair.distance_m - d_min_m) - self.human_normal_speed_m_s)
+        (gamma_per_s * (self.pair.distance_m - d_min_m - self.escape_margin_m)
+            - self.human_normal_speed_m_s)
             .min(self.max_approach_m_s)
     }
 
@@ -248,6 +253,7 @@ impl RobotGeometry {
                             + human.uncertainty_rate_m_s,
                         max_approach_m_s: f64::INFINITY,
                         obstacle: false,
+                        escape_margin_m: 0.0,
                     });
                 };
                 push(pair);
@@ -325,6 +331,7 @@ impl RobotGeometry {
                     human_normal_speed_m_s: 0.0,
                     max_approach_m_s: gamma_per_s * (p.distance_m - clearance_m).max(0.0),
                     obstacle: true,
+                    escape_margin_m: 0.0,
                 });
             }
         }

@@ -76,6 +76,12 @@ pub struct FilterConfig {
     /// that a point that may approach at the cap can slow to the region's limit by the time
     /// it enters the PFL distance. Default 2.5.
     pub pfl_deceleration_m_s2: f64,
+    /// Escape-aware margin: where the arm can move a pair's witness point away from the
+    /// human at only `e` m/s (joint velocity limits, along the normal), the pair keeps
+    /// `escape_horizon_s * max(0, 2.0 - e)` m beyond d_min (2.0 m/s: ISO 13855's approach
+    /// speed), so that it starts giving way before a hand can outrun it. s; 0 turns it off.
+    /// Default 0.
+    pub escape_horizon_s: f64,
     /// The QP keeps each link this far from the cell's static obstacles
     /// ([`SafetyFilter::set_obstacles`]) while it evades the human, m. Default 0.02.
     pub obstacle_clearance_m: f64,
@@ -101,6 +107,7 @@ impl Default for FilterConfig {
             position_gain_per_s: 10.0,
             pfl_distance_m: 0.3,
             pfl_deceleration_m_s2: 2.5,
+            escape_horizon_s: 0.0,
             obstacle_clearance_m: 0.02,
             obstacle_detection_m: 0.2,
             payload_kg: 0.0,
@@ -137,6 +144,7 @@ impl FilterConfig {
             ("safety.pfl_distance_m", self.pfl_distance_m),
             ("safety.payload_kg", self.payload_kg),
             ("safety.obstacle_clearance_m", self.obstacle_clearance_m),
+            ("safety.escape_horizon_s", self.escape_horizon_s),
             ("safety.obstacle_detection_m", self.obstacle_detection_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
@@ -540,6 +548,19 @@ impl SafetyFilter {
                 let limit = self.pfl_limits_m_s[part_index(c.pair.part)];
                 let room = (c.pair.distance_m - self.config.pfl_distance_m).max(0.0);
                 c.max_approach_m_s = (limit * limit + 2.0 * a * room).sqrt();
+            }
+        }
+        if self.config.escape_horizon_s > 0.0 {
+            for c in &mut self.pairs {
+                // The fastest the joints can move the witness point along the normal.
+                let escape: f64 = c
+                    .normal_jacobian
+                    .iter()
+                    .zip(&self.velocity_limit)
+                    .map(|(a, v)| a.abs() * v)
+                    .sum();
+                c.escape_margin_m =
+                    self.config.escape_horizon_s * (DETECTION_APPROACH_M_S - escape).max(0.0);
             }
         }
         out.active_pairs = self.pairs.len();

@@ -250,7 +250,8 @@ impl QpFilter {
                 // do obstacle rows: the furniture does not give way.
                 let capped = c.obstacle
                     || c.max_approach_m_s
-                        < gamma_per_s * (c.pair.distance_m - d_min_m) - c.human_normal_speed_m_s;
+                        < gamma_per_s * (c.pair.distance_m - d_min_m - c.escape_margin_m)
+                            - c.human_normal_speed_m_s;
                 self.a_values[slack_entry] = if capped { 0.0 } else { -room(c) / closest_room };
             } else {
                 for j in 0..n {

@@ -29,6 +29,7 @@ fn row(normal_jacobian: &[f64], distance_m: f64, human_normal_speed_m_s: f64) ->
         human_normal_speed_m_s,
         max_approach_m_s: f64::INFINITY,
         obstacle: false,
+        escape_margin_m: 0.0,
     }
 }
 
@@ -480,6 +481,60 @@ fn evading_the_human_does_not_push_the_arm_into_an_obstacle() {
         excess_with <= 1e-5,
         "a link approached the wall {excess_with} m/s beyond its row"
     );
+}
+
+/// The escape-aware margin of each pair is the horizon times the shortfall of the arm's
+/// fastest escape along the pair's normal (joint velocity limits) below ISO 13855's
+/// 2.0 m/s, and it shifts the pair's barrier by that much.
+#[test]
+fn escape_margin_grows_where_the_arm_cannot_outrun_a_hand() {
+    let robot = iiwa();
+    let horizon = 0.2;
+    let config = FilterConfig {
+        escape_horizon_s: horizon,
+        ..FilterConfig::default()
+    };
+    let mut filter =
+        SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config.clone()).expect("filter");
+    let q = [0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
+    let human = forearm(
+        Vector::new(0.8, -0.3, 0.6),
+        Vector::new(0.8, 0.3, 0.6),
+        Vector::ZERO,
+    );
+    filter.tick(&robot, &q, &[0.0; 7], &human, 0.004);
+    let limits: Vec<f64> = robot
+        .actuated_joints()
+        .iter()
+        .map(|&j| robot.joints()[j].limits.velocity)
+        .collect();
+    let mut with_margin = 0;
+    for c in filter.pairs().iter().filter(|c| !c.obstacle) {
+        let escape: f64 = c
+            .normal_jacobian
+            .iter()
+            .zip(&limits)
+            .map(|(a, v)| a.abs() * v)
+            .sum();
+        let expected = horizon * (2.0 - escape).max(0.0);
+        assert_abs_diff_eq!(c.escape_margin_m, expected, epsilon = 1e-12);
+        let without = PairConstraint {
+            escape_margin_m: 0.0,
+            ..*c
+        };
+        let (g, d) = (config.gamma_per_s, config.d_min_m);
+        let barrier = g * (c.pair.distance_m - d) - c.human_normal_speed_m_s;
+        if barrier < c.max_approach_m_s {
+            // The cap does not bind: the margin shifts the barrier by gamma times itself.
+            assert_abs_diff_eq!(
+                without.approach_bound_m_s(g, d) - c.approach_bound_m_s(g, d),
+                g * expected,
+                epsilon = 1e-12
+            );
+        }
+        with_margin += usize::from(expected > 0.0 && barrier < c.max_approach_m_s);
+    }
+    assert!(with_margin > 0, "some pair near the base has a slow escape");
 }
 
 /// What is wrong, q, the nominal command, the human estimate, the expected reason.
