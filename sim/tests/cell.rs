@@ -495,6 +495,22 @@ fn unbounded_scenario_settings_are_refused() {
             "robot.motion.waypoints",
         ),
         ("time_step_s = 0.001", "time_step_s = 1e-300", "time_step_s"),
+        // Human peak speeds: a range within (0, 10] m/s.
+        (
+            "shuffle = true",
+            "shuffle = true\npeak_speed_m_s = [2.0, 1.0]",
+            "human.peak_speed_m_s",
+        ),
+        (
+            "shuffle = true",
+            "shuffle = true\npeak_speed_m_s = [0.0, 1.0]",
+            "human.peak_speed_m_s",
+        ),
+        (
+            "shuffle = true",
+            "shuffle = true\npeak_speed_m_s = [1.0, 1e9]",
+            "human.peak_speed_m_s",
+        ),
     ] {
         assert!(text.contains(from), "{from}");
         let err = Scenario::from_toml(&text.replacen(from, to, 1), &default_path())
