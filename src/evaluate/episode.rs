@@ -211,7 +211,8 @@ impl<'a> Run<'a> {
         } else {
             c.near_m
         };
-        let mut closest: Option<SignedDistancePair> = None;
+        // The closest pair, with its robot point's velocity when already computed.
+        let mut closest: Option<(SignedDistancePair, Option<Vector>)> = None;
         for part in &self.truth.parts {
             let Some(pair) =
                 self.filter
@@ -220,6 +221,7 @@ impl<'a> Run<'a> {
             else {
                 continue;
             };
+            let mut velocity = None;
             if pair.distance_m < pfl_m {
                 let v = robot_point_velocity(
                     model,
@@ -232,12 +234,13 @@ impl<'a> Run<'a> {
                     let peak = &mut self.metrics.peak_approach_by_part_m_s[i];
                     *peak = peak.max(-pair.nhat_BA_W.dot(v));
                 }
+                velocity = Some(v);
             }
-            if closest.is_none_or(|b| pair.distance_m < b.distance_m) {
-                closest = Some(pair);
+            if closest.is_none_or(|(b, _)| pair.distance_m < b.distance_m) {
+                closest = Some((pair, velocity));
             }
         }
-        let Some(pair) = closest else {
+        let Some((pair, velocity)) = closest else {
             self.trace.separation_m.push(f64::NAN);
             return Ok(());
         };
@@ -249,13 +252,15 @@ impl<'a> Run<'a> {
         }
         let mut speed = 0.0;
         if d < c.near_m.max(d_min) {
-            let v = robot_point_velocity(
-                model,
-                state,
-                &self.robot_kinematics,
-                &mut self.jacobian,
-                &pair,
-            );
+            let v = velocity.unwrap_or_else(|| {
+                robot_point_velocity(
+                    model,
+                    state,
+                    &self.robot_kinematics,
+                    &mut self.jacobian,
+                    &pair,
+                )
+            });
             speed = v.length();
             let metrics = &mut self.metrics;
             if d < c.near_m {
