@@ -35,6 +35,11 @@ enum Command {
     Crosscheck(cli::crosscheck::CrosscheckArgs),
     /// Closed-loop safety evaluation: episodes of a cell with a safety filter and a report.
     Evaluate(cli::evaluate::EvaluateArgs),
+    /// Reports made from evaluations' run records: merge the shards of one evaluation.
+    Report {
+        #[command(subcommand)]
+        command: ReportCommand,
+    },
     /// Run a scenario and write joint trajectories and human part poses (CSV) and a plot.
     Simulate(cli::simulate::SimulateArgs),
     /// Camera datasets for ProcNet: generate them, look at them.
@@ -60,6 +65,13 @@ enum EvalCommand {
     /// The forearm's pose by render-and-compare from gt, visible or ProcNet masks: Table 2's
     /// layout with the paper's numbers, per-frame CSV, error against distance.
     Pose(cli::pose::EvalPoseArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum ReportCommand {
+    /// Merge the folders of `evaluate --shard K/N` runs into the report a single process
+    /// would have written (metrics, verdict, plots, violations with replay commands).
+    Merge(cli::report::MergeArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -115,6 +127,9 @@ fn main() -> ExitCode {
             command: RobotCommand::Add(a),
         } => cli::robot::add(&a),
         Command::Evaluate(a) => cli::evaluate::run(&a),
+        Command::Report {
+            command: ReportCommand::Merge(a),
+        } => cli::report::merge_shards(&a),
         Command::Crosscheck(a) => cli::crosscheck::run(&a),
         Command::Simulate(a) => cli::simulate::run(&a),
         Command::Dataset {

@@ -1017,3 +1017,150 @@ fn robot_add_copies_a_vendor_arm_that_scenarios_can_name() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }
+
+/// `evaluate --shard K/N` runs every N-th episode; `report merge` of the N folders, in any
+/// order, writes the report of one process over the same seeds: the same metrics rows (but
+/// the wall time), violations, settings and plots, byte for byte. Shards of different
+/// evaluations, a shard twice or one missing are refused, naming the folders.
+#[test]
+fn shards_merge_into_the_report_of_one_process() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let eval = dir.path().join("eval.toml");
+    let cell = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/default.toml");
+    // A short task and a large d_min: some episodes violate, so that violations.txt and the
+    // worst-episode plots have something to order.
+    std::fs::write(
+        &eval,
+        format!(
+            "cell = {:?}\ntask_s = 2.0\n[safety]\nd_min_m = 0.3\ndetection_m = 1.0\n",
+            cell.display().to_string()
+        ),
+    )
+    .expect("write");
+    let run = |out: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "evaluate",
+            eval.to_str().expect("utf-8"),
+            "--episodes",
+            "7",
+            "--seed",
+            "11",
+            "--filter",
+            "none",
+            "--out",
+            out.to_str().expect("utf-8"),
+        ];
+        a.extend_from_slice(extra);
+        let o = workcell(&a);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        o
+    };
+    let single = dir.path().join("single");
+    run(&single, &[]);
+    let shard = |k: usize| dir.path().join(format!("shard{k}"));
+    for k in 1..=3 {
+        run(&shard(k), &["--shard", &format!("{k}/3")]);
+    }
+    // Shard 2 of 3 of 7 episodes: episodes 1 and 4 (seeds 12 and 15).
+    let csv2 = std::fs::read_to_string(shard(2).join("metrics.csv")).expect("csv");
+    let seeds: Vec<&str> = csv2
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split(',').nth(1))
+        .collect();
+    assert_eq!(seeds, ["12", "15"]);
+
+    let merged = dir.path().join("merged");
+    let paths = [shard(3), shard(1), shard(2)].map(|p| p.display().to_string());
+    let out = workcell(&[
+        "report",
+        "merge",
+        &paths[0],
+        &paths[1],
+        &paths[2],
+        "--out",
+        merged.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("7 episodes, filter none"));
+    let read = |d: &Path, f: &str| std::fs::read_to_string(d.join(f)).expect(f);
+    let without_wall_time = |csv: String| -> Vec<String> {
+        csv.lines()
+            .map(|l| l.rsplit_once(',').map_or(l, |(head, _)| head).to_string())
+            .collect()
+    };
+    assert_eq!(
+        without_wall_time(read(&single, "metrics.csv")),
+        without_wall_time(read(&merged, "metrics.csv"))
+    );
+    for f in [
+        "evaluation.toml",
+        "separation.svg",
+        "speed_scaling.svg",
+        "perception_error.svg",
+    ] {
+        assert_eq!(read(&single, f), read(&merged, f), "{f}");
+    }
+    // The replay commands point into the merged folder; otherwise the list is the same.
+    let single_list = read(&single, "violations.txt");
+    assert!(single_list.lines().count() > 1, "no violation to list");
+    assert_eq!(
+        single_list.replace(
+            single.to_str().expect("utf-8"),
+            merged.to_str().expect("utf-8")
+        ),
+        read(&merged, "violations.txt")
+    );
+    let verdict = |d: &Path| {
+        read(d, "summary.md")
+            .lines()
+            .skip_while(|l| !l.starts_with("## Verdict"))
+            .take(5)
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    assert_eq!(verdict(&single), verdict(&merged));
+
+    // Refusals.
+    let merge = |dirs: &[&Path], expected: &str| {
+        let mut a = vec!["report".to_string(), "merge".to_string()];
+        a.extend(dirs.iter().map(|d| d.display().to_string()));
+        a.extend([
+            "--out".to_string(),
+            dir.path().join("refused").display().to_string(),
+        ]);
+        let o = workcell(&a.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(!o.status.success(), "{dirs:?}");
+        let err = text(&o.stderr);
+        assert!(err.contains(expected), "{dirs:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    };
+    merge(&[&shard(1), &shard(2)], "missing shards: 3/3");
+    merge(&[&shard(1), &shard(2), &shard(2), &shard(3)], "given twice");
+    merge(&[&shard(1), &single], "different evaluations");
+    merge(&[&dir.path().join("nowhere")], "run.json");
+    let other = dir.path().join("other");
+    run(&other, &["--shard", "2/3", "--set", "safety.gamma_per_s=8"]);
+    merge(
+        &[&shard(1), &other, &shard(3)],
+        "the evaluation (evaluation.toml) differs",
+    );
+    for (shard, expected) in [("0/3", "1..=N"), ("3", "K/N"), ("8/8", "without one")] {
+        let o = workcell(&[
+            "evaluate",
+            eval.to_str().expect("utf-8"),
+            "--episodes",
+            "7",
+            "--shard",
+            shard,
+            "--out",
+            dir.path().join("x").to_str().expect("utf-8"),
+        ]);
+        assert!(!o.status.success(), "{shard}");
+        assert!(
+            text(&o.stderr).contains(expected),
+            "{shard}: {}",
+            text(&o.stderr)
+        );
+    }
+}

@@ -1,12 +1,16 @@
 //! `workcell evaluate`: closed-loop safety episodes of a cell, with a report.
 
 use std::fs;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
+use workcell::evaluate::record::{
+    KeptTrace, PLOTTED_EPISODES, RUN_RECORD, RUN_RECORD_FORMAT, RunRecord, RunSettings,
+    shard_episodes, worst_episodes,
+};
 use workcell::evaluate::report::{
     Aggregate, SummaryContext, metrics_csv, summary_markdown, write_plots,
 };
@@ -15,8 +19,9 @@ use workcell::safety::iso::effective_robot_mass_kg;
 use workcell::safety::{BodyRegion, FilterMode, HumanPart};
 
 /// Files `evaluate` writes into `--out`.
-pub const OUTPUTS: [&str; 10] = [
+pub const OUTPUTS: [&str; 11] = [
     "summary.md",
+    RUN_RECORD,
     "violations.txt",
     "metrics.csv",
     "evaluation.toml",
@@ -83,43 +88,58 @@ pub struct EvaluateArgs {
     /// (repeatable; TOML values).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub overrides: Vec<String>,
+    /// Run only shard K of N (1-based): episodes K-1, K-1+N, ... of the --episodes. The
+    /// shards' folders merge into the whole run's report with `workcell report merge`.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub shard: Option<(usize, usize)>,
 }
 
-impl EvaluateArgs {
-    /// The command that replays episode `seed` exactly: the same file, overrides, filter and
-    /// perception, one episode.
-    #[must_use]
-    pub fn replay_command(&self, path: &std::path::Path, seed: u64) -> String {
-        let mut words = vec![
-            "workcell".to_string(),
-            "evaluate".to_string(),
-            path.display().to_string(),
-            "--episodes".to_string(),
-            "1".to_string(),
-            "--seed".to_string(),
-            seed.to_string(),
-            "--filter".to_string(),
-            value_name(self.filter),
-        ];
-        if let Some(p) = self.perception {
-            words.extend(["--perception".to_string(), value_name(p)]);
-        }
-        for o in &self.overrides {
-            words.extend(["--set".to_string(), o.clone()]);
-        }
-        words.extend([
-            "--out".to_string(),
-            self.out
-                .join(format!("replay-{seed}"))
-                .display()
-                .to_string(),
-        ]);
-        words
-            .iter()
-            .map(|w| shell_quote(w))
-            .collect::<Vec<_>>()
-            .join(" ")
+/// The command that replays episode `seed` of the run `settings` describes exactly: the same
+/// file, overrides, filter and perception, one episode, into `out/replay-SEED`.
+#[must_use]
+pub fn replay_command(settings: &RunSettings, out: &Path, seed: u64) -> String {
+    let mut words = vec![
+        "workcell".to_string(),
+        "evaluate".to_string(),
+        settings.evaluation_file.clone(),
+        "--episodes".to_string(),
+        "1".to_string(),
+        "--seed".to_string(),
+        seed.to_string(),
+        "--filter".to_string(),
+        settings.filter.clone(),
+    ];
+    if let Some(p) = &settings.perception_arg {
+        words.extend(["--perception".to_string(), p.clone()]);
     }
+    for o in &settings.overrides {
+        words.extend(["--set".to_string(), o.clone()]);
+    }
+    words.extend([
+        "--out".to_string(),
+        out.join(format!("replay-{seed}")).display().to_string(),
+    ]);
+    words
+        .iter()
+        .map(|w| shell_quote(w))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// `K/N`: shard K (1-based) of N.
+fn parse_shard(text: &str) -> Result<(usize, usize), String> {
+    let (k, n) = text
+        .split_once('/')
+        .ok_or_else(|| format!("expected K/N, e.g. 2/8, got {text:?}"))?;
+    let k: usize = k
+        .trim()
+        .parse()
+        .map_err(|_| format!("K in K/N is not a count: {text:?}"))?;
+    let n = super::count_in::<1, 1_000_000>(n.trim())?;
+    if !(1..=n).contains(&k) {
+        return Err(format!("K in K/N must be within 1..=N, got {text:?}"));
+    }
+    Ok((k, n))
 }
 
 /// The name clap gives a value on the command line.
@@ -178,17 +198,27 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         FilterArg::Qp => FilterMode::Qp,
         FilterArg::Ssm => FilterMode::Ssm,
     };
+    let (shard, shards) = args.shard.unwrap_or((1, 1));
+    let slice = shard_episodes(shard, shards, args.episodes)?;
     let out = super::OutputDir::create(&args.out, args.force, &OUTPUTS)?;
 
     let bar = super::progress_bar(
-        (args.episodes * 100) as u64,
+        (slice.len() * 100) as u64,
         "{spinner} {msg} [{bar:40}] {percent}% (eta {eta})",
     );
-    bar.set_message(format!("{} episodes, filter {mode}", args.episodes));
+    bar.set_message(if shards > 1 {
+        format!(
+            "shard {shard}/{shards}: {} of {} episodes, filter {mode}",
+            slice.len(),
+            args.episodes
+        )
+    } else {
+        format!("{} episodes, filter {mode}", args.episodes)
+    });
     let first_error: Mutex<Option<anyhow::Error>> = Mutex::new(None);
-    let mut results: Vec<_> = (0..args.episodes)
-        .into_par_iter()
-        .filter_map(|episode| {
+    let mut results: Vec<_> = slice
+        .par_iter()
+        .filter_map(|&episode| {
             let seed = args.seed.wrapping_add(episode as u64);
             let mut shown = 0u64;
             let result = run_episode(&evaluation, mode, episode, seed, None, |fraction| {
@@ -217,9 +247,15 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         return Err(e);
     }
     results.sort_by_key(|(m, _)| m.episode);
-    let (episodes, traces): (Vec<_>, Vec<_>) = results.into_iter().unzip();
+    let (metrics, mut traces): (Vec<_>, Vec<_>) = results.into_iter().unzip();
+    let kept: Vec<KeptTrace> = worst_episodes(&metrics, PLOTTED_EPISODES)
+        .into_iter()
+        .map(|i| KeptTrace {
+            episode: metrics[i].episode,
+            trace: std::mem::take(&mut traces[i]),
+        })
+        .collect();
 
-    // The report.
     let robot = workcell::robots::RobotModel::load(
         &workcell::sim::Scenario::resolve_model_path(
             &evaluation.scenario.robot.model,
@@ -228,7 +264,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         &workcell::robots::PackageMap::from_env(),
     )?;
     let m_r = effective_robot_mass_kg(robot.mass_kg(), evaluation.config.safety.payload_kg);
-    let limits: Vec<(String, f64)> = if m_r > 0.0 {
+    let contact_speed_limits: Vec<(String, f64)> = if m_r > 0.0 {
         HumanPart::ARM
             .iter()
             .map(|&p| {
@@ -241,79 +277,128 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     } else {
         Vec::new()
     };
-    let perception = evaluation.config.perception.describe();
-    let command = std::env::args().collect::<Vec<_>>().join(" ");
-    let context = SummaryContext {
-        evaluation_file: &path.display().to_string(),
-        robot: robot.name(),
-        filter: &mode.to_string(),
-        perception: &perception,
-        d_min_m: evaluation.config.safety.d_min_m,
-        near_m: evaluation.config.near_m,
-        pfl_distance_m: if evaluation.config.safety.pfl_distance_m > 0.0 {
-            evaluation.config.safety.pfl_distance_m
-        } else {
-            evaluation.config.near_m
+    let c = &evaluation.config;
+    let record = RunRecord {
+        format: RUN_RECORD_FORMAT,
+        settings: RunSettings {
+            evaluation_file: path.display().to_string(),
+            evaluation_toml: toml::to_string_pretty(c).context("serialising the configuration")?,
+            robot: robot.name().to_string(),
+            filter: value_name(args.filter),
+            perception_arg: args.perception.map(value_name),
+            overrides: args.overrides.clone(),
+            perception: c.perception.describe(),
+            first_seed: args.seed,
+            episodes: args.episodes,
+            shards,
+            replays_per_shard: 0,
+            d_min_m: c.safety.d_min_m,
+            near_m: c.near_m,
+            pfl_distance_m: if c.safety.pfl_distance_m > 0.0 {
+                c.safety.pfl_distance_m
+            } else {
+                c.near_m
+            },
+            contact_speed_limits,
         },
-        contact_speed_limits: &limits,
-        command: &command,
+        shard,
+        metrics,
+        traces: kept,
+        replays: Vec::new(),
+    };
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    write_report(out.path(), &record, &command, &args.out)?;
+    out.commit()?;
+    let violating = announce(&record, &args.out);
+    if args.fail_on_violation && violating > 0 {
+        return Ok(ExitCode::from(2));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Writes the report of `record` into `dir`: the summary, the violations with their replay
+/// commands (into `out/replay-SEED`), the metrics, the settings, the plots and the record.
+///
+/// # Errors
+/// A file that cannot be written, named.
+pub fn write_report(dir: &Path, record: &RunRecord, command: &str, out: &Path) -> Result<()> {
+    let s = &record.settings;
+    let mut evaluation_file = s.evaluation_file.clone();
+    if s.shards > 1 {
+        evaluation_file.push_str(&format!(
+            " (shard {} of {}: episodes {}, {}, ... of {})",
+            record.shard,
+            s.shards,
+            record.shard - 1,
+            record.shard - 1 + s.shards,
+            s.episodes
+        ));
+    }
+    let context = SummaryContext {
+        evaluation_file: &evaluation_file,
+        robot: &s.robot,
+        filter: &s.filter,
+        perception: &s.perception,
+        d_min_m: s.d_min_m,
+        near_m: s.near_m,
+        pfl_distance_m: s.pfl_distance_m,
+        contact_speed_limits: &s.contact_speed_limits,
+        command,
     };
     let write = |name: &str, text: &str| {
-        let p = out.path().join(name);
+        let p = dir.join(name);
         fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
     };
-    write("summary.md", &summary_markdown(&context, &episodes))?;
-    let violating: Vec<_> = episodes.iter().filter(|e| e.violations > 0).collect();
+    let episodes = &record.metrics;
+    write("summary.md", &summary_markdown(&context, episodes))?;
     let mut replay = format!(
         "# Episodes that came closer than d_min = {} m: seed, violations, smallest separation, \
          and the command that replays exactly that episode.\n",
-        evaluation.config.safety.d_min_m
+        s.d_min_m
     );
-    for e in &violating {
+    for e in episodes.iter().filter(|e| e.violations > 0) {
         replay.push_str(&format!(
             "{}\t{}\t{:.4}\t{}\n",
             e.seed,
             e.violations,
             e.min_separation_m,
-            args.replay_command(path, e.seed)
+            replay_command(s, out, e.seed)
         ));
     }
     write("violations.txt", &replay)?;
-    write("metrics.csv", &metrics_csv(&episodes))?;
-    write(
-        "evaluation.toml",
-        &toml::to_string_pretty(&evaluation.config).context("serialising the configuration")?,
-    )?;
-    write_plots(
-        out.path(),
-        &episodes,
-        &traces,
-        evaluation.config.safety.d_min_m,
-    )?;
+    write("metrics.csv", &metrics_csv(episodes))?;
+    write("evaluation.toml", &s.evaluation_toml)?;
+    write_plots(dir, &record.worst(), s.d_min_m)?;
+    write(RUN_RECORD, &record.to_json()?)?;
+    Ok(())
+}
 
-    out.commit()?;
-    let a = Aggregate::of(&episodes);
+/// Prints the run's headline, where the report is, and how to replay the first violating
+/// episode; returns the number of violating episodes.
+pub fn announce(record: &RunRecord, out: &Path) -> usize {
+    let s = &record.settings;
+    let a = Aggregate::of(&record.metrics);
     // A closed pipe (`| head`) is not an error: the report is already written.
     say!(
-        "{} episodes, filter {mode}, perception {perception}: {}",
+        "{} episodes, filter {}, perception {}: {}",
         a.episodes,
-        a.headline(evaluation.config.safety.d_min_m)
+        s.filter,
+        s.perception,
+        a.headline(s.d_min_m)
     );
     say!(
         "closed loop at {:.1}x real time per core; report: {}",
         a.real_time_factor,
-        args.out.join("summary.md").display()
+        out.join("summary.md").display()
     );
+    let violating: Vec<_> = record.metrics.iter().filter(|e| e.violations > 0).collect();
     if let Some(first) = violating.first() {
         say!(
             "{} violating episodes (seeds in {}); replay the first: {}",
             violating.len(),
-            args.out.join("violations.txt").display(),
-            args.replay_command(path, first.seed)
+            out.join("violations.txt").display(),
+            replay_command(s, out, first.seed)
         );
     }
-    if args.fail_on_violation && a.violations > 0 {
-        return Ok(ExitCode::from(2));
-    }
-    Ok(ExitCode::SUCCESS)
+    violating.len()
 }

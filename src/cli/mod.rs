@@ -23,6 +23,7 @@ pub mod dataset;
 pub mod evaluate;
 pub mod perception;
 pub mod pose;
+pub mod report;
 pub mod robot;
 pub mod simulate;
 

@@ -13,8 +13,10 @@
 //! ```
 
 mod episode;
+pub mod lossless;
 pub mod perception;
 pub mod procnet;
+pub mod record;
 pub mod report;
 
 use std::path::{Path, PathBuf};
@@ -271,32 +273,39 @@ pub fn apply_overrides(text: &str, overrides: &[String], path: &Path) -> Result<
 }
 
 /// What happened in one episode.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeMetrics {
     pub episode: usize,
     pub seed: u64,
     pub filter: String,
     /// Smallest true separation (exact robot shapes against the true human), m.
+    #[serde(with = "lossless::f64")]
     pub min_separation_m: f64,
     /// Where the minimum happened: `robot link / human part at t s`.
     pub closest: String,
     /// Time spent below d_min, s.
+    #[serde(with = "lossless::f64")]
     pub violation_s: f64,
     /// Number of times the separation dropped below d_min.
     pub violations: usize,
     /// Time below d_min while the robot's closest point moved faster than 0.05 m/s, s (what
     /// SSM forbids; a human touching a standing robot is not counted here).
+    #[serde(with = "lossless::f64")]
     pub violation_moving_s: f64,
     /// Time to finish the task, s (`None`: not finished before the timeout).
     pub task_time_s: Option<f64>,
     /// The unfiltered robot's task time (the nominal motion), s.
+    #[serde(with = "lossless::f64")]
     pub nominal_task_s: f64,
     /// Fastest robot surface point while the true separation was below `near_m`, m/s.
+    #[serde(with = "lossless::f64")]
     pub peak_speed_near_human_m_s: f64,
     /// Fastest approach of the robot's closest point toward the human (along the normal)
     /// while the separation was below `near_m`, m/s: the speed a contact would happen at.
+    #[serde(with = "lossless::f64")]
     pub peak_approach_speed_m_s: f64,
     /// Fastest end point of any human part, m/s (the human's speed envelope).
+    #[serde(with = "lossless::f64")]
     pub peak_human_speed_m_s: f64,
     /// Per arm part (upper arm, forearm, hand: [`HumanPart::ARM`]): the robot's fastest
     /// approach toward it at its closest point while the part's true separation was below
@@ -321,20 +330,27 @@ pub struct EpisodeMetrics {
     pub braking_reasons: Vec<(String, usize)>,
     /// Mean distance between estimated and true part end points over ticks with an
     /// estimate, m.
+    #[serde(with = "lossless::f64")]
     pub perception_error_m: f64,
+    #[serde(with = "lossless::f64")]
     pub simulated_s: f64,
+    #[serde(with = "lossless::f64")]
     pub wall_s: f64,
 }
 
 /// Per-tick samples of one episode, for plots.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeTrace {
+    #[serde(with = "lossless::vec")]
     pub t_s: Vec<f64>,
+    #[serde(with = "lossless::vec")]
     pub separation_m: Vec<f64>,
     /// |qdot| / |qdot_nom| (1 when the nominal command is 0).
+    #[serde(with = "lossless::vec")]
     pub speed_scale: Vec<f64>,
     /// Mean distance of the estimated parts' end points from the true ones, m (`None` when
     /// perception delivers no human).
+    #[serde(with = "lossless::vec_option")]
     pub perception_error_m: Vec<Option<f64>>,
 }
 

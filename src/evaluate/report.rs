@@ -331,27 +331,20 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
     md
 }
 
-/// Writes `separation.{svg,png}` and `speed_scaling.{svg,png}` for the episodes with the
-/// smallest separation (at most five), resampled onto one time axis.
+/// Writes `separation.{svg,png}`, `speed_scaling.{svg,png}` and
+/// `perception_error.{svg,png}` for the given episodes (the worst ones, closest first; see
+/// [`super::record::worst_episodes`]), resampled onto one time axis.
 ///
 /// # Errors
 /// When a file cannot be written.
 pub fn write_plots(
     out: &Path,
-    episodes: &[EpisodeMetrics],
-    traces: &[EpisodeTrace],
+    worst: &[(&EpisodeMetrics, &EpisodeTrace)],
     d_min_m: f64,
 ) -> crate::Result<Vec<String>> {
-    let mut order: Vec<usize> = (0..episodes.len()).collect();
-    order.sort_by(|&a, &b| {
-        episodes[a]
-            .min_separation_m
-            .total_cmp(&episodes[b].min_separation_m)
-    });
-    order.truncate(5);
-    let t_end = order
+    let t_end = worst
         .iter()
-        .filter_map(|&i| traces[i].t_s.last().copied())
+        .filter_map(|(_, trace)| trace.t_s.last().copied())
         .fold(0.0, f64::max);
     let n = 1000usize;
     let x: Vec<f64> = (0..=n).map(|k| t_end * k as f64 / n as f64).collect();
@@ -382,12 +375,12 @@ pub fn write_plots(
         y_label: "error [m]".into(),
         series: Vec::new(),
     };
-    for &i in &order {
+    for (episode, trace) in worst {
         perception.series.push((
-            format!("ep {}", episodes[i].episode),
+            format!("ep {}", episode.episode),
             resample(
-                &traces[i].t_s,
-                &traces[i]
+                &trace.t_s,
+                &trace
                     .perception_error_m
                     .iter()
                     .map(|e| e.unwrap_or(f64::NAN))
@@ -396,15 +389,14 @@ pub fn write_plots(
         ));
         let name = format!(
             "ep {}: min {:.3} m",
-            episodes[i].episode, episodes[i].min_separation_m
+            episode.episode, episode.min_separation_m
         );
-        separation.series.push((
-            name.clone(),
-            resample(&traces[i].t_s, &traces[i].separation_m),
-        ));
+        separation
+            .series
+            .push((name, resample(&trace.t_s, &trace.separation_m)));
         scaling.series.push((
-            format!("ep {}", episodes[i].episode),
-            resample(&traces[i].t_s, &traces[i].speed_scale),
+            format!("ep {}", episode.episode),
+            resample(&trace.t_s, &trace.speed_scale),
         ));
     }
     separation
