@@ -35,7 +35,8 @@ enum Command {
     Crosscheck(cli::crosscheck::CrosscheckArgs),
     /// Closed-loop safety evaluation: episodes of a cell with a safety filter and a report.
     Evaluate(cli::evaluate::EvaluateArgs),
-    /// Reports made from evaluations' run records: merge the shards of one evaluation.
+    /// Reports made from evaluations' run records: merge the shards of one evaluation, tabulate
+    /// a sweep.
     Report {
         #[command(subcommand)]
         command: ReportCommand,
@@ -72,6 +73,8 @@ enum ReportCommand {
     /// Merge the folders of `evaluate --shard K/N` runs into the report a single process
     /// would have written (metrics, verdict, plots, violations with replay commands).
     Merge(cli::report::MergeArgs),
+    /// The table and trade-off plot of a sweep's points (violations and task time per point).
+    Sweep(cli::report::SweepArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -130,6 +133,9 @@ fn main() -> ExitCode {
         Command::Report {
             command: ReportCommand::Merge(a),
         } => cli::report::merge_shards(&a),
+        Command::Report {
+            command: ReportCommand::Sweep(a),
+        } => cli::report::sweep_table(&a),
         Command::Crosscheck(a) => cli::crosscheck::run(&a),
         Command::Simulate(a) => cli::simulate::run(&a),
         Command::Dataset {

@@ -115,6 +115,106 @@ pub fn svg_panels(x: &[f64], x_label: &str, panels: &[Panel]) -> String {
     svg
 }
 
+/// A labelled point of [`svg_scatter`].
+#[derive(Debug, Clone)]
+pub struct Labelled {
+    pub label: String,
+    pub x: f64,
+    pub y: f64,
+}
+
+/// Labelled points on x-y axes (a trade-off: one point per configuration), as an SVG
+/// document. Non-finite points are listed under the plot instead of drawn.
+#[must_use]
+pub fn svg_scatter(title: &str, x_label: &str, y_label: &str, points: &[Labelled]) -> String {
+    let (width, height, left, right, top, bottom) = (760.0, 520.0, 80.0, 30.0, 40.0, 70.0);
+    let (plot_w, plot_h) = (width - left - right, height - top - bottom);
+    // A margin around the points, not below zero when no value is (counts, percentages).
+    let pad = |(lo, hi): (f64, f64)| {
+        let m = 0.08 * (hi - lo);
+        (if lo >= 0.0 { (lo - m).max(0.0) } else { lo - m }, hi + m)
+    };
+    let (x0, x1) = pad(bounds(points.iter().map(|p| p.x)));
+    let (y0, y1) = pad(bounds(points.iter().map(|p| p.y)));
+    let sx = |v: f64| left + (v - x0) / (x1 - x0) * plot_w;
+    let sy = |v: f64| top + plot_h - (v - y0) / (y1 - y0) * plot_h;
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
+    let _ = writeln!(
+        svg,
+        r##"<rect x="{left}" y="{top}" width="{plot_w}" height="{plot_h}" fill="none" stroke="#999"/>"##
+    );
+    let _ = writeln!(
+        svg,
+        r#"<text x="{left}" y="{}" font-weight="bold">{}</text>"#,
+        top - 12.0,
+        escape(title)
+    );
+    for k in 0..=4 {
+        let f = f64::from(k) / 4.0;
+        let (xv, yv) = (x0 + f * (x1 - x0), y0 + f * (y1 - y0));
+        let _ = writeln!(
+            svg,
+            r#"<text x="{}" y="{}" text-anchor="middle">{xv:.3}</text>"#,
+            sx(xv),
+            top + plot_h + 16.0
+        );
+        let _ = writeln!(
+            svg,
+            r#"<text x="{}" y="{}" text-anchor="end">{yv:.2}</text>"#,
+            left - 6.0,
+            sy(yv) + 4.0
+        );
+    }
+    let _ = writeln!(
+        svg,
+        r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#,
+        left + plot_w / 2.0,
+        top + plot_h + 36.0,
+        escape(x_label)
+    );
+    let _ = writeln!(
+        svg,
+        r#"<text x="18" y="{0}" transform="rotate(-90 18 {0})" text-anchor="middle">{1}</text>"#,
+        top + plot_h / 2.0,
+        escape(y_label)
+    );
+    let mut missing = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        if !(p.x.is_finite() && p.y.is_finite()) {
+            missing.push(p.label.as_str());
+            continue;
+        }
+        let color = COLORS[i % COLORS.len()];
+        let (cx, cy) = (sx(p.x), sy(p.y));
+        let _ = writeln!(
+            svg,
+            r#"<circle cx="{cx:.1}" cy="{cy:.1}" r="5" fill="{color}"/>"#
+        );
+        let _ = writeln!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}">{}</text>"#,
+            cx + 8.0,
+            cy - 6.0,
+            escape(&p.label)
+        );
+    }
+    if !missing.is_empty() {
+        let _ = writeln!(
+            svg,
+            r#"<text x="{left}" y="{}">not drawn (no value): {}</text>"#,
+            height - 10.0,
+            escape(&missing.join(", "))
+        );
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
 fn bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values
         .filter(|v| v.is_finite())
@@ -156,6 +256,32 @@ mod tests {
         assert_eq!(svg.matches("<polyline").count(), 2);
         assert!(svg.contains("a &lt; b"));
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
+    }
+
+    #[test]
+    fn scatter_draws_finite_points_and_names_the_others() {
+        let points = [
+            Labelled {
+                label: "p1".into(),
+                x: 1.0,
+                y: 0.0,
+            },
+            Labelled {
+                label: "p2 <fast>".into(),
+                x: 1.2,
+                y: 3.0,
+            },
+            Labelled {
+                label: "p3".into(),
+                x: f64::NAN,
+                y: 1.0,
+            },
+        ];
+        let svg = svg_scatter("trade-off", "task time", "violations", &points);
+        assert_eq!(svg.matches("<circle").count(), 2);
+        assert!(svg.contains("p2 &lt;fast&gt;"));
+        assert!(svg.contains("not drawn (no value): p3"));
+        assert!(!svg.contains("NaN"));
     }
 
     #[test]

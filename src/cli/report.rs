@@ -5,6 +5,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use workcell::evaluate::record::{RunRecord, merge};
+use workcell::evaluate::report::Aggregate;
+use workcell::plot::{Labelled, svg_scatter, svg_to_png};
 
 use super::evaluate::{OUTPUTS, announce, write_report};
 
@@ -49,5 +51,141 @@ pub fn merge_shards(args: &MergeArgs) -> Result<ExitCode> {
     if args.fail_on_violation && violating > 0 {
         return Ok(ExitCode::from(2));
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Files `report sweep` writes.
+pub const SWEEP_OUTPUTS: [&str; 4] = ["sweep.md", "sweep.csv", "sweep.svg", "sweep.png"];
+
+#[derive(Debug, clap::Args)]
+pub struct SweepArgs {
+    /// The folders of the sweep's points: each a whole evaluation (one process, or its
+    /// shards merged).
+    #[arg(required = true)]
+    pub points: Vec<PathBuf>,
+    /// Where the sweep's table and plot go.
+    #[arg(long, default_value = "out/sweep")]
+    pub out: PathBuf,
+    /// Overwrite existing output files.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// One point of a sweep, as its table row shows it.
+struct PointRow {
+    name: String,
+    settings: String,
+    a: Aggregate,
+    d_min_m: f64,
+}
+
+/// The table (`sweep.md`, `sweep.csv`) and trade-off plot (`sweep.svg`, `.png`) of a sweep's
+/// points: per point its settings, violations, contacts and task time.
+///
+/// # Errors
+/// A folder without a readable run record, a record of a single shard (merge it first), and
+/// I/O errors.
+pub fn sweep_table(args: &SweepArgs) -> Result<ExitCode> {
+    let mut rows = Vec::new();
+    for dir in &args.points {
+        let record =
+            RunRecord::read(dir).with_context(|| format!("sweep point {}", dir.display()))?;
+        let s = &record.settings;
+        if s.shards > 1 {
+            anyhow::bail!(
+                "{} is shard {} of {}: merge the shards first (`workcell report merge`)",
+                dir.display(),
+                record.shard,
+                s.shards
+            );
+        }
+        let mut settings = vec![format!("filter {}", s.filter)];
+        if let Some(p) = &s.perception_arg {
+            settings.push(format!("perception {p}"));
+        }
+        settings.extend(s.overrides.iter().cloned());
+        rows.push(PointRow {
+            name: dir.file_name().map_or_else(
+                || dir.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            ),
+            settings: settings.join(", "),
+            a: Aggregate::of(&record.metrics),
+            d_min_m: s.d_min_m,
+        });
+    }
+    let out = super::OutputDir::create(&args.out, args.force, &SWEEP_OUTPUTS)?;
+    let mut md = String::from(
+        "# Sweep\n\n| point | settings | episodes | with violation | violations | min separation (m) | d_min (m) | contacts moving / standing | finished | task time / unfiltered |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut csv = String::from(
+        "point,settings,episodes,episodes_with_violation,violations,min_separation_m,d_min_m,contacts_moving,contacts_standing,finished,task_ratio\n",
+    );
+    for r in &rows {
+        let a = &r.a;
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {:.4} | {:.3} | {} / {} | {}/{} | {} |\n",
+            r.name,
+            r.settings,
+            a.episodes,
+            a.episodes_with_violation,
+            a.violations,
+            a.min_separation_m,
+            r.d_min_m,
+            a.contacts_moving,
+            a.contacts_standing,
+            a.finished,
+            a.episodes,
+            if a.mean_task_ratio.is_finite() {
+                format!("{:.3}", a.mean_task_ratio)
+            } else {
+                "- (none finished)".into()
+            }
+        ));
+        csv.push_str(&format!(
+            "{},\"{}\",{},{},{},{:.6},{},{},{},{},{}\n",
+            r.name,
+            r.settings.replace('"', "\"\""),
+            a.episodes,
+            a.episodes_with_violation,
+            a.violations,
+            a.min_separation_m,
+            r.d_min_m,
+            a.contacts_moving,
+            a.contacts_standing,
+            a.finished,
+            if a.mean_task_ratio.is_finite() {
+                format!("{:.4}", a.mean_task_ratio)
+            } else {
+                String::new()
+            }
+        ));
+    }
+    md.push_str("\n![violations against task time](sweep.png)\n");
+    let points: Vec<Labelled> = rows
+        .iter()
+        .map(|r| Labelled {
+            label: format!("{}: {}", r.name, r.settings),
+            x: r.a.mean_task_ratio,
+            y: 100.0 * r.a.episodes_with_violation as f64 / r.a.episodes.max(1) as f64,
+        })
+        .collect();
+    let svg = svg_scatter(
+        "Sweep: episodes that came closer than d_min against task time",
+        "task time / unfiltered (mean over finished episodes)",
+        "episodes with a violation [%]",
+        &points,
+    );
+    let write = |name: &str, text: &str| {
+        let p = out.path().join(name);
+        std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
+    };
+    write("sweep.md", &md)?;
+    write("sweep.csv", &csv)?;
+    write("sweep.svg", &svg)?;
+    svg_to_png(&svg, &out.path().join("sweep.png"))?;
+    out.commit()?;
+    say!("{}", md.trim_end());
+    say!("sweep table: {}", args.out.join("sweep.md").display());
     Ok(ExitCode::SUCCESS)
 }
