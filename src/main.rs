@@ -105,9 +105,11 @@ fn main() -> ExitCode {
     // the default panic message for everything else.
     let default_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
-        let in_decoder = info
-            .location()
-            .is_some_and(|l| l.file().contains(workcell::robots::DECODER_CRATE));
+        let in_decoder = info.location().is_some_and(|l| {
+            workcell::robots::DECODER_CRATES
+                .iter()
+                .any(|c| l.file().contains(c))
+        });
         if !in_decoder {
             default_hook(info);
         }

@@ -271,6 +271,30 @@ pub fn add_robot(
                     std::fs::create_dir_all(dir).map_err(io(dir))?;
                 }
                 std::fs::copy(&m.path, &dest).map_err(io(&m.path))?;
+                // A .gltf's buffers in files of their own go beside it, under the names it
+                // gives them (inside its folder only).
+                let bytes = crate::input::read_regular_file(&m.path, crate::input::MAX_MESH_BYTES)
+                    .map_err(io(&m.path))?;
+                for uri in crate::gltf_buffer_files(&bytes, &m.path) {
+                    let relative = Path::new(&uri);
+                    let inside = relative
+                        .components()
+                        .all(|c| matches!(c, std::path::Component::Normal(_)));
+                    if !inside {
+                        return Err(invalid(format!(
+                            "{}: buffer {uri:?} lies outside the mesh's folder",
+                            m.path.display()
+                        )));
+                    }
+                    let (from, to_file) = (
+                        m.path.parent().unwrap_or(Path::new(".")).join(relative),
+                        dest.parent().unwrap_or(Path::new(".")).join(relative),
+                    );
+                    if let Some(dir) = to_file.parent() {
+                        std::fs::create_dir_all(dir).map_err(io(dir))?;
+                    }
+                    std::fs::copy(&from, &to_file).map_err(io(&from))?;
+                }
                 copied.push((m.path.clone(), to.clone()));
                 to
             }

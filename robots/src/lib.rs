@@ -3,7 +3,7 @@
 //! - [`RobotModel`]: links, joints (revolute, continuous, prismatic, fixed; mimic joints
 //!   honoured), limits (position, velocity, effort, acceleration, `safety_controller`),
 //!   inertials, visual and collision geometry, loaded from URDF with every field checked.
-//! - Meshes (STL binary and ASCII, OBJ, COLLADA/DAE) found through an explicit
+//! - Meshes (STL binary and ASCII, OBJ, COLLADA/DAE, glTF 2.0 `.gltf`/`.glb`) found through an explicit
 //!   [`PackageMap`] for `package://` URIs; a path that leaves its package is refused.
 //! - [`RobotModel::forward_kinematics`] and [`RobotModel::point_jacobian`].
 //! - [`collision`]: parry3d shapes of links and a bounding capsule per link.
@@ -24,6 +24,7 @@ pub mod assets;
 mod catalogue;
 pub mod collision;
 mod error;
+pub mod glb;
 pub mod human;
 pub mod input;
 mod kinematics;
@@ -39,7 +40,7 @@ pub use catalogue::{
 pub use error::{Result, RobotError};
 pub use human::{HumanLook, HumanPart};
 pub use kinematics::{Jacobian, KinematicState};
-pub use mesh::{DECODER_CRATE, TriMesh};
+pub use mesh::{DECODER_CRATES, TriMesh, gltf_buffer_files};
 pub use model::{
     Coordinate, Geometry, Inertial, Joint, JointId, JointKind, JointLimits, Link, LinkId,
     RobotModel, SafetyController, Shape,

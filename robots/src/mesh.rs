@@ -1,15 +1,17 @@
-//! Triangle meshes from STL (binary and ASCII), OBJ and COLLADA/DAE files.
+//! Triangle meshes from STL (binary and ASCII), OBJ, COLLADA/DAE and glTF 2.0 (`.gltf`,
+//! `.glb`) files.
 //!
-//! Decoding uses mesh-loader. Its panics on malformed input are caught and turned into
+//! Decoding uses mesh-loader, and the gltf crate for glTF. Its panics on malformed input are caught and turned into
 //! errors; a program that wants them silent installs a panic hook that skips
-//! [`DECODER_CRATE`] (the `workcell` binary does).
+//! [`DECODER_CRATES`] (the `workcell` binary does).
 
 use std::path::Path;
 
 use crate::math::Vector;
 
-/// Name of the mesh decoding crate, as it appears in panic locations.
-pub const DECODER_CRATE: &str = "mesh-loader";
+/// Names of the mesh decoding crates, as they appear in panic locations (the gltf crate's
+/// validator lives in gltf-json).
+pub const DECODER_CRATES: [&str; 3] = ["mesh-loader-", "gltf-json-", "gltf-1."];
 
 /// An indexed triangle mesh in the mesh's own frame, in metres (scale applied).
 #[derive(Debug, Clone, PartialEq)]
@@ -37,6 +39,9 @@ impl TriMesh {
     /// # Errors
     /// A message saying what is wrong with the bytes.
     pub fn from_bytes(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, String> {
+        if is_gltf(path) {
+            return gltf_mesh(bytes, path, scale);
+        }
         check_binary_stl_length(bytes, path)?;
         check_collada(bytes, path)?;
         // A binary STL whose free-form header starts with "solid" is taken for ASCII by the
@@ -109,17 +114,44 @@ impl TriMesh {
                 mesh.triangles.push([f[0] + base, f[1] + base, f[2] + base]);
             }
         }
-        if mesh.triangles.is_empty() {
+        mesh.checked(path)
+    }
+
+    /// The mesh when it holds a triangle and its vertices do not all coincide.
+    fn checked(self, path: &Path) -> Result<Self, String> {
+        if self.triangles.is_empty() {
             return Err(format!("{} holds no triangle", path.display()));
         }
-        let (lo, hi) = mesh.bounds();
+        let (lo, hi) = self.bounds();
         if (hi - lo).max_element() <= 0.0 {
             return Err(format!(
                 "{} is degenerate: all its vertices coincide",
                 path.display()
             ));
         }
-        Ok(mesh)
+        Ok(self)
+    }
+
+    /// The mesh as a binary glTF file: one node, one grey material (f32 vertices).
+    #[must_use]
+    pub fn to_glb(&self, name: &str) -> Vec<u8> {
+        let mut glb = crate::glb::GlbBuilder::new();
+        let material = glb.material(name, [0.6, 0.6, 0.6, 1.0]);
+        let positions: Vec<[f32; 3]> = self
+            .vertices
+            .iter()
+            .map(|v| [v.x as f32, v.y as f32, v.z as f32])
+            .collect();
+        let indices: Vec<u32> = self.triangles.iter().flatten().copied().collect();
+        let mesh = glb.mesh(
+            name,
+            &positions,
+            &indices,
+            crate::glb::Mode::Triangles,
+            material,
+        );
+        glb.node(name, serde_json::json!({"mesh": mesh}), true);
+        glb.finish("workcell", name)
     }
 
     /// Axis-aligned bounds `(min, max)` of the vertices.
@@ -133,6 +165,211 @@ impl TriMesh {
             |(lo, hi), v| (lo.min(*v), hi.max(*v)),
         )
     }
+}
+
+/// `.gltf` or `.glb`.
+fn is_gltf(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"))
+}
+
+/// The files a `.gltf` file's buffers name (relative URIs, not `data:`), which must travel
+/// with it; empty for anything else.
+#[must_use]
+pub fn gltf_buffer_files(bytes: &[u8], path: &Path) -> Vec<String> {
+    if !is_gltf(path) {
+        return Vec::new();
+    }
+    std::panic::catch_unwind(|| {
+        gltf::Gltf::from_slice(bytes).map(|g| {
+            g.document
+                .buffers()
+                .filter_map(|b| match b.source() {
+                    gltf::buffer::Source::Uri(uri) if !uri.starts_with("data:") => {
+                        Some(uri.to_string())
+                    }
+                    _ => None,
+                })
+                .collect()
+        })
+    })
+    .ok()
+    .and_then(Result::ok)
+    .unwrap_or_default()
+}
+
+/// Nodes deeper than this in a glTF scene are refused (a malformed file may nest without
+/// end, or loop).
+const MAX_GLTF_DEPTH: usize = 64;
+
+/// The triangles of a glTF 2.0 file's default scene (else its first), every mesh placed by
+/// its node's transform from the scene root. Vertices are taken as written, in metres, in
+/// the link's frame, like the other formats: glTF's "+Y is up" is not turned into ROS's +Z.
+/// Buffers come from the `.glb`'s binary chunk, from `data:` URIs, or from files beside
+/// `path` (read with the same size limit as meshes).
+fn gltf_mesh(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<TriMesh, String> {
+    // The gltf crate indexes without checking in places (its own validator looks accessors
+    // up by the index it is about to validate; accessor iterators slice the buffers): a
+    // malformed file must be an error, not a crash, as with the other decoders.
+    match std::panic::catch_unwind(|| gltf_mesh_unguarded(bytes, path, scale)) {
+        Ok(result) => result,
+        Err(_) => Err(format!(
+            "cannot decode {}: the glTF decoder failed on a malformed file",
+            path.display()
+        )),
+    }
+}
+
+fn gltf_mesh_unguarded(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<TriMesh, String> {
+    use base64::Engine as _;
+    let bad = |why: String| format!("cannot decode {}: {why}", path.display());
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| bad(e.to_string()))?;
+    let mut buffers: Vec<Vec<u8>> = Vec::new();
+    for buffer in gltf.document.buffers() {
+        let data = match buffer.source() {
+            gltf::buffer::Source::Bin => gltf
+                .blob
+                .clone()
+                .ok_or_else(|| bad("a buffer refers to a binary chunk the file lacks".into()))?,
+            gltf::buffer::Source::Uri(uri) => {
+                if let Some(rest) = uri.strip_prefix("data:") {
+                    let (_, data) = rest
+                        .split_once(";base64,")
+                        .ok_or_else(|| bad("a data URI that is not base64".into()))?;
+                    base64::engine::general_purpose::STANDARD
+                        .decode(data)
+                        .map_err(|e| bad(format!("a data URI: {e}")))?
+                } else {
+                    let file = path.parent().unwrap_or(Path::new(".")).join(uri);
+                    crate::input::read_regular_file(&file, crate::input::MAX_MESH_BYTES)
+                        .map_err(|e| bad(format!("buffer {}: {e}", file.display())))?
+                }
+            }
+        };
+        // Accessors index into the declared length: data shorter than that is truncated.
+        if data.len() < buffer.length() {
+            return Err(bad(format!(
+                "buffer {} holds {} bytes, declares {}",
+                buffer.index(),
+                data.len(),
+                buffer.length()
+            )));
+        }
+        buffers.push(data);
+    }
+    let scene = gltf
+        .document
+        .default_scene()
+        .or_else(|| gltf.document.scenes().next())
+        .ok_or_else(|| bad("no scene".into()))?;
+    let mut mesh = TriMesh {
+        vertices: Vec::new(),
+        triangles: Vec::new(),
+    };
+    let s = Vector::from_array(scale);
+    let mut stack: Vec<(gltf::Node<'_>, [[f64; 4]; 4], usize)> =
+        scene.nodes().map(|n| (n, IDENTITY_4, 0)).collect();
+    while let Some((node, parent, depth)) = stack.pop() {
+        if depth > MAX_GLTF_DEPTH {
+            return Err(bad(format!(
+                "nodes nested deeper than {MAX_GLTF_DEPTH} (a loop?)"
+            )));
+        }
+        let local = node.transform().matrix().map(|c| c.map(f64::from));
+        let world = mul4(&parent, &local);
+        if let Some(m) = node.mesh() {
+            for primitive in m.primitives() {
+                add_primitive(&mut mesh, &primitive, &buffers, &world, s).map_err(bad)?;
+            }
+        }
+        stack.extend(node.children().map(|c| (c, world, depth + 1)));
+    }
+    mesh.checked(path)
+}
+
+/// The identity, column-major as glTF stores matrices.
+const IDENTITY_4: [[f64; 4]; 4] = [
+    [1.0, 0.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0, 0.0],
+    [0.0, 0.0, 1.0, 0.0],
+    [0.0, 0.0, 0.0, 1.0],
+];
+
+/// `a * b` of column-major 4x4 matrices.
+fn mul4(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
+    let mut m = [[0.0; 4]; 4];
+    for (c, column) in m.iter_mut().enumerate() {
+        for (r, v) in column.iter_mut().enumerate() {
+            *v = (0..4).map(|k| a[k][r] * b[c][k]).sum();
+        }
+    }
+    m
+}
+
+/// Appends one primitive's triangles (lists, strips and fans; points and lines have none),
+/// its positions placed by `world` and scaled per axis.
+fn add_primitive(
+    mesh: &mut TriMesh,
+    primitive: &gltf::Primitive<'_>,
+    buffers: &[Vec<u8>],
+    world: &[[f64; 4]; 4],
+    scale: Vector,
+) -> Result<(), String> {
+    use gltf::mesh::Mode;
+    let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+    let Some(positions) = reader.read_positions() else {
+        return Ok(());
+    };
+    let base = u32::try_from(mesh.vertices.len()).map_err(|_| "mesh too large".to_string())?;
+    let mut count = 0usize;
+    for p in positions {
+        let p = p.map(f64::from);
+        let w = Vector::new(
+            world[0][0] * p[0] + world[1][0] * p[1] + world[2][0] * p[2] + world[3][0],
+            world[0][1] * p[0] + world[1][1] * p[1] + world[2][1] * p[2] + world[3][1],
+            world[0][2] * p[0] + world[1][2] * p[1] + world[2][2] * p[2] + world[3][2],
+        ) * scale;
+        if !w.is_finite() {
+            return Err("a non-finite vertex".into());
+        }
+        mesh.vertices.push(w);
+        count += 1;
+    }
+    let indices: Vec<u32> = match reader.read_indices() {
+        Some(i) => i.into_u32().collect(),
+        None => (0..u32::try_from(count).map_err(|_| "mesh too large".to_string())?).collect(),
+    };
+    if let Some(&i) = indices.iter().find(|&&i| i as usize >= count) {
+        return Err(format!("index {i} past the primitive's {count} vertices"));
+    }
+    let triangles: Vec<[u32; 3]> = match primitive.mode() {
+        Mode::Triangles => indices
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]])
+            .collect(),
+        // Every other strip triangle is wound the other way round.
+        Mode::TriangleStrip => indices
+            .windows(3)
+            .enumerate()
+            .map(|(k, t)| {
+                if k % 2 == 0 {
+                    [t[0], t[1], t[2]]
+                } else {
+                    [t[1], t[0], t[2]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => indices
+            .iter()
+            .skip(1)
+            .zip(indices.iter().skip(2))
+            .map(|(&b, &c)| [indices[0], b, c])
+            .collect(),
+        Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip => Vec::new(),
+    };
+    mesh.triangles
+        .extend(triangles.into_iter().map(|t| t.map(|i| i + base)));
+    Ok(())
 }
 
 /// A COLLADA file must be well-formed XML of bounded depth whose counts fit its size before

@@ -13,7 +13,13 @@ fn fixtures() -> PathBuf {
 
 #[test]
 fn unit_cube_in_every_format() {
-    for file in ["cube_binary.stl", "cube_ascii.stl", "cube.obj", "cube.dae"] {
+    for file in [
+        "cube_binary.stl",
+        "cube_ascii.stl",
+        "cube.obj",
+        "cube.dae",
+        "cube.glb",
+    ] {
         let mesh = TriMesh::load(&fixtures().join("meshes").join(file), [1.0, 2.0, 3.0])
             .unwrap_or_else(|e| panic!("{file}: {e}"));
         assert_eq!(mesh.triangles.len(), 12, "{file}");
@@ -104,7 +110,13 @@ fn package_uris_relative_paths_and_mimic_joints() {
 fn truncated_and_corrupted_meshes_are_errors_not_panics() {
     // Every prefix of each fixture, and each fixture with one byte flipped at a time, must
     // give Ok or Err: a broken mesh in a vendor package must never crash a safety tool.
-    for file in ["cube_binary.stl", "cube_ascii.stl", "cube.obj", "cube.dae"] {
+    for file in [
+        "cube_binary.stl",
+        "cube_ascii.stl",
+        "cube.obj",
+        "cube.dae",
+        "cube.glb",
+    ] {
         let path = fixtures().join("meshes").join(file);
         let bytes = std::fs::read(&path).expect("fixture");
         for len in 0..bytes.len() {
@@ -160,4 +172,141 @@ fn deeply_nested_collada_is_an_error_not_a_stack_overflow() {
     let err =
         TriMesh::from_bytes(dae.as_bytes(), Path::new("deep.dae"), [1.0; 3]).expect_err("too deep");
     assert!(err.contains("deeper than 256 levels"), "{err}");
+}
+
+/// `cube.glb` is the project's own writer's output for `cube.obj` (rewrite it with
+/// `WORKCELL_WRITE_FIXTURES=1 cargo test -p workcell-robots --test meshes`). Every format
+/// round-trips through glTF to the same triangles, vertices rounded to f32.
+#[test]
+fn meshes_written_as_glb_load_back() {
+    let meshes = fixtures().join("meshes");
+    let cube = TriMesh::load(&meshes.join("cube.obj"), [1.0; 3]).expect("cube");
+    let glb = cube.to_glb("cube");
+    if std::env::var_os("WORKCELL_WRITE_FIXTURES").is_some() {
+        std::fs::write(meshes.join("cube.glb"), &glb).expect("write the fixture");
+    }
+    assert_eq!(
+        std::fs::read(meshes.join("cube.glb")).expect("fixture"),
+        glb,
+        "the writer's output changed: rewrite the fixture if that is intended"
+    );
+    for file in ["cube_binary.stl", "cube.dae", "cube.obj"] {
+        let mesh = TriMesh::load(&meshes.join(file), [1.0; 3]).expect(file);
+        let back = TriMesh::from_bytes(&mesh.to_glb(file), Path::new("x.glb"), [1.0; 3])
+            .expect("glb back");
+        assert_eq!(back.triangles, mesh.triangles, "{file}");
+        for (a, b) in back.vertices.iter().zip(&mesh.vertices) {
+            assert!((*a - *b).abs().max_element() <= 1e-7 * b.abs().max_element().max(1.0));
+        }
+    }
+}
+
+/// A `.gltf` with its buffer in a data URI and a mesh two nodes deep: the vertices are placed
+/// by the product of the nodes' transforms (translation, rotation, scale, and a matrix),
+/// and a triangle strip becomes its triangles.
+#[test]
+fn gltf_scene_graph_places_the_mesh() {
+    use base64::Engine as _;
+    // A unit square in the x-y plane as a strip of 4 vertices: (0,0), (1,0), (0,1), (1,1).
+    let positions: [f32; 12] = [0., 0., 0., 1., 0., 0., 0., 1., 0., 1., 1., 0.];
+    let indices: [u32; 4] = [0, 1, 2, 3];
+    let mut bin: Vec<u8> = positions.iter().flat_map(|x| x.to_le_bytes()).collect();
+    bin.extend(indices.iter().flat_map(|x| x.to_le_bytes()));
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bin)
+    );
+    // Parent: translate (1, 2, 3), scale 2. Child: a quarter turn about z (quaternion
+    // (0, 0, sin 45, cos 45)) as TRS, the grandchild a matrix translating by (0, 0, 1).
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    let doc = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [
+            {"translation": [1.0, 2.0, 3.0], "scale": [2.0, 2.0, 2.0], "children": [1]},
+            {"rotation": [0.0, 0.0, h, h], "children": [2]},
+            {"matrix": [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0], "mesh": 0}
+        ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "mode": 5}]}],
+        "buffers": [{"byteLength": bin.len(), "uri": uri}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 16}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5125, "count": 4, "type": "SCALAR"}
+        ]
+    });
+    let text = doc.to_string();
+    let mesh =
+        TriMesh::from_bytes(text.as_bytes(), Path::new("square.gltf"), [1.0; 3]).expect("gltf");
+    assert_eq!(mesh.triangles.len(), 2, "a strip of 4 is 2 triangles");
+    // World = T(1,2,3) S(2) Rz(90) T(0,0,1) p: (x, y, 0) goes to (1 - 2y, 2 + 2x, 5).
+    for (v, p) in mesh.vertices.iter().zip(positions.chunks_exact(3)) {
+        let (x, y) = (f64::from(p[0]), f64::from(p[1]));
+        assert_relative_eq!(v.x, 1.0 - 2.0 * y, epsilon = 1e-6);
+        assert_relative_eq!(v.y, 2.0 + 2.0 * x, epsilon = 1e-6);
+        assert_relative_eq!(v.z, 5.0, epsilon = 1e-6);
+    }
+    // Both triangles face the same way (the strip's second one is turned round).
+    let normal = |t: [u32; 3]| {
+        let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+        (b - a).cross(c - a).z
+    };
+    assert!(normal(mesh.triangles[0]) * normal(mesh.triangles[1]) > 0.0);
+
+    // Broken files: errors that say why, never panics.
+    let broken = |doc: serde_json::Value, expected: &str| {
+        let err = TriMesh::from_bytes(doc.to_string().as_bytes(), Path::new("b.gltf"), [1.0; 3])
+            .expect_err(expected);
+        assert!(err.contains(expected), "{expected}: {err}");
+    };
+    let mut short = doc.clone();
+    short["buffers"][0]["byteLength"] = serde_json::json!(bin.len() + 4);
+    broken(short, "declares");
+    let mut past = doc.clone();
+    past["accessors"][0]["count"] = serde_json::json!(3);
+    past["bufferViews"][0]["byteLength"] = serde_json::json!(36);
+    broken(past, "past the primitive's 3 vertices");
+    let mut looped = doc.clone();
+    looped["nodes"][2]["children"] = serde_json::json!([0]);
+    broken(looped, "cannot decode");
+    let mut missing = doc;
+    missing["buffers"][0]["uri"] = serde_json::json!("nowhere.bin");
+    broken(missing, "nowhere.bin");
+}
+
+/// A URDF whose link is a `.gltf` with its buffer in a file of its own loads, and adding it
+/// to a robot library copies the buffer beside the `.gltf`: the added robot loads too.
+#[test]
+fn gltf_with_an_external_buffer_loads_and_travels_with_its_robot() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cube = TriMesh::load(&fixtures().join("meshes/cube.obj"), [1.0; 3]).expect("cube");
+    // Split the project's .glb into a .gltf and a .bin.
+    let glb = cube.to_glb("cube");
+    let json_len = u32::from_le_bytes([glb[12], glb[13], glb[14], glb[15]]) as usize;
+    let mut doc: serde_json::Value =
+        serde_json::from_slice(&glb[20..20 + json_len]).expect("json chunk");
+    let bin = &glb[20 + json_len + 8..];
+    doc["buffers"][0]["uri"] = serde_json::json!("cube_data.bin");
+    let meshes = dir.path().join("src/meshes");
+    std::fs::create_dir_all(&meshes).expect("mkdir");
+    std::fs::write(meshes.join("cube.gltf"), doc.to_string()).expect("gltf");
+    std::fs::write(meshes.join("cube_data.bin"), bin).expect("bin");
+    let urdf = dir.path().join("src/box.urdf");
+    std::fs::write(
+        &urdf,
+        r#"<robot name="box"><link name="base"><visual><geometry><mesh filename="meshes/cube.gltf"/></geometry></visual><collision><geometry><mesh filename="meshes/cube.gltf"/></geometry></collision></link></robot>"#,
+    )
+    .expect("urdf");
+    let loaded = TriMesh::load(&meshes.join("cube.gltf"), [1.0; 3]).expect("gltf + bin");
+    assert_eq!(loaded.triangles, cube.triangles);
+    RobotModel::from_urdf_file(&urdf, &PackageMap::new()).expect("robot with a gltf mesh");
+    let library = dir.path().join("library");
+    let added =
+        workcell_robots::assets::add_robot(&urdf, &PackageMap::new(), "box", &library, false)
+            .expect("add");
+    RobotModel::from_urdf_file(&added.urdf, &PackageMap::new()).expect("the added robot loads");
 }
