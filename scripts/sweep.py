@@ -139,9 +139,9 @@ def run_workcell(binary: str, args: list[str], threads: int | None, keep_all: bo
         seconds = time.perf_counter() - started
         files = {}
         if proc.returncode == 0:
-            for f in out.iterdir():
+            for f in sorted(out.rglob("*")):
                 if f.is_file() and (keep_all or f.suffix in KEEP_SUFFIXES):
-                    files[f.name] = f.read_bytes()
+                    files[str(f.relative_to(out))] = f.read_bytes()
         return {"rc": proc.returncode, "stderr": proc.stderr[-4000:], "files": files, "seconds": seconds,
                 "out": str(out), "entered": entered, "left": time.time()}
 
@@ -151,6 +151,7 @@ def write_files(folder: Path, files: dict) -> None:
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir(parents=True)
     for name, data in files.items():
+        (staging / name).parent.mkdir(parents=True, exist_ok=True)
         (staging / name).write_bytes(data)
     shutil.rmtree(folder, ignore_errors=True)
     staging.rename(folder)
@@ -188,9 +189,10 @@ def same_report(single: Path, single_out: str, merged: Path) -> list[str]:
 
     if verdict(single) != verdict(merged):
         differ.append("summary.md (verdict)")
-    for f in single.glob("*.glb"):
-        if not (merged / f.name).is_file() or f.read_bytes() != (merged / f.name).read_bytes():
-            differ.append(f.name)
+    for f in single.glob("replays/*.glb"):
+        other = merged / "replays" / f.name
+        if not other.is_file() or f.read_bytes() != other.read_bytes():
+            differ.append(f"replays/{f.name}")
     return differ
 
 

@@ -1047,6 +1047,8 @@ fn shards_merge_into_the_report_of_one_process() {
             "11",
             "--filter",
             "none",
+            "--gltf",
+            "2",
             "--out",
             out.to_str().expect("utf-8"),
         ];
@@ -1120,6 +1122,25 @@ fn shards_merge_into_the_report_of_one_process() {
             .join("\n")
     };
     assert_eq!(verdict(&single), verdict(&merged));
+    // The 3D replays of the whole run's two worst episodes, byte for byte.
+    let replays = |d: &Path| {
+        let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(d.join("replays"))
+            .expect("replays")
+            .map(|e| {
+                let e = e.expect("entry");
+                (
+                    e.file_name().to_string_lossy().into_owned(),
+                    std::fs::read(e.path()).expect("glb"),
+                )
+            })
+            .collect();
+        files.sort();
+        files
+    };
+    let single_replays = replays(&single);
+    assert_eq!(single_replays.len(), 2);
+    assert!(single_replays.iter().all(|(_, b)| b.starts_with(b"glTF")));
+    assert_eq!(single_replays, replays(&merged));
 
     // Refusals.
     let merge = |dirs: &[&Path], expected: &str| {

@@ -35,6 +35,7 @@ pub struct GlbBuilder {
     roots: Vec<usize>,
     channels: Vec<Value>,
     samplers: Vec<Value>,
+    by_colour: Vec<([u32; 4], usize)>,
 }
 
 impl GlbBuilder {
@@ -144,6 +145,61 @@ impl GlbBuilder {
         self.meshes.len() - 1
     }
 
+    /// A triangle mesh whose triangles come in colour groups: one primitive per group
+    /// (`indices`, linear RGBA), all sharing `positions` and their normals.
+    pub fn mesh_groups(
+        &mut self,
+        name: &str,
+        positions: &[[f32; 3]],
+        groups: &[(Vec<u32>, [f32; 4])],
+    ) -> usize {
+        let flat: Vec<f32> = positions.iter().flatten().copied().collect();
+        let position = self.floats(&flat, 3, true);
+        let all: Vec<u32> = groups.iter().flat_map(|(i, _)| i.iter().copied()).collect();
+        let normals = vertex_normals(positions, &all);
+        let flat: Vec<f32> = normals.iter().flatten().copied().collect();
+        let normal = self.floats(&flat, 3, true);
+        let primitives: Vec<Value> = groups
+            .iter()
+            .map(|(indices, rgba)| {
+                let material = self.coloured(*rgba);
+                let index = self.indices(indices);
+                json!({
+                    "attributes": {"POSITION": position, "NORMAL": normal},
+                    "indices": index,
+                    "mode": Mode::Triangles as u32,
+                    "material": material,
+                })
+            })
+            .collect();
+        self.meshes
+            .push(json!({"name": name, "primitives": primitives}));
+        self.meshes.len() - 1
+    }
+
+    /// Line segments (`indices` in pairs) in one colour.
+    pub fn mesh_lines(
+        &mut self,
+        name: &str,
+        points: &[[f32; 3]],
+        indices: &[u32],
+        rgba: [f32; 4],
+    ) -> usize {
+        let material = self.coloured(rgba);
+        self.mesh(name, points, indices, Mode::Lines, material)
+    }
+
+    /// The material of colour `rgba`, made once per colour.
+    fn coloured(&mut self, rgba: [f32; 4]) -> usize {
+        let key = rgba.map(f32::to_bits);
+        if let Some(&(_, m)) = self.by_colour.iter().find(|(k, _)| *k == key) {
+            return m;
+        }
+        let m = self.material(&format!("rgba {rgba:?}"), rgba);
+        self.by_colour.push((key, m));
+        m
+    }
+
     /// A perspective camera (vertical field of view in radians, width over height).
     pub fn camera(&mut self, name: &str, yfov_rad: f64, aspect: f64, near_m: f64) -> usize {
         self.cameras.push(json!({
@@ -170,13 +226,21 @@ impl GlbBuilder {
     }
 
     /// Animates `node`'s `path` (`translation`: 3 values per key, `rotation`: a unit
-    /// quaternion x, y, z, w, `scale`: 3) linearly between keys at `times_s`. `times`
-    /// is an accessor from [`GlbBuilder::floats`] (shared by channels sampled alike).
-    pub fn animate(&mut self, node: usize, path: &str, times: usize, values: &[f32]) {
+    /// quaternion x, y, z, w, `scale`: 3) between keys at the times of accessor `times`
+    /// (from [`GlbBuilder::floats`], shared by channels sampled alike), `interpolation`
+    /// `LINEAR` or `STEP`.
+    pub fn animate(
+        &mut self,
+        node: usize,
+        path: &str,
+        times: usize,
+        values: &[f32],
+        interpolation: &str,
+    ) {
         let width = if path == "rotation" { 4 } else { 3 };
         let output = self.floats(values, width, false);
         self.samplers
-            .push(json!({"input": times, "output": output, "interpolation": "LINEAR"}));
+            .push(json!({"input": times, "output": output, "interpolation": interpolation}));
         self.channels.push(json!({
             "sampler": self.samplers.len() - 1,
             "target": {"node": node, "path": path},

@@ -11,17 +11,21 @@ use workcell::evaluate::record::{
     KeptTrace, PLOTTED_EPISODES, RUN_RECORD, RUN_RECORD_FORMAT, RunRecord, RunSettings,
     shard_episodes, worst_episodes,
 };
+use workcell::evaluate::replay::episode_glb;
 use workcell::evaluate::report::{
     Aggregate, SummaryContext, metrics_csv, summary_markdown, write_plots,
 };
-use workcell::evaluate::{Evaluation, EvaluationConfig, MaskKind, PerceptionKind, run_episode};
+use workcell::evaluate::{
+    Evaluation, EvaluationConfig, MaskKind, PerceptionKind, record_episode, run_episode,
+};
 use workcell::safety::iso::effective_robot_mass_kg;
 use workcell::safety::{BodyRegion, FilterMode, HumanPart};
 
 /// Files `evaluate` writes into `--out`.
-pub const OUTPUTS: [&str; 11] = [
+pub const OUTPUTS: [&str; 12] = [
     "summary.md",
     RUN_RECORD,
+    REPLAYS_DIR,
     "violations.txt",
     "metrics.csv",
     "evaluation.toml",
@@ -92,7 +96,18 @@ pub struct EvaluateArgs {
     /// shards' folders merge into the whole run's report with `workcell report merge`.
     #[arg(long, value_name = "K/N", value_parser = parse_shard)]
     pub shard: Option<(usize, usize)>,
+    /// Write the N episodes with the smallest separation as animated binary glTF
+    /// (`replays/episode-SEED.glb`: robot, human, closest pair, cameras, clutter); each is run
+    /// again with a recorder (0 to 100).
+    #[arg(long, value_name = "N", default_value_t = 0, value_parser = super::count_in::<0, 100>)]
+    pub gltf: usize,
 }
+
+/// The folder of the 3D replays inside an evaluation's output.
+pub const REPLAYS_DIR: &str = "replays/";
+
+/// Replays sample the cell at this rate, Hz.
+pub const REPLAY_RATE_HZ: f64 = 30.0;
 
 /// The command that replays episode `seed` of the run `settings` describes exactly: the same
 /// file, overrides, filter and perception, one episode, into `out/replay-SEED`.
@@ -277,6 +292,54 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     } else {
         Vec::new()
     };
+    // The worst episodes again, recorded, as 3D replays.
+    let mut replays = Vec::new();
+    if args.gltf > 0 {
+        let dir = out.path().join(REPLAYS_DIR);
+        fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let cameras: Vec<(String, workcell::render::Camera)> = evaluation
+            .scenario
+            .cameras
+            .iter()
+            .filter_map(|c| c.camera().ok().map(|cam| (c.name.clone(), cam)))
+            .collect();
+        let worst = worst_episodes(&metrics, args.gltf);
+        let bar = super::progress_bar(worst.len() as u64, "{spinner} {msg} [{bar:40}] {pos}/{len}");
+        bar.set_message("3D replays of the worst episodes");
+        for i in worst {
+            let m = &metrics[i];
+            let (again, _, recording) =
+                record_episode(&evaluation, mode, m.episode, m.seed, 1.0 / REPLAY_RATE_HZ)?;
+            // Determinism: the recorded run is the same episode (wall time aside).
+            if again.min_separation_m.to_bits() != m.min_separation_m.to_bits() {
+                bail!(
+                    "episode {} (seed {}) did not replay identically: min separation {} m, then {} m",
+                    m.episode,
+                    m.seed,
+                    m.min_separation_m,
+                    again.min_separation_m
+                );
+            }
+            let mut scenario = evaluation.scenario.clone();
+            scenario.seed = m.seed;
+            let model = workcell::sim::CellModel::new(&scenario, &evaluation.scenario_path)?;
+            let glb = episode_glb(
+                &model,
+                &cameras,
+                &recording,
+                evaluation.config.safety.d_min_m,
+                &format!("episode {} (seed {})", m.episode, m.seed),
+            );
+            let file = format!("{REPLAYS_DIR}episode-{}.glb", m.seed);
+            let path = out.path().join(&file);
+            fs::write(&path, glb).with_context(|| format!("writing {}", path.display()))?;
+            replays.push((m.episode, file));
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        replays.sort();
+    }
+
     let c = &evaluation.config;
     let record = RunRecord {
         format: RUN_RECORD_FORMAT,
@@ -291,7 +354,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
             first_seed: args.seed,
             episodes: args.episodes,
             shards,
-            replays_per_shard: 0,
+            replays_per_shard: args.gltf,
             d_min_m: c.safety.d_min_m,
             near_m: c.near_m,
             pfl_distance_m: if c.safety.pfl_distance_m > 0.0 {
@@ -304,7 +367,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         shard,
         metrics,
         traces: kept,
-        replays: Vec::new(),
+        replays,
     };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     write_report(out.path(), &record, &command, &args.out)?;

@@ -49,6 +49,8 @@ pub fn prepare_out(out: &std::path::Path, force: bool, outputs: &[&str]) -> anyh
     Ok(())
 }
 
+/// A run's outputs are files, or folders when the name ends in '/' (replaced whole).
+///
 /// Prefix of the folder inside `--out` where a run writes its files before they replace the
 /// previous run's.
 const STAGE_PREFIX: &str = ".workcell-partial-";
@@ -111,7 +113,13 @@ impl OutputDir {
         use anyhow::Context as _;
         for name in self.outputs {
             let old = self.out.join(name);
-            match std::fs::remove_file(&old) {
+            // A name ending in '/' is a folder of the run's, replaced whole.
+            let removed = if name.ends_with('/') {
+                std::fs::remove_dir_all(&old)
+            } else {
+                std::fs::remove_file(&old)
+            };
+            match removed {
                 Ok(()) => {}
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
                 Err(e) => return Err(e).with_context(|| format!("removing {}", old.display())),

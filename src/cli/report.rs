@@ -42,8 +42,18 @@ pub fn merge_shards(args: &MergeArgs) -> Result<ExitCode> {
                 .with_context(|| format!("shard folder {}", dir.display()))
         })
         .collect::<Result<Vec<_>>>()?;
-    let (record, _replay_dirs) = merge(records)?;
+    let (record, replay_dirs) = merge(records)?;
     let out = super::OutputDir::create(&args.out, args.force, &OUTPUTS)?;
+    // The whole run's worst episodes' replays, from the shards that wrote them.
+    for ((_, file), dir) in record.replays.iter().zip(&replay_dirs) {
+        let (from, to) = (dir.join(file), out.path().join(file));
+        if let Some(parent) = to.parent() {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("creating {}", parent.display()))?;
+        }
+        std::fs::copy(&from, &to)
+            .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
+    }
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     write_report(out.path(), &record, &command, &args.out)?;
     out.commit()?;

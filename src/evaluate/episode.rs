@@ -2,7 +2,7 @@
 
 use std::time::Instant;
 
-use workcell_robots::math::Vector;
+use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{Jacobian, KinematicState, LinkId};
 use workcell_safety::{
     BrakeReason, FilterMode, FilterStatus, HumanEstimate, HumanGeometry, HumanPart, Obstacle,
@@ -30,8 +30,66 @@ pub fn run_episode(
     episode: usize,
     seed: u64,
     perception: Option<Box<dyn HumanPerception>>,
-    mut on_tick: impl FnMut(f64),
+    on_tick: impl FnMut(f64),
 ) -> Result<(EpisodeMetrics, EpisodeTrace)> {
+    run(evaluation, mode, episode, seed, perception, None, on_tick)
+        .map(|(metrics, trace, _)| (metrics, trace))
+}
+
+/// [`run_episode`] that also records the cell's poses every `period_s` for a 3D replay
+/// (the same episode: the recording changes nothing else).
+///
+/// # Errors
+/// As [`run_episode`].
+pub fn record_episode(
+    evaluation: &Evaluation,
+    mode: FilterMode,
+    episode: usize,
+    seed: u64,
+    period_s: f64,
+) -> Result<(EpisodeMetrics, EpisodeTrace, Recording)> {
+    let (metrics, trace, recording) = run(
+        evaluation,
+        mode,
+        episode,
+        seed,
+        None,
+        Some(period_s),
+        |_| {},
+    )?;
+    Ok((metrics, trace, recording.unwrap_or_default()))
+}
+
+/// The cell over time, sampled for a 3D replay: world poses of every robot and human link
+/// (from the simulator), the robot's joint positions, and the closest robot-human pair.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Recording {
+    pub t_s: Vec<f64>,
+    /// Per sample, the pose of each robot link ([`workcell_robots::LinkId`] order).
+    pub robot_link_poses: Vec<Vec<Pose>>,
+    /// Per sample, the pose of each human link.
+    pub human_link_poses: Vec<Vec<Pose>>,
+    /// Per sample, the robot's measured joint positions.
+    pub robot_q: Vec<Vec<f64>>,
+    /// Per sample, the closest pair's robot point, human point and signed distance (`None`
+    /// when no pair was within 5 m).
+    pub closest: Vec<Option<ClosestSample>>,
+}
+
+/// The closest pair at a sample: the robot's point, the human's point (world, m), and the
+/// signed distance, m.
+pub type ClosestSample = ([f64; 3], [f64; 3], f64);
+
+#[allow(clippy::too_many_arguments)]
+fn run(
+    evaluation: &Evaluation,
+    mode: FilterMode,
+    episode: usize,
+    seed: u64,
+    perception: Option<Box<dyn HumanPerception>>,
+    record_period_s: Option<f64>,
+    mut on_tick: impl FnMut(f64),
+) -> Result<(EpisodeMetrics, EpisodeTrace, Option<Recording>)> {
     let started = Instant::now();
     let c = &evaluation.config;
     let mut scenario = evaluation.scenario.clone();
@@ -42,6 +100,7 @@ pub fn run_episode(
         None => c.perception.build(seed, &scenario, &model)?,
     };
     let mut run = Run::new(c, model, mode, episode, seed, perception)?;
+    run.recording = record_period_s.map(|p| (p, Recording::default()));
     let dt_physics = run.model.time_step_s();
     let substeps = (c.control_period_s / dt_physics).round().max(1.0) as usize;
     let dt = substeps as f64 * dt_physics;
@@ -61,7 +120,9 @@ pub fn run_episode(
         run.progress = (run.progress + rate * dt).min(c.task_s);
         on_tick((t / c.task_s).min(1.0));
     }
-    Ok(run.finish(started))
+    let recording = run.recording.take().map(|(_, r)| r);
+    let (metrics, trace) = run.finish(started);
+    Ok((metrics, trace, recording))
 }
 
 /// The state of an episode between ticks.
@@ -96,6 +157,8 @@ struct Run<'a> {
     braking: Vec<(BrakeReason, usize)>,
     error_sum: f64,
     error_ticks: usize,
+    /// The sample period and the samples of a 3D replay, when recording.
+    recording: Option<(f64, Recording)>,
 }
 
 impl<'a> Run<'a> {
@@ -175,6 +238,7 @@ impl<'a> Run<'a> {
             braking: Vec::new(),
             error_sum: 0.0,
             error_ticks: 0,
+            recording: None,
             model,
             state,
         })
@@ -240,6 +304,12 @@ impl<'a> Run<'a> {
                 closest = Some((pair, velocity));
             }
         }
+        record(
+            &mut self.recording,
+            state,
+            t,
+            closest.as_ref().map(|(pair, _)| pair),
+        );
         let Some((pair, velocity)) = closest else {
             self.trace.separation_m.push(f64::NAN);
             return Ok(());
@@ -432,6 +502,36 @@ impl<'a> Run<'a> {
         metrics.wall_s = started.elapsed().as_secs_f64();
         (self.metrics, self.trace)
     }
+}
+
+/// Adds a sample to the recording when one is due at `t`.
+fn record(
+    recording: &mut Option<(f64, Recording)>,
+    state: &CellState,
+    t: f64,
+    closest: Option<&SignedDistancePair>,
+) {
+    let Some((period, recording)) = recording else {
+        return;
+    };
+    // Due when t has reached the next multiple of the period (half a tick early at
+    // most, so that rounding does not skip one).
+    let due = recording
+        .t_s
+        .last()
+        .is_none_or(|&last| t - last >= *period - 1e-9);
+    if !due {
+        return;
+    }
+    recording.t_s.push(t);
+    recording.robot_link_poses.push(state.robot_link_poses());
+    recording
+        .human_link_poses
+        .push(state.human_link_poses().to_vec());
+    recording.robot_q.push(state.q().to_vec());
+    recording
+        .closest
+        .push(closest.map(|p| (p.p_WA.to_array(), p.p_WB.to_array(), p.distance_m)));
 }
 
 /// Velocity of the robot's witness point of `pair` in the world, m/s.

@@ -17,6 +17,7 @@ pub mod lossless;
 pub mod perception;
 pub mod procnet;
 pub mod record;
+pub mod replay;
 pub mod report;
 
 use std::path::{Path, PathBuf};
@@ -27,7 +28,7 @@ use workcell_sim::Scenario;
 
 use crate::error::{Error, Result};
 
-pub use episode::run_episode;
+pub use episode::{Recording, record_episode, run_episode};
 pub use perception::{
     GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig, PerceptionInput,
     PerceptionKind,
