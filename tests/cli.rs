@@ -1126,6 +1126,10 @@ fn shards_merge_into_the_report_of_one_process() {
     let replays = |d: &Path| {
         let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(d.join("replays"))
             .expect("replays")
+            .filter(|e| {
+                e.as_ref()
+                    .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "glb"))
+            })
             .map(|e| {
                 let e = e.expect("entry");
                 (
@@ -1141,6 +1145,18 @@ fn shards_merge_into_the_report_of_one_process() {
     assert_eq!(single_replays.len(), 2);
     assert!(single_replays.iter().all(|(_, b)| b.starts_with(b"glTF")));
     assert_eq!(single_replays, replays(&merged));
+    // summary.html lists them (worst first) beside the report's tables.
+    let page = read(&merged, "summary.html");
+    assert!(page.contains("<h2>Verdict: VIOLATIONS</h2>"), "{page}");
+    let links: Vec<&str> = page
+        .match_indices("<a href=\"replays/episode-")
+        .map(|(k, _)| &page[k + 9..k + 9 + page[k + 9..].find('"').expect("quote")])
+        .collect();
+    assert_eq!(links.len(), 2, "{page}");
+    for link in links {
+        assert!(merged.join(link).is_file(), "{link}");
+        assert!(merged.join(link.replace(".glb", ".js")).is_file(), "{link}");
+    }
 
     // Refusals.
     let merge = |dirs: &[&Path], expected: &str| {

@@ -7,6 +7,7 @@ use std::sync::Mutex;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
+use workcell::evaluate::html::{PageReplay, replay_script, summary_html};
 use workcell::evaluate::record::{
     KeptTrace, PLOTTED_EPISODES, RUN_RECORD, RUN_RECORD_FORMAT, RunRecord, RunSettings,
     shard_episodes, worst_episodes,
@@ -22,8 +23,10 @@ use workcell::safety::iso::effective_robot_mass_kg;
 use workcell::safety::{BodyRegion, FilterMode, HumanPart};
 
 /// Files `evaluate` writes into `--out`.
-pub const OUTPUTS: [&str; 12] = [
+pub const OUTPUTS: [&str; 14] = [
     "summary.md",
+    "summary.html",
+    VIEWER_JS,
     RUN_RECORD,
     REPLAYS_DIR,
     "violations.txt",
@@ -105,6 +108,21 @@ pub struct EvaluateArgs {
 
 /// The folder of the 3D replays inside an evaluation's output.
 pub const REPLAYS_DIR: &str = "replays/";
+
+/// The 3D replay viewer beside `summary.html` (built by `scripts/fetch-viewer.sh`).
+pub const VIEWER_JS: &str = "viewer.js";
+
+/// The viewer bundle to copy beside the page: `WORKCELL_VIEWER_JS`, else where
+/// `scripts/fetch-viewer.sh` puts it; `None` when neither is a file.
+fn viewer_bundle() -> Option<PathBuf> {
+    std::env::var_os("WORKCELL_VIEWER_JS")
+        .map(PathBuf::from)
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .map(|h| PathBuf::from(h).join(".cache/workcell/viewer/workcell-viewer.js"))
+        })
+        .filter(|p| p.is_file())
+}
 
 /// Replays sample the cell at this rate, Hz.
 pub const REPLAY_RATE_HZ: f64 = 30.0;
@@ -413,7 +431,58 @@ pub fn write_report(dir: &Path, record: &RunRecord, command: &str, out: &Path) -
         fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
     };
     let episodes = &record.metrics;
-    write("summary.md", &summary_markdown(&context, episodes))?;
+    let markdown = summary_markdown(&context, episodes);
+    write("summary.md", &markdown)?;
+    // The page: the same summary, and the replays with the viewer when it is at hand.
+    let mut page_replays = Vec::new();
+    // Worst first.
+    let mut listed: Vec<&(usize, String)> = record.replays.iter().collect();
+    let separation = |e: usize| {
+        episodes
+            .iter()
+            .find(|m| m.episode == e)
+            .map_or(f64::INFINITY, |m| m.min_separation_m)
+    };
+    listed.sort_by(|a, b| {
+        separation(a.0)
+            .total_cmp(&separation(b.0))
+            .then(a.0.cmp(&b.0))
+    });
+    for (episode, file) in listed {
+        let glb_path = dir.join(file);
+        let glb = fs::read(&glb_path).with_context(|| format!("reading {}", glb_path.display()))?;
+        let m = episodes.iter().find(|m| m.episode == *episode);
+        let label = m.map_or_else(
+            || format!("episode {episode}"),
+            |m| {
+                format!(
+                    "episode {} (seed {}): min separation {:.3} m, {} violations",
+                    m.episode, m.seed, m.min_separation_m, m.violations
+                )
+            },
+        );
+        let script = file.replace(".glb", ".js");
+        write(&script, &replay_script(&label, &glb))?;
+        page_replays.push(PageReplay {
+            label,
+            script,
+            glb: file.clone(),
+        });
+    }
+    let viewer = if page_replays.is_empty() {
+        None
+    } else {
+        viewer_bundle()
+    };
+    if let Some(bundle) = &viewer {
+        let to = dir.join(VIEWER_JS);
+        fs::copy(bundle, &to)
+            .with_context(|| format!("copying {} to {}", bundle.display(), to.display()))?;
+    }
+    write(
+        "summary.html",
+        &summary_html(&markdown, &page_replays, viewer.is_some()),
+    )?;
     let mut replay = format!(
         "# Episodes that came closer than d_min = {} m: seed, violations, smallest separation, \
          and the command that replays exactly that episode.\n",

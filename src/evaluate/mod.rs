@@ -13,6 +13,7 @@
 //! ```
 
 mod episode;
+pub mod html;
 pub mod lossless;
 pub mod perception;
 pub mod procnet;
