@@ -1176,6 +1176,52 @@ fn shards_merge_into_the_report_of_one_process() {
     merge(&[&shard(1), &shard(2), &shard(2), &shard(3)], "given twice");
     merge(&[&shard(1), &single], "different evaluations");
     merge(&[&dir.path().join("nowhere")], "run.json");
+    let garbage = dir.path().join("garbage");
+    std::fs::create_dir_all(&garbage).expect("mkdir");
+    std::fs::write(garbage.join("run.json"), "{\"format\": 1, \"settings\": 3").expect("write");
+    merge(&[&garbage], "not a run record");
+    std::fs::write(garbage.join("run.json"), "{\"format\": 99}").expect("write");
+    merge(&[&garbage], "run record format 99");
+
+    // A sweep's table from whole evaluations; a lone shard is refused.
+    let table = dir.path().join("sweep");
+    let out = workcell(&[
+        "report",
+        "sweep",
+        single.to_str().expect("utf-8"),
+        merged.to_str().expect("utf-8"),
+        "--out",
+        table.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let md = read(&table, "sweep.md");
+    let rows: Vec<&str> = md
+        .lines()
+        .filter(|l| l.starts_with("| single") || l.starts_with("| merged"))
+        .collect();
+    assert_eq!(rows.len(), 2, "{md}");
+    // Both rows show the same evaluation: the same counts after the name and the link.
+    let counts = |row: &str| {
+        row.split(" | ")
+            .skip(3)
+            .map(String::from)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(counts(rows[0]), counts(rows[1]));
+    assert!(table.join("sweep.png").is_file() && table.join("sweep.csv").is_file());
+    let out = workcell(&[
+        "report",
+        "sweep",
+        shard(2).to_str().expect("utf-8"),
+        "--out",
+        dir.path().join("sweep2").to_str().expect("utf-8"),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("merge the shards first"),
+        "{}",
+        text(&out.stderr)
+    );
     let other = dir.path().join("other");
     run(&other, &["--shard", "2/3", "--set", "safety.gamma_per_s=8"]);
     merge(

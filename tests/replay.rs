@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use workcell::evaluate::replay::{
-    HUMAN_PREFIX, PAIR_NODES, ROBOT_PREFIX, ROOT_NODE, episode_glb, pair_class,
+    HUMAN_PREFIX, MARKER_SUFFIX, PAIR_NODES, ROBOT_PREFIX, ROOT_NODE, episode_glb, pair_class,
 };
 use workcell::evaluate::{Evaluation, apply_overrides, record_episode};
 use workcell::robots::math::{Pose, Rotation, Vector};
@@ -142,6 +142,11 @@ fn an_episode_reads_back_with_the_simulations_poses() {
             let scale = track.scale[k];
             if c != class {
                 assert_eq!(scale, [0.0; 3], "{name} shown at key {k}");
+                let marker = &tracks[&format!("{name}{MARKER_SUFFIX}")];
+                assert_eq!(
+                    marker.scale[k], [0.0; 3],
+                    "{name}'s marker shown at key {k}"
+                );
                 continue;
             }
             let (a, b) = (Vector::from_array(a), Vector::from_array(b));
@@ -149,6 +154,10 @@ fn an_episode_reads_back_with_the_simulations_poses() {
             assert!((pose.translation - a).length() < 1e-5);
             let tip = pose.translation + pose.rotation * Vector::new(f64::from(scale[0]), 0.0, 0.0);
             assert!((tip - b).length() < 1e-5, "key {k}: {tip:?} vs {b:?}");
+            let marker = &tracks[&format!("{name}{MARKER_SUFFIX}")];
+            assert_eq!(marker.scale[k], [1.0; 3]);
+            let at = Vector::from_array(marker.translation[k].map(f64::from));
+            assert!((at - b).length() < 1e-5, "marker at key {k}");
             if d > 0.0 {
                 assert!(
                     (f64::from(scale[0]) - d).abs() < 1e-5,

@@ -68,7 +68,9 @@ function start() {
   });
 
   let current = null; // {gltf, mixer, duration}
-  let playing = true;
+  // `summary.html#t=4.2` opens the replay paused at 4.2 s (a moment to point someone at).
+  const startAt = /(?:^#|&)t=([0-9.]+)/.exec(window.location.hash);
+  let playing = !startAt;
   let frames = 0;
 
   // How many distinct colours the last frame shows on a 16 x 16 grid: a blank canvas has
@@ -90,17 +92,17 @@ function start() {
   }
 
   function frame(object) {
-    // Frame the robot, the human and the clutter (the room is far larger). three.js turns
-    // the '/' of node names into '_'.
+    // Frame the robot and the human (the room is far larger). three.js drops the '/' of
+    // node names ("robot/link1" becomes "robotlink1").
     const box = new THREE.Box3();
     object.traverse((node) => {
-      if (/^(robot[/_]|human[/_]|clutter_)/.test(node.name)) box.expandByObject(node);
+      if (/^(robot|human)/.test(node.name)) box.expandByObject(node);
     });
     if (box.isEmpty()) box.setFromObject(object);
     const centre = box.getCenter(new THREE.Vector3());
     const size = box.getSize(new THREE.Vector3()).length();
     // From the open side of the room: the walls stand at the cell's -x and -y (glTF's +z).
-    camera.position.copy(centre).add(new THREE.Vector3(0.8, 0.55, -0.8).multiplyScalar(size));
+    camera.position.copy(centre).add(new THREE.Vector3(0.75, 0.5, -0.75).multiplyScalar(size));
     controls.target.copy(centre);
     controls.update();
   }
@@ -119,6 +121,8 @@ function start() {
       }
       current = { gltf, mixer, duration };
       slider.max = String(duration);
+      if (startAt) mixer.setTime(Math.min(Number(startAt[1]), duration));
+      play.textContent = playing ? 'pause' : 'play';
       frame(gltf.scene);
     }, (e) => { errors.push(String(e && e.message ? e.message : e)); report('error', 'the replay did not load'); });
   }

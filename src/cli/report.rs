@@ -84,6 +84,8 @@ pub struct SweepArgs {
 /// One point of a sweep, as its table row shows it.
 struct PointRow {
     name: String,
+    /// The point's summary.html, relative to the sweep's output when inside it.
+    page: String,
     settings: String,
     a: Aggregate,
     d_min_m: f64,
@@ -114,7 +116,14 @@ pub fn sweep_table(args: &SweepArgs) -> Result<ExitCode> {
             settings.push(format!("perception {p}"));
         }
         settings.extend(s.overrides.iter().cloned());
+        let page = dir.join("summary.html");
+        let page = page
+            .strip_prefix(&args.out)
+            .unwrap_or(&page)
+            .display()
+            .to_string();
         rows.push(PointRow {
+            page,
             name: dir.file_name().map_or_else(
                 || dir.display().to_string(),
                 |n| n.to_string_lossy().into_owned(),
@@ -126,7 +135,7 @@ pub fn sweep_table(args: &SweepArgs) -> Result<ExitCode> {
     }
     let out = super::OutputDir::create(&args.out, args.force, &SWEEP_OUTPUTS)?;
     let mut md = String::from(
-        "# Sweep\n\n| point | settings | episodes | with violation | violations | min separation (m) | d_min (m) | contacts moving / standing | finished | task time / unfiltered |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Sweep\n\n| point | settings | report | episodes | with violation | violations | min separation (m) | d_min (m) | contacts moving / standing | finished | task time / unfiltered |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut csv = String::from(
         "point,settings,episodes,episodes_with_violation,violations,min_separation_m,d_min_m,contacts_moving,contacts_standing,finished,task_ratio\n",
@@ -134,9 +143,10 @@ pub fn sweep_table(args: &SweepArgs) -> Result<ExitCode> {
     for r in &rows {
         let a = &r.a;
         md.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {:.4} | {:.3} | {} / {} | {}/{} | {} |\n",
+            "| {} | {} | [summary.html]({}) | {} | {} | {} | {:.4} | {:.3} | {} / {} | {}/{} | {} |\n",
             r.name,
             r.settings,
+            r.page,
             a.episodes,
             a.episodes_with_violation,
             a.violations,

@@ -29,6 +29,11 @@ pub const PAIR_NODES: [(&str, [f32; 4]); 3] = [
     ("closest pair: within 0.1 m of d_min", [0.95, 0.6, 0.0, 1.0]),
     ("closest pair: clear", [0.1, 0.7, 0.2, 1.0]),
 ];
+/// The marker on the closest pair's human point (a sphere, visible with its line: a line is
+/// one pixel wide and vanishes at contact), per margin class: `PAIR_NODES`' name + this.
+pub const MARKER_SUFFIX: &str = " (human point)";
+/// Radius of the marker, m.
+const MARKER_RADIUS_M: f64 = 0.04;
 /// Margin to d_min below which the pair's line turns from green to amber, m.
 pub const AMBER_MARGIN_M: f64 = 0.1;
 /// Depth of the drawn camera frusta, m.
@@ -179,6 +184,34 @@ pub fn episode_glb(
         glb.animate(node, "translation", times, &tr, "STEP");
         glb.animate(node, "rotation", times, &rot, "STEP");
         glb.animate(node, "scale", times, &sc, "STEP");
+        // The marker at the human point, shown with the line.
+        let [r, g, b, _] = *rgba;
+        let sphere = RenderMesh::capsule(MARKER_RADIUS_M, 0.0, [r, g, b]);
+        let marker_name = format!("{pair_name}{MARKER_SUFFIX}");
+        let Some(mesh) = add_render_mesh(&mut glb, &marker_name, &sphere) else {
+            continue;
+        };
+        let marker = glb.node(
+            &marker_name,
+            json!({"mesh": mesh, "scale": [0.0, 0.0, 0.0]}),
+            false,
+        );
+        children.push(marker);
+        let (mut tr, mut sc) = (Vec::new(), Vec::new());
+        for pair in &recording.closest {
+            match pair {
+                Some((_, b, d)) if pair_class(*d, d_min_m) == class => {
+                    tr.extend(b.map(|x| x as f32));
+                    sc.extend([1.0; 3]);
+                }
+                _ => {
+                    tr.extend([0.0; 3]);
+                    sc.extend([0.0; 3]);
+                }
+            }
+        }
+        glb.animate(marker, "translation", times, &tr, "STEP");
+        glb.animate(marker, "scale", times, &sc, "STEP");
     }
 
     // Cameras: a glTF camera looks along its -z with +y up; the project's camera frame C
