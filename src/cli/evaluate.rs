@@ -116,6 +116,7 @@ pub const VIEWER_JS: &str = "viewer.js";
 /// `scripts/fetch-viewer.sh` puts it; `None` when neither is a file.
 fn viewer_bundle() -> Option<PathBuf> {
     std::env::var_os("WORKCELL_VIEWER_JS")
+        .filter(|v| !v.is_empty())
         .map(PathBuf::from)
         .or_else(|| {
             std::env::var_os("HOME")
