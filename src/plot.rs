@@ -118,7 +118,10 @@ pub fn svg_panels(x: &[f64], x_label: &str, panels: &[Panel]) -> String {
 /// A labelled point of [`svg_scatter`].
 #[derive(Debug, Clone)]
 pub struct Labelled {
+    /// A short name drawn beside the point.
     pub label: String,
+    /// What the point is, listed under the plot (`label: detail`).
+    pub detail: String,
     pub x: f64,
     pub y: f64,
 }
@@ -127,8 +130,10 @@ pub struct Labelled {
 /// document. Non-finite points are listed under the plot instead of drawn.
 #[must_use]
 pub fn svg_scatter(title: &str, x_label: &str, y_label: &str, points: &[Labelled]) -> String {
-    let (width, height, left, right, top, bottom) = (760.0, 520.0, 80.0, 30.0, 40.0, 70.0);
-    let (plot_w, plot_h) = (width - left - right, height - top - bottom);
+    let (width, left, right, top, bottom) = (900.0, 80.0, 30.0, 40.0, 70.0);
+    let plot_h = 380.0;
+    let plot_w = width - left - right;
+    let height = top + plot_h + bottom + 16.0 * points.len() as f64 + 10.0;
     // A margin around the points, not below zero when no value is (counts, percentages).
     let pad = |(lo, hi): (f64, f64)| {
         let m = 0.08 * (hi - lo);
@@ -183,31 +188,55 @@ pub fn svg_scatter(title: &str, x_label: &str, y_label: &str, points: &[Labelled
         top + plot_h / 2.0,
         escape(y_label)
     );
+    // Points at the same place share one label.
     let mut missing = Vec::new();
+    let mut drawn: Vec<((u64, u64), Vec<&str>, &str)> = Vec::new();
     for (i, p) in points.iter().enumerate() {
         if !(p.x.is_finite() && p.y.is_finite()) {
             missing.push(p.label.as_str());
             continue;
         }
-        let color = COLORS[i % COLORS.len()];
-        let (cx, cy) = (sx(p.x), sy(p.y));
+        let key = (p.x.to_bits(), p.y.to_bits());
+        match drawn.iter_mut().find(|(k, _, _)| *k == key) {
+            Some((_, labels, _)) => labels.push(&p.label),
+            None => drawn.push((key, vec![&p.label], COLORS[i % COLORS.len()])),
+        }
+    }
+    for ((x, y), labels, color) in &drawn {
+        let (cx, cy) = (sx(f64::from_bits(*x)), sy(f64::from_bits(*y)));
         let _ = writeln!(
             svg,
             r#"<circle cx="{cx:.1}" cy="{cy:.1}" r="5" fill="{color}"/>"#
         );
+        // Labels right of the point, or left of it near the right edge.
+        let (lx, anchor) = if cx > left + 0.75 * plot_w {
+            (cx - 8.0, "end")
+        } else {
+            (cx + 8.0, "start")
+        };
         let _ = writeln!(
             svg,
-            r#"<text x="{:.1}" y="{:.1}">{}</text>"#,
-            cx + 8.0,
+            r#"<text x="{lx:.1}" y="{:.1}" text-anchor="{anchor}">{}</text>"#,
             cy - 6.0,
-            escape(&p.label)
+            escape(&labels.join(", "))
+        );
+    }
+    let legend_top = top + plot_h + 56.0;
+    for (k, p) in points.iter().enumerate() {
+        let _ = writeln!(
+            svg,
+            r#"<text x="{left}" y="{:.1}" font-size="11">{}: {}</text>"#,
+            legend_top + 16.0 * k as f64,
+            escape(&p.label),
+            escape(&p.detail)
         );
     }
     if !missing.is_empty() {
         let _ = writeln!(
             svg,
-            r#"<text x="{left}" y="{}">not drawn (no value): {}</text>"#,
-            height - 10.0,
+            r#"<text x="{}" y="{}" text-anchor="end">not drawn (no value): {}</text>"#,
+            width - right,
+            top - 12.0,
             escape(&missing.join(", "))
         );
     }
@@ -263,23 +292,34 @@ mod tests {
         let points = [
             Labelled {
                 label: "p1".into(),
+                detail: "qp".into(),
                 x: 1.0,
                 y: 0.0,
             },
             Labelled {
                 label: "p2 <fast>".into(),
+                detail: "ssm".into(),
                 x: 1.2,
                 y: 3.0,
             },
             Labelled {
                 label: "p3".into(),
+                detail: "none".into(),
                 x: f64::NAN,
                 y: 1.0,
             },
+            Labelled {
+                label: "p4".into(),
+                detail: "ssm, gamma 8".into(),
+                x: 1.2,
+                y: 3.0,
+            },
         ];
         let svg = svg_scatter("trade-off", "task time", "violations", &points);
+        // p2 and p4 coincide: one point, one label naming both.
         assert_eq!(svg.matches("<circle").count(), 2);
-        assert!(svg.contains("p2 &lt;fast&gt;"));
+        assert!(svg.contains(">p2 &lt;fast&gt;, p4</text>"), "{svg}");
+        assert!(svg.contains("p4: ssm, gamma 8"));
         assert!(svg.contains("not drawn (no value): p3"));
         assert!(!svg.contains("NaN"));
     }

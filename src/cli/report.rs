@@ -185,7 +185,8 @@ pub fn sweep_table(args: &SweepArgs) -> Result<ExitCode> {
     let points: Vec<Labelled> = rows
         .iter()
         .map(|r| Labelled {
-            label: format!("{}: {}", r.name, r.settings),
+            label: r.name.clone(),
+            detail: r.settings.clone(),
             x: r.a.mean_task_ratio,
             y: 100.0 * r.a.episodes_with_violation as f64 / r.a.episodes.max(1) as f64,
         })
