@@ -72,6 +72,7 @@ function start() {
   const startAt = /(?:^#|&)t=([0-9.]+)/.exec(window.location.hash);
   let playing = !startAt;
   let frames = 0;
+  let played = 0;
 
   // How many distinct colours the last frame shows on a 16 x 16 grid: a blank canvas has
   // one. The CI check reads it from #replay-status's data-colours.
@@ -148,9 +149,17 @@ function start() {
     const dt = clock.getDelta();
     if (current) {
       if (playing) {
-        current.mixer.update(dt * Number(speed.value || 1));
-        if (current.mixer.time > current.duration) current.mixer.setTime(0);
+        const step = dt * Number(speed.value || 1);
+        current.mixer.update(step);
+        played += step;
+        // Loop: back to the start, keeping the overshoot.
+        if (current.mixer.time > current.duration && current.duration > 0) {
+          current.mixer.setTime(current.mixer.time % current.duration);
+        }
       }
+      // Seconds of episode played since the page opened (the replay loops, so its time
+      // alone does not tell whether it plays).
+      status.dataset.played = played.toFixed(3);
       const t = current.mixer.time;
       slider.value = String(t);
       status.dataset.time = t.toFixed(3);
