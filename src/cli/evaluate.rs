@@ -388,11 +388,26 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         traces: kept,
         replays,
     };
+    finish_report(out, &record, &args.out, args.fail_on_violation)
+}
+
+/// Writes the report of `record` into the staged `out` (whose final place is `out_path`),
+/// moves it into place, prints the headline, and gives the exit status: 2 for a violation
+/// when `fail_on_violation`.
+///
+/// # Errors
+/// As [`write_report`], and a failed move into place.
+pub fn finish_report(
+    out: super::OutputDir,
+    record: &RunRecord,
+    out_path: &Path,
+    fail_on_violation: bool,
+) -> Result<ExitCode> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    write_report(out.path(), &record, &command, &args.out)?;
+    write_report(out.path(), record, &command, out_path)?;
     out.commit()?;
-    let violating = announce(&record, &args.out);
-    if args.fail_on_violation && violating > 0 {
+    let violating = announce(record, out_path);
+    if fail_on_violation && violating > 0 {
         return Ok(ExitCode::from(2));
     }
     Ok(ExitCode::SUCCESS)

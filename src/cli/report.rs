@@ -5,10 +5,10 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use workcell::evaluate::record::{RunRecord, merge};
-use workcell::evaluate::report::Aggregate;
+use workcell::evaluate::report::{Aggregate, task_ratio};
 use workcell::plot::{Labelled, svg_scatter, svg_to_png};
 
-use super::evaluate::{OUTPUTS, announce, write_report};
+use super::evaluate::{OUTPUTS, finish_report};
 
 #[derive(Debug, clap::Args)]
 pub struct MergeArgs {
@@ -54,14 +54,7 @@ pub fn merge_shards(args: &MergeArgs) -> Result<ExitCode> {
         std::fs::copy(&from, &to)
             .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
     }
-    let command = std::env::args().collect::<Vec<_>>().join(" ");
-    write_report(out.path(), &record, &command, &args.out)?;
-    out.commit()?;
-    let violating = announce(&record, &args.out);
-    if args.fail_on_violation && violating > 0 {
-        return Ok(ExitCode::from(2));
-    }
-    Ok(ExitCode::SUCCESS)
+    finish_report(out, &record, &args.out, args.fail_on_violation)
 }
 
 /// Files `report sweep` writes.
@@ -156,11 +149,7 @@ pub fn sweep_table(args: &SweepArgs) -> Result<ExitCode> {
             a.contacts_standing,
             a.finished,
             a.episodes,
-            if a.mean_task_ratio.is_finite() {
-                format!("{:.3}", a.mean_task_ratio)
-            } else {
-                "- (none finished)".into()
-            }
+            task_ratio(a.mean_task_ratio, "")
         ));
         csv.push_str(&format!(
             "{},\"{}\",{},{},{},{:.6},{},{},{},{},{}\n",

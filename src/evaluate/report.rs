@@ -90,7 +90,8 @@ impl Aggregate {
 }
 
 /// The mean task-time ratio, or `-` when no episode finished (it is NaN then).
-fn task_ratio(ratio: f64, prefix: &str) -> String {
+#[must_use]
+pub fn task_ratio(ratio: f64, prefix: &str) -> String {
     if ratio.is_finite() {
         format!("{prefix}{ratio:.3}")
     } else {
