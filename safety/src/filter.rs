@@ -62,7 +62,10 @@ pub struct FilterConfig {
     /// When no command keeps every pair row (the human approaches faster than the arm can
     /// retreat), the filter takes the command that protects the closest pair most (farther
     /// pairs give way first) if it breaks the closest pair's row by at most this much, m/s
-    /// ([`FilterStatus::Relaxed`]); beyond, it brakes. Default 1.
+    /// ([`FilterStatus::Relaxed`]); beyond, it brakes. Default 3: the best retreat the
+    /// joints allow keeps more distance than stopping in the hand's path (docs/safety.md:
+    /// 1,000 episodes with the brake at 1 m/s and without it). A relaxation far beyond a
+    /// human's speed means the inputs are wrong, and the filter stops.
     pub max_relaxation_m_s: f64,
     /// Joint position limits become velocity bounds `gain (q_max - q)`, 1/s. Default 10.
     pub position_gain_per_s: f64,
@@ -87,6 +90,12 @@ pub struct FilterConfig {
     pub obstacle_clearance_m: f64,
     /// Obstacle boxes closer to a link than this get a row, m. Default 0.2.
     pub obstacle_detection_m: f64,
+    /// How fast a link may approach the furniture per metre of clearance left beyond
+    /// `obstacle_clearance_m`, 1/s. Default 25: a hand can pin the arm against a table, and
+    /// at the human pairs' gamma (4) a link 5 cm from the table could back toward it at only
+    /// 0.12 m/s; at 25 it can retreat at 0.75 m/s and still stops before the clearance (one
+    /// 4 ms tick covers a tenth of the gap).
+    pub obstacle_gamma_per_s: f64,
     /// Payload at the tool for the effective robot mass of power and force limiting
     /// (M/2 + payload), kg. Default 0.
     pub payload_kg: f64,
@@ -103,13 +112,14 @@ impl Default for FilterConfig {
             max_pairs: 32,
             acceleration_rad_s2: 8.0,
             bound_acceleration: false,
-            max_relaxation_m_s: 1.0,
+            max_relaxation_m_s: 3.0,
             position_gain_per_s: 10.0,
             pfl_distance_m: 0.3,
             pfl_deceleration_m_s2: 2.5,
             escape_horizon_s: 0.0,
             obstacle_clearance_m: 0.02,
             obstacle_detection_m: 0.2,
+            obstacle_gamma_per_s: 25.0,
             payload_kg: 0.0,
             ssm: SsmConfig::default(),
         }
@@ -140,6 +150,7 @@ impl FilterConfig {
         positive("safety.acceleration_rad_s2", self.acceleration_rad_s2)?;
         positive("safety.position_gain_per_s", self.position_gain_per_s)?;
         positive("safety.pfl_deceleration_m_s2", self.pfl_deceleration_m_s2)?;
+        positive("safety.obstacle_gamma_per_s", self.obstacle_gamma_per_s)?;
         for (key, v) in [
             ("safety.pfl_distance_m", self.pfl_distance_m),
             ("safety.payload_kg", self.payload_kg),
@@ -517,7 +528,7 @@ impl SafetyFilter {
                     &self.obstacles,
                     self.config.obstacle_detection_m,
                     self.config.obstacle_clearance_m,
-                    self.config.gamma_per_s,
+                    self.config.obstacle_gamma_per_s,
                     &mut self.pairs,
                 );
                 // The planned motion keeps its own clearance (from the exact links, which

@@ -414,7 +414,7 @@ fn barrier_counts_the_growth_of_the_uncertainty() {
 
 /// A hand closing in on the tool from +x and a wall just behind it (-x): without the wall
 /// the filter retreats straight into it; told about it, no link approaches the wall faster
-/// than its row allows (gamma (d - clearance), the nominal command standing still).
+/// than its row allows (obstacle gamma (d - clearance), the nominal command standing still).
 #[test]
 fn evading_the_human_does_not_push_the_arm_into_an_obstacle() {
     let robot = iiwa();
@@ -441,7 +441,11 @@ fn evading_the_human_does_not_push_the_arm_into_an_obstacle() {
         Pose::from_translation(p_tool - Vector::new(0.25, 0.0, 0.0)),
         [0.05, 0.5, 0.5],
     );
-    let config = FilterConfig::default();
+    // A slow wall barrier, so that the unaware filter's retreat breaks it clearly.
+    let config = FilterConfig {
+        obstacle_gamma_per_s: 4.0,
+        ..FilterConfig::default()
+    };
     let approach_to_wall = |with_wall: bool| {
         let mut filter = SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config.clone())
             .expect("filter");
@@ -465,8 +469,8 @@ fn evading_the_human_does_not_push_the_arm_into_an_obstacle() {
             .iter()
             .filter(|c| c.obstacle)
             .map(|c| {
-                let bound =
-                    config.gamma_per_s * (c.pair.distance_m - config.obstacle_clearance_m).max(0.0);
+                let bound = config.obstacle_gamma_per_s
+                    * (c.pair.distance_m - config.obstacle_clearance_m).max(0.0);
                 c.approach_m_s(filter.command()) - bound
             })
             .fold(f64::NEG_INFINITY, f64::max)
@@ -717,6 +721,13 @@ fn invalid_configurations_are_refused_with_the_key() {
                 ..FilterConfig::default()
             },
             "safety.max_pairs",
+        ),
+        (
+            FilterConfig {
+                obstacle_gamma_per_s: 0.0,
+                ..FilterConfig::default()
+            },
+            "safety.obstacle_gamma_per_s",
         ),
         // Each key alone is in range, together they contradict: pairs would enter the filter
         // only inside d_min (this passed and gave violations).
