@@ -91,9 +91,9 @@ pub struct FilterConfig {
     /// Obstacle boxes closer to a link than this get a row, m. Default 0.2.
     pub obstacle_detection_m: f64,
     /// How fast a link may approach the furniture per metre of clearance left beyond
-    /// `obstacle_clearance_m`, 1/s. Default 25: a hand can pin the arm against a table, and
-    /// at the human pairs' gamma (4) a link 5 cm from the table could back toward it at only
-    /// 0.12 m/s; at 25 it can retreat at 0.75 m/s and still stops before the clearance (one
+    /// `obstacle_clearance_m`, 1/s. Default 25: a hand can pin the arm against a box, and at
+    /// the human pairs' gamma (4) a link 6 cm from the box could back toward it at only
+    /// 0.16 m/s; at 25 it can retreat at 1 m/s and still stops before the clearance (one
     /// 4 ms tick covers a tenth of the gap).
     pub obstacle_gamma_per_s: f64,
     /// Payload at the tool for the effective robot mass of power and force limiting
