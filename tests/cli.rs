@@ -832,6 +832,10 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         &format!("{cell_line}control_period_s = 1e6\n"),
         "control_period_s: 1000000 is above the limit of 0.1",
     );
+    bad(
+        &format!("{cell_line}command_lead_rad = 0.0\n"),
+        "command_lead_rad: must be > 0",
+    );
     // Each key in range, together contradictory: pairs would enter the filter inside d_min.
     bad(
         &format!("{cell_line}[safety]\ndetection_m = 0.01\nd_min_m = 0.1\n"),

@@ -319,6 +319,12 @@ impl CellState {
     pub fn qd(&self) -> &[f64] {
         &self.qd
     }
+    /// The position servos' reference: where the servo's rate- and acceleration-limited
+    /// chase of the last position command has got to (equal to `q` after a velocity command).
+    #[must_use]
+    pub fn reference_q(&self) -> &[f64] {
+        &self.reference_q
+    }
     /// Human joint positions.
     #[must_use]
     pub fn human_q(&self) -> &[f64] {

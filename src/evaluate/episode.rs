@@ -114,6 +114,7 @@ fn run(
             }
             break;
         }
+        run.bound_command_lead();
         let rate = run.nominal();
         run.perceive_and_filter(t, dt);
         run.advance(substeps, dt_physics)?;
@@ -368,6 +369,19 @@ impl<'a> Run<'a> {
         }
         self.trace.separation_m.push(d);
         Ok(())
+    }
+
+    /// Anti-windup: the position command may lead the servos' reference by at most
+    /// `command_lead_rad` per joint. Integrated open-loop, the command ran ahead while the
+    /// servo's acceleration limit held the reference back (a sudden evasion), and the servo
+    /// then caught up at up to `sqrt(2 a e)` beyond anything the filter commanded: the
+    /// forearm and hand limits of power and force limiting were exceeded that way in 5 of
+    /// 1,000 episodes (docs/safety.md, "Peak approach per body region").
+    fn bound_command_lead(&mut self) {
+        let e_max = self.c.command_lead_rad;
+        for (q_cmd, r) in self.q_cmd.iter_mut().zip(self.state.reference_q()) {
+            *q_cmd = r + (*q_cmd - r).clamp(-e_max, e_max);
+        }
     }
 
     /// The nominal controller: tracks the task trajectory at the progress variable, which

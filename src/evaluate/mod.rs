@@ -55,6 +55,14 @@ pub struct EvaluationConfig {
     pub tracking_gain_per_s: f64,
     /// The task pauses while the tracking error exceeds this, rad. Default 0.05.
     pub progress_tolerance_rad: f64,
+    /// How far the position command may run ahead of the servos' reference, rad (anti-windup).
+    /// The controller integrates the filtered velocity into the position command; when the
+    /// servo's acceleration limit holds its reference back (a sudden evasion), an unbounded
+    /// command runs ahead, and the servo later catches up at up to `sqrt(2 a e)` beyond any
+    /// velocity the filter commanded. Default 0.002: in free motion the reference trails the
+    /// command by under 1 mrad, and a 2 mrad lead is caught up at 0.2 rad/s at most (10
+    /// rad/s^2). `inf` turns the bound off.
+    pub command_lead_rad: f64,
     /// "Near the human" for the peak speed metric: true separation below this, m. Default 0.3.
     pub near_m: f64,
     pub perception: PerceptionConfig,
@@ -71,6 +79,7 @@ impl Default for EvaluationConfig {
             control_period_s: 0.004,
             tracking_gain_per_s: 5.0,
             progress_tolerance_rad: 0.05,
+            command_lead_rad: 0.002,
             near_m: 0.3,
             perception: PerceptionConfig::default(),
             safety: FilterConfig::default(),
@@ -183,6 +192,12 @@ impl Evaluation {
         }
         positive("tracking_gain_per_s", c.tracking_gain_per_s)?;
         positive("progress_tolerance_rad", c.progress_tolerance_rad)?;
+        if c.command_lead_rad.is_nan() || c.command_lead_rad <= 0.0 {
+            return Err(Error::config(
+                "command_lead_rad",
+                format!("must be > 0 (inf: no bound), got {}", c.command_lead_rad),
+            ));
+        }
         positive("near_m", c.near_m)?;
         if !(c.timeout_factor.is_finite() && c.timeout_factor >= 1.0) {
             return Err(Error::config(
