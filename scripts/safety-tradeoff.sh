@@ -14,8 +14,8 @@ out="${2:-out/tradeoff}"
 bin=target/release/workcell
 cargo build --release --locked --quiet
 mkdir -p "$out"
-echo "| d_min (m) | gamma (1/s) | detection (m) | episodes | min separation (m) | episodes with violation | task time / unfiltered |"
-echo "|---|---|---|---|---|---|---|"
+echo "| d_min (m) | gamma (1/s) | detection (m) | episodes | min separation (m) | episodes with violation | task time / unfiltered | peak approach, upper arm / forearm / hand (m/s) |"
+echo "|---|---|---|---|---|---|---|---|"
 for d_min in 0.05 0.10 0.15; do
     for gamma in 2 4 8; do
         detection=$(python3 -c "print(round(max(0.6, $d_min + 2 / $gamma + 0.05), 3))")
@@ -29,11 +29,14 @@ for d_min in 0.05 0.10 0.15; do
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 ratios = [float(r["task_ratio"]) for r in rows if r["task_ratio"]]
-print("| {} | {} | {} | {} | {:.4f} | {} | {:.3f} |".format(
+peaks = " / ".join(
+    "{:.2f}".format(max(float(r["peak_approach_" + part + "_m_s"]) for r in rows))
+    for part in ("upper_arm", "forearm", "hand"))
+print("| {} | {} | {} | {} | {:.4f} | {} | {:.3f} | {} |".format(
     sys.argv[2], sys.argv[3], sys.argv[4], len(rows),
     min(float(r["min_separation_m"]) for r in rows),
     sum(1 for r in rows if int(r["violations"]) > 0),
-    sum(ratios) / len(ratios) if ratios else float("nan")))
+    sum(ratios) / len(ratios) if ratios else float("nan"), peaks))
 PY
     done
 done

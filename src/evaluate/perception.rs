@@ -58,7 +58,9 @@ pub struct PerceptionConfig {
     /// Bound on the human's acceleration used to grow the uncertainty of an ageing estimate,
     /// m/s^2. Default 10.
     pub human_acceleration_m_s2: f64,
-    /// The reported uncertainty covers this many standard deviations. Default 4.
+    /// Confidence of the reported uncertainty, in standard deviations of a 1-D Gaussian:
+    /// each end point's 3-D error stays within the bound as often as a 1-D error stays
+    /// within this many sigmas (4: all but 6.3e-5). Default 4.
     pub confidence_sigmas: f64,
 }
 
@@ -116,6 +118,21 @@ impl PerceptionConfig {
         let hold_s = self.latency_s + 1.0 / self.rate_hz;
         let age = age_s.max(hold_s);
         base_m + drift_m_s * age + 0.5 * self.human_acceleration_m_s2 * age * age
+    }
+
+    /// The noisy camera's uncertainty `age_s` after exposure, m: the radius that an end
+    /// point's 3-D error (position noise plus velocity noise times the age, independent
+    /// Gaussians, so sigma = sqrt(sigma_p^2 + (sigma_v age)^2) per axis) exceeds with the
+    /// probability of a 1-D Gaussian beyond `confidence_sigmas`
+    /// ([`sphere_radius_for_sigmas`]), plus the human's acceleration over the age; held until
+    /// the next frame is due as in [`PerceptionConfig::aged_uncertainty`].
+    #[must_use]
+    pub fn noisy_camera_uncertainty(&self, age_s: f64) -> f64 {
+        let hold_s = self.latency_s + 1.0 / self.rate_hz;
+        let age = age_s.max(hold_s);
+        let sigma = self.position_noise_m.hypot(self.velocity_noise_m_s * age);
+        sphere_radius_for_sigmas(self.confidence_sigmas) * sigma
+            + 0.5 * self.human_acceleration_m_s2 * age * age
     }
 
     /// Checks ranges; the error names the key.
@@ -217,12 +234,41 @@ impl HumanPerception for GroundTruth {
     }
 }
 
+/// The radius, in sigmas, that a 3-D isotropic Gaussian error (sigma 1 per axis) exceeds
+/// exactly as often as a 1-D Gaussian error exceeds `k` sigmas: the `x` with
+/// `P(chi_3 > x) = erfc(k / sqrt 2)`, where `P(chi_3 > x) = erfc(x / sqrt 2) + sqrt(2 / pi) x
+/// exp(-x^2 / 2)`. 4.69 for k = 4, against the 6.93 of `k sqrt 3` (the bound of a box of
+/// k sigmas per axis, which is exceeded 1e-6 times as often). 0 for k <= 0.
+#[must_use]
+pub fn sphere_radius_for_sigmas(k: f64) -> f64 {
+    if !(k > 0.0) {
+        return 0.0;
+    }
+    let tail = |x: f64| {
+        libm::erfc(x / std::f64::consts::SQRT_2)
+            + (2.0 / std::f64::consts::PI).sqrt() * x * (-0.5 * x * x).exp()
+    };
+    let target = libm::erfc(k / std::f64::consts::SQRT_2);
+    // The tail falls monotonically from 1 at 0; it is below the target at k sqrt 3 + 1.
+    let (mut lo, mut hi) = (k, k * 3f64.sqrt() + 1.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if tail(mid) > target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
 /// A camera at `rate_hz` whose frames are lost with probability `dropout` and whose
 /// estimates (true pose plus Gaussian noise) arrive `latency_s` after exposure. Between
 /// frames the last estimate is extrapolated with its velocity; its uncertainty is
-/// `k sigma_p + k sigma_v age + a_max age^2 / 2` (k = `confidence_sigmas`, per axis sigmas
-/// scaled by sqrt 3 for the 3-D norm) held at the oldest age before the next frame is due
-/// ([`PerceptionConfig::aged_uncertainty`]).
+/// `r(k) sqrt(sigma_p^2 + (sigma_v age)^2) + a_max age^2 / 2` (r(k): the 3-D radius as
+/// rarely exceeded as `confidence_sigmas` in 1-D, [`sphere_radius_for_sigmas`]) held at the
+/// oldest age before the next frame is due
+/// ([`PerceptionConfig::noisy_camera_uncertainty`]).
 #[derive(Debug, Clone)]
 pub struct NoisyCamera {
     config: PerceptionConfig,
@@ -306,12 +352,7 @@ impl HumanPerception for NoisyCamera {
             return; // nothing yet: the filter brakes
         };
         let age = (t - t0).max(0.0);
-        let k = self.config.confidence_sigmas * 3f64.sqrt();
-        out.uncertainty_m = self.config.aged_uncertainty(
-            k * self.config.position_noise_m,
-            k * self.config.velocity_noise_m_s,
-            age,
-        );
+        out.uncertainty_m = self.config.noisy_camera_uncertainty(age);
         out.uncertainty_rate_m_s = 0.0;
         out.parts
             .extend(measured.parts.iter().map(|p| PartEstimate {
@@ -322,5 +363,65 @@ impl HumanPerception for NoisyCamera {
                 ),
                 ..*p
             }));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Reference: the chi distribution with 3 degrees of freedom, solved for
+    /// `Q(3/2, x^2/2) = erfc(k / sqrt 2)` with mpmath 1.3.0 (regularized upper incomplete
+    /// gamma, 30 digits): an independent route from the closed form the code uses.
+    #[test]
+    fn the_sphere_radius_matches_the_chi_distribution() {
+        for (k, x) in [
+            (1.0, 1.877_961_762_193_714),
+            (2.0, 2.832_822_225_319_875),
+            (3.0, 3.762_500_977_956_908),
+            (4.0, 4.696_948_013_014_455),
+        ] {
+            let r = sphere_radius_for_sigmas(k);
+            assert!((r - x).abs() < 1e-9, "k {k}: {r} against {x}");
+            // Never below k itself; tighter than the box of k sigmas per axis from k = 2
+            // on (at k = 1 the box, 1.73, is exceeded more often than 1-D's 1 sigma).
+            assert!(r > k);
+            assert_eq!(r < k * 3f64.sqrt(), k >= 2.0);
+        }
+        assert_eq!(sphere_radius_for_sigmas(0.0), 0.0);
+        assert_eq!(sphere_radius_for_sigmas(f64::NAN), 0.0);
+    }
+
+    /// Sampled like the camera samples its errors (independent Gaussian position and velocity
+    /// noise per axis, the velocity's error carried over the age), the end points fall
+    /// outside the bound (less the human's acceleration, which the samples do not have) as
+    /// often as a 1-D Gaussian falls beyond k sigmas.
+    #[test]
+    fn the_camera_bound_is_exceeded_as_often_as_its_confidence_says() {
+        let config = PerceptionConfig {
+            confidence_sigmas: 2.0,
+            ..PerceptionConfig::default()
+        };
+        let age = 0.2;
+        let radius =
+            config.noisy_camera_uncertainty(age) - 0.5 * config.human_acceleration_m_s2 * age * age;
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let n = 400_000;
+        let outside = (0..n)
+            .filter(|_| {
+                let mut sq = 0.0;
+                for _ in 0..3 {
+                    let e = config.position_noise_m * gaussian(&mut rng)
+                        + config.velocity_noise_m_s * age * gaussian(&mut rng);
+                    sq += e * e;
+                }
+                sq.sqrt() > radius
+            })
+            .count();
+        let expected = libm::erfc(2.0 / std::f64::consts::SQRT_2); // 0.0455
+        let p = outside as f64 / n as f64;
+        // Four binomial standard errors (0.00033 each).
+        let se = (expected * (1.0 - expected) / n as f64).sqrt();
+        assert!((p - expected).abs() < 4.0 * se, "{p} against {expected}");
     }
 }
