@@ -241,7 +241,7 @@ impl HumanPerception for GroundTruth {
 /// k sigmas per axis, which is exceeded 1e-6 times as often). 0 for k <= 0.
 #[must_use]
 pub fn sphere_radius_for_sigmas(k: f64) -> f64 {
-    if !(k > 0.0) {
+    if k.is_nan() || k <= 0.0 {
         return 0.0;
     }
     let tail = |x: f64| {
