@@ -380,16 +380,26 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "window = 3\nlr = 1e-15\ninit_weights = \"run/procnet.safetensors\"\n",
         )
     };
-    std::fs::write(&second_cfg, second("[4, 4, 4]")).expect("second config");
+    let second_cycle = |config: String, out: &Path| {
+        std::fs::write(&second_cfg, config).expect("second config");
+        let cycle = workcell(&[
+            "train",
+            "--config",
+            second_cfg.to_str().expect("utf-8"),
+            "--out",
+            out.to_str().expect("utf-8"),
+        ]);
+        assert!(cycle.status.success(), "{}", text(&cycle.stderr));
+    };
     let second_out = tmp.path().join("second");
-    let cycle = workcell(&[
-        "train",
-        "--config",
-        second_cfg.to_str().expect("utf-8"),
-        "--out",
-        second_out.to_str().expect("utf-8"),
-    ]);
-    assert!(cycle.status.success(), "{}", text(&cycle.stderr));
+    second_cycle(second("[4, 4, 4]"), &second_out);
+    // No parameter depends on the input size, so a cycle on larger frames (32x32 instead of
+    // 16x16: progressive resizing) starts from the same weights.
+    let larger_out = tmp.path().join("larger");
+    second_cycle(
+        second("[4, 4, 4]").replace("input_size = 16", "input_size = 32"),
+        &larger_out,
+    );
     // Every tensor is f32, in the same order in both files (one configuration).
     let tensors = |path: &Path| -> Vec<f32> {
         let bytes = std::fs::read(path).expect("weights");
@@ -399,20 +409,21 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
             .collect()
     };
-    let (first_w, second_w) = (
-        tensors(&out.join("procnet.safetensors")),
-        tensors(&second_out.join("procnet.safetensors")),
-    );
-    assert_eq!(first_w.len(), second_w.len());
-    let moved = first_w
-        .iter()
-        .zip(&second_w)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0f32, f32::max);
-    assert!(
-        moved < 1e-12,
-        "the second cycle did not start from the first run's weights ({moved})"
-    );
+    let first_w = tensors(&out.join("procnet.safetensors"));
+    for run in [&second_out, &larger_out] {
+        let second_w = tensors(&run.join("procnet.safetensors"));
+        assert_eq!(first_w.len(), second_w.len());
+        let moved = first_w
+            .iter()
+            .zip(&second_w)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max);
+        assert!(
+            moved < 1e-12,
+            "{}: the second cycle did not start from the first run's weights ({moved})",
+            run.display()
+        );
+    }
     // Weights of another shape are refused before any data is loaded, naming what differs.
     std::fs::write(&second_cfg, second("[4, 4, 8]")).expect("second config");
     refused(

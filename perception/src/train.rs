@@ -136,9 +136,10 @@ pub struct TrainConfig {
     /// Validate on this many sequences of the validation split, taken in turn from each
     /// (distance, occlusion) cell so that every cell is represented (0: all of them).
     pub validation_sequences: usize,
-    /// Start from these weights (of the same `model` configuration) instead of the seed's
-    /// random ones: a second training cycle on top of a finished run. Relative to the config
-    /// file. A checkpoint in the run folder still wins (resuming).
+    /// Start from these weights (of the same `model` configuration, at any input size)
+    /// instead of the seed's random ones: a second training cycle on top of a finished run,
+    /// or full-size training on top of a run on smaller frames. Relative to the config file.
+    /// A checkpoint in the run folder still wins (resuming).
     pub init_weights: Option<PathBuf>,
     /// The network (starts from the `cpu` preset; override any key).
     pub model: ProcNetConfig,
@@ -588,7 +589,7 @@ impl Trainer {
 
         // A wrong starting point is refused before the split is loaded.
         if let Some(init) = &cfg.init_weights {
-            weights::check_config(init, &cfg.model)?;
+            weights::check_config_any_input_size(init, &cfg.model)?;
         }
         let dataset = Dataset::open(&cfg.dataset)?;
         let train = load_split(&dataset, Split::Train, &cfg.model)?;
@@ -651,7 +652,7 @@ impl Trainer {
                 .collect();
             tracing::info!(step = start, "resuming");
         } else if let Some(init) = &cfg.init_weights {
-            weights::load_checked(&mut model, &cfg.model, init)?;
+            weights::load_any_input_size(&mut model, &cfg.model, init)?;
             tracing::info!(weights = %init.display(), "starting from trained weights");
         }
         self.rewrite_metrics(&metrics)?;

@@ -192,7 +192,30 @@ pub fn load_checked(model: &mut ProcNetModel, expected: &ProcNetConfig, path: &P
 /// Reads only the configuration of a weight file and refuses one other than `expected`,
 /// naming what differs.
 pub fn check_config(path: &Path, expected: &ProcNetConfig) -> Result<()> {
-    let found = read_config(path)?;
+    compare_config(path, read_config(path)?, expected)
+}
+
+/// Like [`check_config`], but accepts weights of another input size: no parameter depends on
+/// it (every layer is convolutional), so a run can start from weights trained on smaller
+/// frames (progressive resizing).
+pub fn check_config_any_input_size(path: &Path, expected: &ProcNetConfig) -> Result<()> {
+    let mut found = read_config(path)?;
+    found.input_size = expected.input_size;
+    compare_config(path, found, expected)
+}
+
+/// Loads weights of `expected`'s configuration at any input size into `model` (see
+/// [`check_config_any_input_size`]).
+pub fn load_any_input_size(
+    model: &mut ProcNetModel,
+    expected: &ProcNetConfig,
+    path: &Path,
+) -> Result<()> {
+    check_config_any_input_size(path, expected)?;
+    load_into(model, path)
+}
+
+fn compare_config(path: &Path, found: ProcNetConfig, expected: &ProcNetConfig) -> Result<()> {
     if &found != expected {
         return Err(weights_error(
             path,
