@@ -400,7 +400,8 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         second("[4, 4, 4]").replace("input_size = 16", "input_size = 32"),
         &larger_out,
     );
-    // Every tensor is f32, in the same order in both files (one configuration).
+    // Every tensor is f32, in the same order in every file (one set of parameters: the input
+    // size changes none).
     let tensors = |path: &Path| -> Vec<f32> {
         let bytes = std::fs::read(path).expect("weights");
         let header = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;

@@ -652,7 +652,8 @@ impl Trainer {
                 .collect();
             tracing::info!(step = start, "resuming");
         } else if let Some(init) = &cfg.init_weights {
-            weights::load_any_input_size(&mut model, &cfg.model, init)?;
+            // Its configuration was checked above, before the split was loaded.
+            weights::load_into(&mut model, init)?;
             tracing::info!(weights = %init.display(), "starting from trained weights");
         }
         self.rewrite_metrics(&metrics)?;

@@ -204,17 +204,6 @@ pub fn check_config_any_input_size(path: &Path, expected: &ProcNetConfig) -> Res
     compare_config(path, found, expected)
 }
 
-/// Loads weights of `expected`'s configuration at any input size into `model` (see
-/// [`check_config_any_input_size`]).
-pub fn load_any_input_size(
-    model: &mut ProcNetModel,
-    expected: &ProcNetConfig,
-    path: &Path,
-) -> Result<()> {
-    check_config_any_input_size(path, expected)?;
-    load_into(model, path)
-}
-
 fn compare_config(path: &Path, found: ProcNetConfig, expected: &ProcNetConfig) -> Result<()> {
     if &found != expected {
         return Err(weights_error(
@@ -228,7 +217,8 @@ fn compare_config(path: &Path, found: ProcNetConfig, expected: &ProcNetConfig) -
     Ok(())
 }
 
-fn load_into(model: &mut ProcNetModel, path: &Path) -> Result<()> {
+/// Loads a file's tensors into `model` without checking its configuration (the caller has).
+pub(crate) fn load_into(model: &mut ProcNetModel, path: &Path) -> Result<()> {
     let mut store = SafetensorsStore::from_file(path);
     let result = model
         .load_from(&mut store)
