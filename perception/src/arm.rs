@@ -579,8 +579,8 @@ mod tests {
     }
 
     /// A network reads the frame's region of interest at its input size: the shipped
-    /// weights on a 640x480 frame see the reach sphere's square, resampled to 64x64, and the
-    /// mask comes back with that square's camera.
+    /// weights on a 640x480 frame see the reach sphere's square, resampled to their input, and
+    /// the mask comes back with that square's camera.
     #[test]
     fn the_network_reads_the_region_of_interest_at_its_input() {
         let arm = ArmModel::new(&human(), &Pose::IDENTITY).expect("arm");
