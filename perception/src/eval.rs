@@ -429,7 +429,8 @@ impl Evaluation {
         let _ = writeln!(
             md,
             "\nForearm by distance class (the paper's cameras) or camera of the cell, and occlusion level (ceiling: a perfect network's Dice \
-             loss at this input size, from the labels):\n\n\
+             loss at the dataset's stored size, from the labels; for a network of another input size it is \
+             the stored frames' ceiling, not its input's):\n\n\
              | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |\n\
              |---|---|---|---|---|---|---|---|---|"
         );
