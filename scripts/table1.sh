@@ -1,19 +1,42 @@
 #!/usr/bin/env bash
 # The paper's Table 1 at CPU scale on the default dataset: hGRU, ConvLSTM and conv cells, with
-# and without the prediction loss, and hGRU with the axonal delay; each trained by
-# configs/train.toml's recipe (seed, losses, schedule, channels) for the same STEPS steps
-# (default 1500), then evaluated on the test split. Writes out/table1/<variant>/ (a resumable
-# run folder each: stop any time, the same command goes on) and out/table1/table1.md.
+# and without the prediction loss, and hGRU with the axonal delay; each trained by the base
+# recipe (default configs/train-64.toml: seed, losses, schedule, channels, 64x64) for the same
+# STEPS steps (default: the recipe's), then evaluated on the test split. Writes
+# out/table1/<variant>/ (a resumable run folder each: stop any time, the same command goes
+# on) and out/table1/table1.md.
+#
 #   scripts/table1.sh [STEPS]        (needs out/dataset and a release build; tch recipe)
+#
+# WORKCELL_TABLE1_JOBS (default 2) variants train side by side at one thread each: on two
+# cores two one-thread runs of the 64x64 recipe make 1.14 times the steps of one two-thread
+# run (0.62 and 0.75 s a step for ProcNet and the baseline side by side, against 0.36 and 0.42
+# alone; docs/perception.md). WORKCELL_TABLE1_BASE picks another base recipe.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-STEPS="${1:-1500}"
+BASE="${WORKCELL_TABLE1_BASE:-configs/train-64.toml}"
+STEPS="${1:-$(sed -n 's/^steps = \([0-9]*\).*/\1/p' "$BASE")}"
+JOBS="${WORKCELL_TABLE1_JOBS:-2}"
 BIN="${WORKCELL_BIN:-target/release/workcell}"
 DATASET="${WORKCELL_DATASET:-out/dataset}"
 OUT=out/table1
 mkdir -p "$OUT"
 VARIANTS=(hgru:true:false hgru:false:false hgru:true:true convlstm:true:false convlstm:false:false
           conv:true:false conv:false:false)
+THREADS=$(( $(nproc) / JOBS )); [ "$THREADS" -ge 1 ] || THREADS=1
+
+run_variant() {
+    local name="$1" cfg="$2"
+    if [ ! -f "$OUT/$name/test.md" ]; then
+        "$BIN" train --config "$cfg" --out "$OUT/$name" > "$OUT/$name.log" 2>&1
+        "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" --dataset "$DATASET" \
+            --split test --backend "${WORKCELL_EVAL_BACKEND:-flex}" --threads "$THREADS" \
+            --out "$OUT/$name/test.md" > /dev/null
+    fi
+    echo "$name: $(tail -n 3 "$OUT/$name.log" | head -n 2 | tr '\n' ' ')"
+}
+
+running=0
 for v in "${VARIANTS[@]}"; do
     IFS=: read -r cell pred delay <<< "$v"
     name="${cell}-pred-${pred}-delay-${delay}"
@@ -22,13 +45,16 @@ for v in "${VARIANTS[@]}"; do
         -e "s/^prediction_loss = .*/prediction_loss = $pred/" \
         -e "s/^axonal_delay = .*/axonal_delay = $delay/" \
         -e "s|^dataset = .*|dataset = \"../../$DATASET\"|" \
-        -e "s/^steps = .*/steps = $STEPS/" configs/train.toml > "$cfg"
-    if [ ! -f "$OUT/$name/test.md" ]; then
-        "$BIN" train --config "$cfg" --out "$OUT/$name" | tail -3
-        "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" --dataset "$DATASET" \
-            --split test --backend "${WORKCELL_EVAL_BACKEND:-flex}" --out "$OUT/$name/test.md" > /dev/null
+        -e "s/^threads = .*/threads = $THREADS/" \
+        -e "s/^steps = .*/steps = $STEPS/" "$BASE" > "$cfg"
+    run_variant "$name" "$cfg" &
+    running=$((running + 1))
+    if [ "$running" -ge "$JOBS" ]; then
+        wait -n
+        running=$((running - 1))
     fi
 done
+wait
 # Columns of a row of `eval segmentation`'s forearm table:
 # | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |
 col() { grep -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }

@@ -583,20 +583,20 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
 
     // The feed-forward baseline: the same command and recipe with --model baseline, its own
-    // weight file, named as the PoseCNN stand-in in every table.
+    // weight file, named as the PoseCNN stand-in in every table. Two steps of it into `out`,
+    // with `extra` arguments:
+    let train_baseline = |out: &Path, extra: &[&str]| {
+        let out_s = out.to_str().expect("utf-8");
+        let mut args = vec![
+            "train", "--config", cfg_s, "--model", "baseline", "--steps", "2", "--out", out_s,
+        ];
+        args.extend_from_slice(extra);
+        let run = workcell(&args);
+        assert!(run.status.success(), "{}", text(&run.stderr));
+        run
+    };
     let base_out = tmp.path().join("run-baseline");
-    let base = workcell(&[
-        "train",
-        "--config",
-        cfg_s,
-        "--model",
-        "baseline",
-        "--steps",
-        "2",
-        "--out",
-        base_out.to_str().expect("utf-8"),
-    ]);
-    assert!(base.status.success(), "{}", text(&base.stderr));
+    let base = train_baseline(&base_out, &[]);
     assert!(
         text(&base.stdout).contains("feed-forward baseline (PoseCNN stand-in)"),
         "{}",
@@ -604,6 +604,17 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
     let base_weights = base_out.join("baseline.safetensors");
     assert!(base_weights.exists() && !base_out.join("procnet.safetensors").exists());
+    // A second seed of the same recipe: --seed overrides the configuration's, and the run
+    // folder's train.toml (what a resume compares against) records it.
+    let seed_out = tmp.path().join("run-seed-7");
+    train_baseline(&seed_out, &["--seed", "7"]);
+    let recorded = std::fs::read_to_string(seed_out.join("train.toml")).expect("train.toml");
+    assert!(recorded.contains("seed = 7"), "{recorded}");
+    assert_ne!(
+        std::fs::read(&base_weights).expect("seed 1 weights"),
+        std::fs::read(seed_out.join("baseline.safetensors")).expect("seed 7 weights"),
+        "another seed, other weights"
+    );
     refused(
         &[
             "train", "--config", cfg_s, "--model", "posecnn", "--out", out_s,

@@ -281,8 +281,8 @@ fn flex_and_the_gpu_give_the_same_masks() {
 /// The shipped weights (ProcNet, flesh at 128x128 and 64x64 and skeletal, and its feed-forward
 /// baseline) load, are of the configuration their recipe trains (ProcNet:
 /// `configs/train-progressive.toml`, `configs/train-64.toml` and `configs/train-skeletal.toml`;
-/// the baseline, not yet retrained on the new frames: `configs/train-v1.toml` with `--model
-/// baseline`), stay within the 20 MB budget together, and run.
+/// the baseline: `configs/train-64.toml` with `--model baseline`), stay within the 20 MB
+/// budget together, and run.
 #[test]
 fn the_shipped_weights_load_and_match_their_recipe() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -295,8 +295,8 @@ fn the_shipped_weights_load_and_match_their_recipe() {
         ("procnet-cpu-64", recipe("train-64.toml").model),
         ("procnet-skeletal", recipe("train-skeletal.toml").model),
         (
-            "baseline-cpu",
-            recipe("train-v1.toml").model.feed_forward_baseline(),
+            "baseline-cpu-64",
+            recipe("train-64.toml").model.feed_forward_baseline(),
         ),
     ] {
         let path = root.join(format!("weights/{file}.safetensors"));

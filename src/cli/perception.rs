@@ -34,6 +34,10 @@ pub struct TrainArgs {
     /// Override the configuration's number of steps (1 to 10,000,000).
     #[arg(long, value_parser = super::count_in::<1, 10_000_000>)]
     pub steps: Option<usize>,
+    /// Override the configuration's seed (initial weights, sequence order, augmentation): a
+    /// second seed of the same recipe measures the spread between training runs.
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Stop after this many steps of this run (checkpointed; the same command resumes).
     #[arg(long, value_parser = super::count_in::<1, 10_000_000>)]
     pub stop_after: Option<usize>,
@@ -99,6 +103,9 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     }
     if let Some(s) = args.steps {
         config.steps = s;
+    }
+    if let Some(s) = args.seed {
+        config.seed = s;
     }
     match args.model.as_str() {
         "procnet" => {}

@@ -30,7 +30,7 @@ pub struct EvalPoseArgs {
     #[arg(long, default_value = "procnet")]
     pub masks: String,
     /// Network weights for --masks procnet or baseline [default:
-    /// perception/weights/procnet-cpu.safetensors or baseline-cpu.safetensors].
+    /// perception/weights/procnet-cpu.safetensors or baseline-cpu-64.safetensors].
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// flex, tch or gpu (the latter two with their cargo features), for the network.
@@ -56,8 +56,14 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
         "gt" => Box::new(GroundTruthMasks),
         "visible" => Box::new(VisibleMasks),
         "procnet" | "baseline" => {
+            // The shipped ProcNet is the 128x128 one; the shipped baseline is trained by its
+            // 64x64 first stage's recipe (configs/train-64.toml).
             let weights = args.weights.clone().unwrap_or_else(|| {
-                PathBuf::from(format!("perception/weights/{kind}-cpu.safetensors"))
+                PathBuf::from(if kind == "procnet" {
+                    "perception/weights/procnet-cpu.safetensors"
+                } else {
+                    "perception/weights/baseline-cpu-64.safetensors"
+                })
             });
             // The error names the file already.
             let net = ProcNet::load(&weights, Backend::parse(&args.backend)?)?;
