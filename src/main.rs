@@ -75,6 +75,9 @@ enum ReportCommand {
     Merge(cli::report::MergeArgs),
     /// The table and trade-off plot of a sweep's points (violations and task time per point).
     Sweep(cli::report::SweepArgs),
+    /// Training runs side by side: their validation forearm Dice loss on one plot, and a
+    /// table of each run's last and best (seeds, recipes, ProcNet against the baseline).
+    Training(cli::perception::TrainingReportArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -138,6 +141,9 @@ fn main() -> ExitCode {
         Command::Report {
             command: ReportCommand::Sweep(a),
         } => cli::report::sweep_table(&a),
+        Command::Report {
+            command: ReportCommand::Training(a),
+        } => cli::perception::training_report(&a),
         Command::Crosscheck(a) => cli::crosscheck::run(&a),
         Command::Simulate(a) => cli::simulate::run(&a),
         Command::Dataset {

@@ -615,6 +615,31 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         std::fs::read(seed_out.join("baseline.safetensors")).expect("seed 7 weights"),
         "another seed, other weights"
     );
+    // The runs side by side: one row each (two steps; this dataset has no validation split,
+    // so no validation figure) and a plot.
+    let curves = tmp.path().join("curves/validation.svg");
+    let report = workcell(&[
+        "report",
+        "training",
+        base_out.to_str().expect("utf-8"),
+        seed_out.to_str().expect("utf-8"),
+        "--out",
+        curves.to_str().expect("utf-8"),
+    ]);
+    assert!(report.status.success(), "{}", text(&report.stderr));
+    let table = text(&report.stdout);
+    for run in ["run-baseline", "run-seed-7"] {
+        let row = table
+            .lines()
+            .find(|l| l.starts_with(&format!("| {run} | 2 |")))
+            .unwrap_or_else(|| panic!("{run} missing:\n{table}"));
+        assert!(row.ends_with("| - | - |"), "{row}");
+    }
+    assert!(curves.exists() && curves.with_extension("png").exists());
+    refused(
+        &["report", "training", data_s],
+        "is not a training run folder",
+    );
     refused(
         &[
             "train", "--config", cfg_s, "--model", "posecnn", "--out", out_s,

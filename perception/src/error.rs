@@ -24,8 +24,8 @@ pub enum PerceptionError {
     /// A human model could not be loaded or lacks a part.
     #[error(transparent)]
     Robot(#[from] workcell_robots::RobotError),
-    /// Writing an output (checkpoint, CSV, plot) failed.
-    #[error("{path}: cannot write")]
+    /// Reading or writing a file of a run (checkpoint, metrics CSV, plot) failed.
+    #[error("{path}: cannot read or write")]
     Io {
         path: PathBuf,
         #[source]

@@ -47,6 +47,17 @@ pub struct TrainArgs {
 }
 
 #[derive(Debug, clap::Args)]
+pub struct TrainingReportArgs {
+    /// Run folders of `workcell train` (each with its metrics.csv), e.g. two seeds of ProcNet
+    /// and of the baseline.
+    #[arg(required = true, num_args = 1..)]
+    pub runs: Vec<PathBuf>,
+    /// Where to write the overlaid validation curves (SVG; a PNG is written beside it).
+    #[arg(long, default_value = "out/validation_curves.svg")]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
 pub struct EvalSegmentationArgs {
     /// ProcNet weights (safetensors), e.g. perception/weights/procnet-cpu.safetensors.
     #[arg(long)]
@@ -177,20 +188,6 @@ fn write_loss_curve(
     path: &std::path::Path,
 ) -> Result<()> {
     let x: Vec<f64> = metrics.iter().map(|m| m.step as f64).collect();
-    let smooth = |v: Vec<f64>| -> Vec<f64> {
-        // Exponential moving average, so that the trend shows through the batch noise.
-        let mut acc = f64::NAN;
-        v.into_iter()
-            .map(|y| {
-                acc = if acc.is_nan() {
-                    y
-                } else {
-                    0.95 * acc + 0.05 * y
-                };
-                acc
-            })
-            .collect()
-    };
     let mut val_x = Vec::new();
     let mut val = Vec::new();
     for m in metrics.iter().filter(|m| m.val_forearm_dice.is_finite()) {
@@ -202,21 +199,12 @@ fn write_loss_curve(
             title: "training loss (moving average)".into(),
             y_label: "loss".into(),
             series: vec![
-                (
-                    "total".into(),
-                    smooth(metrics.iter().map(|m| m.loss).collect()),
-                ),
-                (
-                    "Dice".into(),
-                    smooth(metrics.iter().map(|m| m.dice).collect()),
-                ),
-                (
-                    "focal".into(),
-                    smooth(metrics.iter().map(|m| m.focal).collect()),
-                ),
+                ("total".into(), smooth(metrics.iter().map(|m| m.loss))),
+                ("Dice".into(), smooth(metrics.iter().map(|m| m.dice))),
+                ("focal".into(), smooth(metrics.iter().map(|m| m.focal))),
                 (
                     "prediction".into(),
-                    smooth(metrics.iter().map(|m| m.prediction).collect()),
+                    smooth(metrics.iter().map(|m| m.prediction)),
                 ),
             ],
         },
@@ -244,6 +232,134 @@ fn write_loss_curve(
     std::fs::write(path, &svg).with_context(|| format!("writing {}", path.display()))?;
     svg_to_png(&svg, &path.with_extension("png"))?;
     Ok(())
+}
+
+/// Exponential moving average, so that a loss's trend shows through the batch noise.
+fn smooth(v: impl IntoIterator<Item = f64>) -> Vec<f64> {
+    let mut acc = f64::NAN;
+    v.into_iter()
+        .map(|y| {
+            acc = if acc.is_nan() {
+                y
+            } else {
+                0.95 * acc + 0.05 * y
+            };
+            acc
+        })
+        .collect()
+}
+
+/// `samples` (step, value), ascending, linearly interpolated at `steps`; NaN outside them.
+fn interpolate(samples: &[(usize, f64)], steps: &[usize]) -> Vec<f64> {
+    steps
+        .iter()
+        .map(|&s| {
+            let i = samples.partition_point(|(t, _)| *t < s);
+            match (
+                samples.get(i),
+                i.checked_sub(1).and_then(|j| samples.get(j)),
+            ) {
+                (Some(&(t, v)), _) if t == s => v,
+                (Some(&(t1, v1)), Some(&(t0, v0))) => {
+                    v0 + (v1 - v0) * (s - t0) as f64 / (t1 - t0) as f64
+                }
+                _ => f64::NAN,
+            }
+        })
+        .collect()
+}
+
+/// `workcell report training`: several training runs side by side, their training loss and
+/// validation forearm Dice loss on one plot, and a table of each run's last and best.
+pub fn training_report(args: &TrainingReportArgs) -> Result<ExitCode> {
+    struct Run {
+        name: String,
+        steps: Vec<usize>,
+        loss: Vec<f64>,
+        val: Vec<(usize, f64)>,
+        wall_s: f64,
+    }
+    let mut runs = Vec::new();
+    for dir in &args.runs {
+        let metrics = read_metrics(&dir.join("metrics.csv"))
+            .with_context(|| format!("{} is not a training run folder", dir.display()))?;
+        let Some(last) = metrics.last() else {
+            anyhow::bail!("{} has no training steps yet", dir.display());
+        };
+        runs.push(Run {
+            name: dir.file_name().map_or_else(
+                || dir.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            ),
+            steps: metrics.iter().map(|m| m.step).collect(),
+            loss: smooth(metrics.iter().map(|m| m.loss)),
+            val: metrics
+                .iter()
+                .filter(|m| m.val_forearm_dice.is_finite())
+                .map(|m| (m.step, m.val_forearm_dice))
+                .collect(),
+            wall_s: last.elapsed_s,
+        });
+    }
+    say!(
+        "| run | steps | wall (s) | training loss (moving average) | last validation forearm Dice loss (step) | best (step) |"
+    );
+    say!("|---|---|---|---|---|---|");
+    for run in &runs {
+        let at = |(step, v): (usize, f64)| format!("{v:.4} ({step})");
+        let best = run
+            .val
+            .iter()
+            .copied()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or_else(|| "-".into(), at);
+        say!(
+            "| {} | {} | {:.0} | {:.4} | {} | {} |",
+            run.name,
+            run.steps.last().copied().unwrap_or(0),
+            run.wall_s,
+            run.loss.last().copied().unwrap_or(f64::NAN),
+            run.val.last().copied().map_or_else(|| "-".into(), at),
+            best
+        );
+    }
+    // Every run on the union of the runs' steps (NaN where a run has no step: a gap).
+    let mut x: Vec<usize> = runs.iter().flat_map(|r| r.steps.iter().copied()).collect();
+    x.sort_unstable();
+    x.dedup();
+    let loss = runs
+        .iter()
+        .map(|r| {
+            let samples: Vec<(usize, f64)> = r.steps.iter().copied().zip(r.loss.clone()).collect();
+            (r.name.clone(), interpolate(&samples, &x))
+        })
+        .collect();
+    let mut panels = vec![Panel {
+        title: "training loss (moving average)".into(),
+        y_label: "loss".into(),
+        series: loss,
+    }];
+    if runs.iter().any(|r| !r.val.is_empty()) {
+        panels.push(Panel {
+            title: "validation forearm Dice loss (straight between validations)".into(),
+            y_label: "Dice loss".into(),
+            series: runs
+                .iter()
+                .map(|r| (r.name.clone(), interpolate(&r.val, &x)))
+                .collect(),
+        });
+    }
+    let xs: Vec<f64> = x.iter().map(|&s| s as f64).collect();
+    let svg = svg_panels(&xs, "step", &panels);
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
+    }
+    std::fs::write(&args.out, &svg).with_context(|| format!("writing {}", args.out.display()))?;
+    let png = args.out.with_extension("png");
+    svg_to_png(&svg, &png)?;
+    say!("curves: {} and {}", args.out.display(), png.display());
+    Ok(ExitCode::SUCCESS)
 }
 
 pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
@@ -441,4 +557,26 @@ pub fn bench(args: &BenchArgs) -> Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{interpolate, smooth};
+
+    #[test]
+    fn samples_are_joined_by_straight_lines_and_nothing_beyond_them() {
+        let y = interpolate(&[(2, 1.0), (6, 3.0), (8, 2.0)], &[1, 2, 4, 5, 6, 7, 8, 9]);
+        let want = [f64::NAN, 1.0, 2.0, 2.5, 3.0, 2.5, 2.0, f64::NAN];
+        for (a, b) in y.iter().zip(want) {
+            assert!(a == &b || (a.is_nan() && b.is_nan()), "{y:?}");
+        }
+    }
+
+    #[test]
+    fn the_moving_average_starts_at_the_first_value_and_follows_a_step() {
+        // 0.95^k of the old level remains after k samples of the new one.
+        let y = smooth([1.0, 0.0, 0.0, 0.0]);
+        assert_eq!(y[0], 1.0);
+        assert!((y[3] - 0.95_f64.powi(3)).abs() < 1e-12, "{y:?}");
+    }
 }
