@@ -98,8 +98,9 @@ pub fn svg_panels(x: &[f64], x_label: &str, panels: &[Panel]) -> String {
             for (v, anchor, x_pos) in [(x0, "start", left), (x1, "end", left + plot_w)] {
                 let _ = writeln!(
                     svg,
-                    r#"<text x="{x_pos}" y="{}" text-anchor="{anchor}">{v:.1}</text>"#,
-                    y_top + panel_h + 16.0
+                    r#"<text x="{x_pos}" y="{}" text-anchor="{anchor}">{}</text>"#,
+                    y_top + panel_h + 16.0,
+                    tick(v)
                 );
             }
             let _ = writeln!(
@@ -113,6 +114,15 @@ pub fn svg_panels(x: &[f64], x_label: &str, panels: &[Panel]) -> String {
     }
     svg.push_str("</svg>\n");
     svg
+}
+
+/// An axis end label: whole numbers (steps, episodes) without a decimal point.
+fn tick(v: f64) -> String {
+    if v.fract() == 0.0 && v.abs() < 1e15 {
+        format!("{v:.0}")
+    } else {
+        format!("{v:.1}")
+    }
 }
 
 /// A labelled point of [`svg_scatter`].
@@ -285,6 +295,14 @@ mod tests {
         assert_eq!(svg.matches("<polyline").count(), 2);
         assert!(svg.contains("a &lt; b"));
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
+    }
+
+    #[test]
+    fn axis_ends_print_whole_numbers_without_a_decimal_point() {
+        assert_eq!(tick(7300.0), "7300");
+        assert_eq!(tick(1.0), "1");
+        assert_eq!(tick(0.26), "0.3");
+        assert_eq!(tick(-3.74), "-3.7");
     }
 
     #[test]
