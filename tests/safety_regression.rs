@@ -208,3 +208,45 @@ fn the_servo_does_not_outrun_the_filter() {
     // The control: the same episode with an unbounded command breaks the limit.
     assert!(unbounded > limit, "{unbounded} <= {limit}");
 }
+
+/// Re-timing wins back the time the filter cost, and never near the human. Seed 5 of the
+/// README's evaluation loses 7.6 s of its 12 s task to a hand that lingers on the tool's
+/// path (task time 19.56 s on plan). With `catch_up_speed` 1.75 the task runs faster than
+/// planned once the hand has left the filter's detection distance, and finishes in
+/// 18.22 s (the hand stays until late, so little is left to win back); the speed never
+/// exceeds the setting, and it is back to the plan's wherever the true separation is below
+/// the power and force limiting distance (0.3 m): at ISO 13855's 2 m/s a part cannot cross
+/// from the detection distance (0.6 m, seen on the inflated estimate) to 0.3 m within the
+/// 75 ms the speed takes to come down.
+#[test]
+fn catching_up_wins_back_time_but_never_near_the_human() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut evaluation =
+        Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
+    let run = |evaluation: &Evaluation| {
+        run_episode(evaluation, FilterMode::Qp, 0, 5, None, |_| {}).expect("episode runs")
+    };
+    evaluation.config.catch_up_speed = 1.0;
+    let (planned, planned_trace) = run(&evaluation);
+    evaluation.config.catch_up_speed = 1.75;
+    let (retimed, trace) = run(&evaluation);
+    let (t_planned, t_retimed) = (
+        planned.task_time_s.expect("finishes"),
+        retimed.task_time_s.expect("finishes"),
+    );
+    eprintln!("task time {t_planned:.2} s on plan, {t_retimed:.2} s re-timed");
+    assert!(planned_trace.task_speed.iter().all(|&s| s == 1.0));
+    assert!(t_retimed < t_planned - 1.0, "{t_retimed} vs {t_planned}");
+    let fastest = trace.task_speed.iter().copied().fold(0.0, f64::max);
+    assert!(fastest > 1.5 && fastest <= 1.75, "{fastest}");
+    let pfl_m = evaluation.config.safety.pfl_distance_m;
+    for ((t, d), s) in trace
+        .t_s
+        .iter()
+        .zip(&trace.separation_m)
+        .zip(&trace.task_speed)
+    {
+        assert!(!(*d < pfl_m && *s > 1.0), "speed {s} at {d} m, t = {t} s");
+    }
+    assert_eq!(retimed.violations, 0);
+}

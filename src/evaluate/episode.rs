@@ -17,6 +17,9 @@ use crate::error::Result;
 /// A robot point slower than this counts as standing, m/s.
 const MOVING_M_S: f64 = 0.05;
 
+/// How fast the task's re-timed speed may rise, 1/s (its fall is ten times faster).
+const CATCH_UP_RAMP_PER_S2: f64 = 1.0;
+
 /// One closed-loop episode of `evaluation` with `filter` and the perception of the
 /// evaluation file, seeded with `seed` (the cell's seed is replaced by it, so the robot's
 /// task and the human's motions differ per episode). `on_tick` gets the fraction done.
@@ -115,7 +118,7 @@ fn run(
             break;
         }
         run.bound_command_lead();
-        let rate = run.nominal();
+        let rate = run.nominal(t, dt);
         run.perceive_and_filter(t, dt);
         run.advance(substeps, dt_physics)?;
         run.progress = (run.progress + rate * dt).min(c.task_s);
@@ -147,6 +150,10 @@ struct Run<'a> {
     jacobian: Jacobian,
     /// How far along the task trajectory the robot is, s.
     progress: f64,
+    /// The task's speed against its plan (re-timing; 1 unless catching up).
+    speed: f64,
+    /// No human part within the filter's detection distance at the last tick.
+    clear: bool,
     metrics: EpisodeMetrics,
     trace: EpisodeTrace,
     /// Below d_min at the last tick.
@@ -231,6 +238,8 @@ impl<'a> Run<'a> {
             q_cmd,
             jacobian: Jacobian::zeros(dof),
             progress: 0.0,
+            speed: 1.0,
+            clear: true,
             metrics,
             trace: EpisodeTrace::default(),
             below: false,
@@ -385,10 +394,23 @@ impl<'a> Run<'a> {
     }
 
     /// The nominal controller: tracks the task trajectory at the progress variable, which
-    /// advances only as fast as the robot keeps up. Sets `qdot_nom`; returns the rate at
-    /// which progress advances.
-    fn nominal(&mut self) -> f64 {
+    /// advances only as fast as the robot keeps up, and faster than planned (up to
+    /// `catch_up_speed`) while the task is behind schedule and no human part is near. Sets
+    /// `qdot_nom`; returns the rate at which progress advances.
+    fn nominal(&mut self, t: f64, dt: f64) -> f64 {
         let c = self.c;
+        // The speed ramps up gently (the trajectory's accelerations grow with its square) and
+        // back down within 0.1 s of a human part coming into view.
+        let target = if self.clear && self.progress < t - dt {
+            c.catch_up_speed
+        } else {
+            1.0
+        };
+        self.speed = if target > self.speed {
+            (self.speed + CATCH_UP_RAMP_PER_S2 * dt).min(target)
+        } else {
+            (self.speed - 10.0 * CATCH_UP_RAMP_PER_S2 * dt).max(target)
+        };
         self.model.robot_motion.sample(
             self.progress,
             &mut self.q_ref,
@@ -401,7 +423,7 @@ impl<'a> Run<'a> {
             .zip(&self.q_cmd)
             .map(|(r, q)| (r - q).abs())
             .fold(0.0, f64::max);
-        let rate = (1.0 - error / c.progress_tolerance_rad).clamp(0.0, 1.0);
+        let rate = (1.0 - error / c.progress_tolerance_rad).clamp(0.0, 1.0) * self.speed;
         for j in 0..self.qdot_nom.len() {
             self.qdot_nom[j] =
                 rate * self.qd_ref[j] + c.tracking_gain_per_s * (self.q_ref[j] - self.q_cmd[j]);
@@ -432,6 +454,8 @@ impl<'a> Run<'a> {
             &self.estimate,
             dt,
         );
+        // Clear: the filter saw the human (no brake for a missing estimate) and no part near.
+        self.clear = out.active_pairs == 0 && out.status == FilterStatus::Pass;
         tracing::trace!(
             episode = self.metrics.episode,
             t,
@@ -465,6 +489,7 @@ impl<'a> Run<'a> {
             .sqrt();
         self.trace.t_s.push(t);
         self.trace.perception_error_m.push(tick_error);
+        self.trace.task_speed.push(self.speed);
         self.trace.speed_scale.push(if nominal_norm > 1e-6 {
             (command_norm / nominal_norm).min(2.0)
         } else {

@@ -63,6 +63,13 @@ pub struct EvaluationConfig {
     /// command by under 1 mrad, and a 2 mrad lead is caught up at 0.2 rad/s at most (10
     /// rad/s^2). `inf` turns the bound off.
     pub command_lead_rad: f64,
+    /// Re-timing: while the task is behind its schedule (progress below the time elapsed)
+    /// and the filter sees no human part within its detection distance, the task may run up
+    /// to this many times its planned speed, winning back time the filter cost. The joints'
+    /// velocity limits, the filter's rows and power and force limiting still bound every
+    /// command; the speed comes back to 1 as soon as a part is within the detection
+    /// distance. Default 1 (off); at most 3.
+    pub catch_up_speed: f64,
     /// "Near the human" for the peak speed metric: true separation below this, m. Default 0.3.
     pub near_m: f64,
     pub perception: PerceptionConfig,
@@ -80,6 +87,7 @@ impl Default for EvaluationConfig {
             tracking_gain_per_s: 5.0,
             progress_tolerance_rad: 0.05,
             command_lead_rad: 0.002,
+            catch_up_speed: 1.0,
             near_m: 0.3,
             perception: PerceptionConfig::default(),
             safety: FilterConfig::default(),
@@ -196,6 +204,12 @@ impl Evaluation {
             return Err(Error::config(
                 "command_lead_rad",
                 format!("must be > 0 (inf: no bound), got {}", c.command_lead_rad),
+            ));
+        }
+        if !(1.0..=3.0).contains(&c.catch_up_speed) {
+            return Err(Error::config(
+                "catch_up_speed",
+                format!("must be within 1 (off) and 3, got {}", c.catch_up_speed),
             ));
         }
         positive("near_m", c.near_m)?;
@@ -365,6 +379,9 @@ pub struct EpisodeTrace {
     /// |qdot| / |qdot_nom| (1 when the nominal command is 0).
     #[serde(with = "lossless::vec")]
     pub speed_scale: Vec<f64>,
+    /// The task's speed against its plan (`catch_up_speed`'s re-timing; 1 when on plan).
+    #[serde(with = "lossless::vec", default)]
+    pub task_speed: Vec<f64>,
     /// Mean distance of the estimated parts' end points from the true ones, m (`None` when
     /// perception delivers no human).
     #[serde(with = "lossless::vec_option")]
