@@ -892,6 +892,14 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         &format!("{cell_line}catch_up_speed = nan\n"),
         "catch_up_speed: must be within 1 (off) and 3",
     );
+    bad(
+        &format!("{cell_line}yield_after_s = -1.0\n"),
+        "yield_after_s: must be >= 0",
+    );
+    bad(
+        &format!("{cell_line}yield_resume_m = 0.0\n"),
+        "yield_resume_m",
+    );
     // Each key in range, together contradictory: pairs would enter the filter inside d_min.
     bad(
         &format!("{cell_line}[safety]\ndetection_m = 0.01\nd_min_m = 0.1\n"),

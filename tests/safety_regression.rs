@@ -250,3 +250,43 @@ fn catching_up_wins_back_time_but_never_near_the_human() {
     }
     assert_eq!(retimed.violations, 0);
 }
+
+/// Yielding keeps the arm out of reach while it waits. In seed 193 of the README's
+/// evaluation the hand lingers beside the arm, which the task pulls toward its path: the
+/// filter holds it at the barrier (seen distance about d_min) for most of a second, then the
+/// hand closes at about 0.5 m/s faster than link 7 can move away and the true separation
+/// drops to 0.033 m. Yielding after 0.1 s held off the path (backing away until the seen
+/// distance is above 0.2 m) keeps 0.2 m.
+#[test]
+fn yielding_backs_away_instead_of_waiting_at_the_barrier() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut evaluation =
+        Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
+    let d_min = evaluation.config.safety.d_min_m;
+    let run = |evaluation: &Evaluation| {
+        run_episode(evaluation, FilterMode::Qp, 0, 193, None, |_| {})
+            .expect("episode runs")
+            .0
+    };
+    evaluation.config.yield_after_s = f64::INFINITY;
+    let waiting = run(&evaluation);
+    evaluation.config.yield_after_s = 0.1;
+    evaluation.config.yield_resume_m = 0.2;
+    let yielding = run(&evaluation);
+    eprintln!(
+        "min separation {:.3} m waiting, {:.3} m yielding",
+        waiting.min_separation_m, yielding.min_separation_m
+    );
+    // The control: waiting at the barrier breaks d_min.
+    assert!(
+        waiting.min_separation_m < d_min,
+        "{}",
+        waiting.min_separation_m
+    );
+    assert!(
+        yielding.min_separation_m > d_min + 0.05,
+        "{}",
+        yielding.min_separation_m
+    );
+    assert!(yielding.task_time_s.is_some());
+}

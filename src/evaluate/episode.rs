@@ -20,6 +20,9 @@ const MOVING_M_S: f64 = 0.05;
 /// How fast the task's re-timed speed may rise, 1/s (its fall is ten times faster).
 const CATCH_UP_RAMP_PER_S2: f64 = 1.0;
 
+/// A yielding robot backs away at most at this fraction of its joints' velocity limits.
+const RETREAT_SPEED: f64 = 0.5;
+
 /// One closed-loop episode of `evaluation` with `filter` and the perception of the
 /// evaluation file, seeded with `seed` (the cell's seed is replaced by it, so the robot's
 /// task and the human's motions differ per episode). `on_tick` gets the fraction done.
@@ -154,6 +157,14 @@ struct Run<'a> {
     speed: f64,
     /// No human part within the filter's detection distance at the last tick.
     clear: bool,
+    /// The filter's smallest seen distance at the last tick (infinite: none in view), m.
+    seen_m: f64,
+    /// How long the task has been held off its path near the human, s.
+    blocked_s: f64,
+    /// Retreating from the human (see `yield_after_s`).
+    yielding: bool,
+    /// Half the joints' velocity limits: the retreat's speed.
+    v_retreat: Vec<f64>,
     metrics: EpisodeMetrics,
     trace: EpisodeTrace,
     /// Below d_min at the last tick.
@@ -196,6 +207,11 @@ impl<'a> Run<'a> {
         let mut robot_kinematics = KinematicState::new(robot);
         robot_kinematics.X_WB = model.X_WR;
         let q_cmd = state.q().to_vec();
+        let v_retreat = robot
+            .velocity_limits()
+            .iter()
+            .map(|v| if *v > 0.0 { RETREAT_SPEED * v } else { 1.0 })
+            .collect();
         let metrics = EpisodeMetrics {
             episode,
             seed,
@@ -240,6 +256,10 @@ impl<'a> Run<'a> {
             progress: 0.0,
             speed: 1.0,
             clear: true,
+            seen_m: f64::INFINITY,
+            blocked_s: 0.0,
+            yielding: false,
+            v_retreat,
             metrics,
             trace: EpisodeTrace::default(),
             below: false,
@@ -423,7 +443,50 @@ impl<'a> Run<'a> {
             .zip(&self.q_cmd)
             .map(|(r, q)| (r - q).abs())
             .fold(0.0, f64::max);
-        let rate = (1.0 - error / c.progress_tolerance_rad).clamp(0.0, 1.0) * self.speed;
+        let tracking = (1.0 - error / c.progress_tolerance_rad).clamp(0.0, 1.0);
+        if self.yielding {
+            self.yielding = self.seen_m < c.yield_resume_m;
+        } else if tracking < 0.5 && !self.clear {
+            self.blocked_s += dt;
+            self.yielding = self.blocked_s >= c.yield_after_s;
+        } else {
+            self.blocked_s = 0.0;
+        }
+        if self.yielding {
+            self.blocked_s = 0.0;
+            // Away from the human: the joint direction that moves the seen pairs' robot
+            // points out along their normals, the closest pairs weighted most.
+            let dof = self.qdot_nom.len();
+            self.qdot_nom.fill(0.0);
+            for p in self.filter.pairs().iter().filter(|p| !p.obstacle) {
+                let w = 1.0 / (p.pair.distance_m.max(0.0) + 0.05);
+                for j in 0..dof {
+                    self.qdot_nom[j] += w * p.normal_jacobian[j];
+                }
+            }
+            // The largest step that keeps every joint within its retreat speed.
+            let scale = self
+                .qdot_nom
+                .iter()
+                .zip(&self.v_retreat)
+                .map(|(g, v)| {
+                    if g.abs() > 1e-12 {
+                        v / g.abs()
+                    } else {
+                        f64::INFINITY
+                    }
+                })
+                .fold(f64::INFINITY, f64::min);
+            if scale.is_finite() {
+                for g in &mut self.qdot_nom {
+                    *g *= scale;
+                }
+            } else {
+                self.qdot_nom.fill(0.0);
+            }
+            return 0.0;
+        }
+        let rate = tracking * self.speed;
         for j in 0..self.qdot_nom.len() {
             self.qdot_nom[j] =
                 rate * self.qd_ref[j] + c.tracking_gain_per_s * (self.q_ref[j] - self.q_cmd[j]);
@@ -456,6 +519,7 @@ impl<'a> Run<'a> {
         );
         // Clear: the filter saw the human (no brake for a missing estimate) and no part near.
         self.clear = out.active_pairs == 0 && out.status == FilterStatus::Pass;
+        self.seen_m = out.min_distance_m;
         tracing::trace!(
             episode = self.metrics.episode,
             t,

@@ -70,6 +70,20 @@ pub struct EvaluationConfig {
     /// command; the speed comes back to 1 as soon as a part is within the detection
     /// distance. Default 1 (off); at most 3.
     pub catch_up_speed: f64,
+    /// Yielding: when the task has been held off its path near the human (tracking rate below
+    /// half, a human part within the filter's detection distance) for this long, s, the
+    /// robot stops pulling toward its path, which holds it at the barrier where a sudden
+    /// reach can outrun its escape, and backs away instead: the joint direction that moves
+    /// the seen pairs' robot points out along their normals (the closest weighted most), at
+    /// up to half the joints' speed limits, until the filter's seen distance is above
+    /// `yield_resume_m`; then the task resumes where it stopped. Default inf (off): over
+    /// 1,000 seeds of `configs/evaluate.toml` (0.1 s, 0.2 m) it left 2 episodes below d_min
+    /// instead of 6, but 10 went beyond a body region's transient contact speed (the hand
+    /// approached at up to 1.93 m/s against 1.35) and the task took 1.18 instead of 1.14
+    /// (docs/safety.md).
+    pub yield_after_s: f64,
+    /// See `yield_after_s`, m. Default 0.3.
+    pub yield_resume_m: f64,
     /// "Near the human" for the peak speed metric: true separation below this, m. Default 0.3.
     pub near_m: f64,
     pub perception: PerceptionConfig,
@@ -88,6 +102,8 @@ impl Default for EvaluationConfig {
             progress_tolerance_rad: 0.05,
             command_lead_rad: 0.002,
             catch_up_speed: 1.0,
+            yield_after_s: f64::INFINITY,
+            yield_resume_m: 0.3,
             near_m: 0.3,
             perception: PerceptionConfig::default(),
             safety: FilterConfig::default(),
@@ -212,6 +228,13 @@ impl Evaluation {
                 format!("must be within 1 (off) and 3, got {}", c.catch_up_speed),
             ));
         }
+        if c.yield_after_s.is_nan() || c.yield_after_s < 0.0 {
+            return Err(Error::config(
+                "yield_after_s",
+                format!("must be >= 0 (inf: off), got {}", c.yield_after_s),
+            ));
+        }
+        positive("yield_resume_m", c.yield_resume_m)?;
         positive("near_m", c.near_m)?;
         if !(c.timeout_factor.is_finite() && c.timeout_factor >= 1.0) {
             return Err(Error::config(
