@@ -213,11 +213,11 @@ fn the_servo_does_not_outrun_the_filter() {
 /// README's evaluation loses 7.6 s of its 12 s task to a hand that lingers on the tool's
 /// path (task time 19.56 s on plan). With `catch_up_speed` 1.75 the task runs faster than
 /// planned once the hand has left the filter's detection distance, and finishes in
-/// 18.22 s (the hand stays until late, so little is left to win back); the speed never
+/// 18.25 s (the hand stays until late, so little is left to win back); the speed never
 /// exceeds the setting, and it is back to the plan's wherever the true separation is below
-/// the power and force limiting distance (0.3 m): at ISO 13855's 2 m/s a part cannot cross
-/// from the detection distance (0.6 m, seen on the inflated estimate) to 0.3 m within the
-/// 75 ms the speed takes to come down.
+/// the power and force limiting distance (0.3 m): the speed drops to the plan's on the tick
+/// a part comes within the detection distance (0.6 m, seen on the inflated estimate), and
+/// at ISO 13855's 2 m/s no part crosses 0.3 m in one tick.
 #[test]
 fn catching_up_wins_back_time_but_never_near_the_human() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));

@@ -17,7 +17,7 @@ use crate::error::Result;
 /// A robot point slower than this counts as standing, m/s.
 const MOVING_M_S: f64 = 0.05;
 
-/// How fast the task's re-timed speed may rise, 1/s (its fall is ten times faster).
+/// How fast the task's re-timed speed may rise, 1/s (it falls at once).
 const CATCH_UP_RAMP_PER_S2: f64 = 1.0;
 
 /// A yielding robot backs away at most at this fraction of its joints' velocity limits.
@@ -420,7 +420,9 @@ impl<'a> Run<'a> {
     fn nominal(&mut self, t: f64, dt: f64) -> f64 {
         let c = self.c;
         // The speed ramps up gently (the trajectory's accelerations grow with its square) and
-        // back down within 0.1 s of a human part coming into view.
+        // drops to the plan's at once when a human part comes into view: ramped down over
+        // 75 ms, it let the arm approach the hand at 0.95 m/s instead of 0.72 (100 seeds)
+        // and seed 64 (perfect perception) come to 0.092 m.
         let target = if self.clear && self.progress < t - dt {
             c.catch_up_speed
         } else {
@@ -429,7 +431,7 @@ impl<'a> Run<'a> {
         self.speed = if target > self.speed {
             (self.speed + CATCH_UP_RAMP_PER_S2 * dt).min(target)
         } else {
-            (self.speed - 10.0 * CATCH_UP_RAMP_PER_S2 * dt).max(target)
+            target
         };
         self.model.robot_motion.sample(
             self.progress,

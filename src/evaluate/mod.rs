@@ -67,7 +67,7 @@ pub struct EvaluationConfig {
     /// and the filter sees no human part within its detection distance, the task may run up
     /// to this many times its planned speed, winning back time the filter cost. The joints'
     /// velocity limits, the filter's rows and power and force limiting still bound every
-    /// command; the speed comes back to 1 as soon as a part is within the detection
+    /// command; the speed drops back to 1 on the tick a part is within the detection
     /// distance. Default 1 (off); at most 3.
     pub catch_up_speed: f64,
     /// Yielding: when the task has been held off its path near the human (tracking rate below
@@ -77,10 +77,10 @@ pub struct EvaluationConfig {
     /// the seen pairs' robot points out along their normals (the closest weighted most), at
     /// up to half the joints' speed limits, until the filter's seen distance is above
     /// `yield_resume_m`; then the task resumes where it stopped. Default inf (off): over
-    /// 1,000 seeds of `configs/evaluate.toml` (0.1 s, 0.2 m) it left 2 episodes below d_min
-    /// instead of 6, but 10 went beyond a body region's transient contact speed (the hand
-    /// approached at up to 1.93 m/s against 1.35) and the task took 1.18 instead of 1.14
-    /// (docs/safety.md).
+    /// 1,000 seeds of `configs/evaluate.toml` (0.1 s, 0.2 m, beside an earlier re-timing)
+    /// it left 2 episodes below d_min instead of 6, but 10 went beyond a body region's
+    /// transient contact speed (the hand approached at up to 1.93 m/s against 1.35) and the
+    /// task took 1.18 instead of 1.14 (docs/safety.md).
     pub yield_after_s: f64,
     /// See `yield_after_s`, m. Default 0.3.
     pub yield_resume_m: f64,
