@@ -251,12 +251,12 @@ fn catching_up_wins_back_time_but_never_near_the_human() {
     assert_eq!(retimed.violations, 0);
 }
 
-/// Yielding keeps the arm out of reach while it waits. In seed 193 of the README's
+/// Yielding keeps the arm out of reach while it waits. In seed 836 of the README's
 /// evaluation the hand lingers beside the arm, which the task pulls toward its path: the
-/// filter holds it at the barrier (seen distance about d_min) for most of a second, then the
-/// hand closes at about 0.5 m/s faster than link 7 can move away and the true separation
-/// drops to 0.033 m. Yielding after 0.1 s held off the path (backing away until the seen
-/// distance is above 0.2 m) keeps 0.2 m.
+/// filter holds it at the barrier (seen distance 0.10-0.12 m, true 0.21 m) for more than
+/// 1.5 s, then the hand closes faster than link 6 can move away and the true separation
+/// drops to 0.085 m. Yielding after 0.1 s held off the path (backing away until the seen
+/// distance is above 0.2 m) keeps 0.196 m.
 #[test]
 fn yielding_backs_away_instead_of_waiting_at_the_barrier() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -264,7 +264,7 @@ fn yielding_backs_away_instead_of_waiting_at_the_barrier() {
         Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
     let d_min = evaluation.config.safety.d_min_m;
     let run = |evaluation: &Evaluation| {
-        run_episode(evaluation, FilterMode::Qp, 0, 193, None, |_| {})
+        run_episode(evaluation, FilterMode::Qp, 0, 836, None, |_| {})
             .expect("episode runs")
             .0
     };
