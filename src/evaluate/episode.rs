@@ -163,7 +163,7 @@ struct Run<'a> {
     blocked_s: f64,
     /// Retreating from the human (see `yield_after_s`).
     yielding: bool,
-    /// Half the joints' velocity limits: the retreat's speed.
+    /// The retreat's joint speed limits (`RETREAT_SPEED` of the joints' own).
     v_retreat: Vec<f64>,
     metrics: EpisodeMetrics,
     trace: EpisodeTrace,
@@ -456,36 +456,7 @@ impl<'a> Run<'a> {
         }
         if self.yielding {
             self.blocked_s = 0.0;
-            // Away from the human: the joint direction that moves the seen pairs' robot
-            // points out along their normals, the closest pairs weighted most.
-            let dof = self.qdot_nom.len();
-            self.qdot_nom.fill(0.0);
-            for p in self.filter.pairs().iter().filter(|p| !p.obstacle) {
-                let w = 1.0 / (p.pair.distance_m.max(0.0) + 0.05);
-                for j in 0..dof {
-                    self.qdot_nom[j] += w * p.normal_jacobian[j];
-                }
-            }
-            // The largest step that keeps every joint within its retreat speed.
-            let scale = self
-                .qdot_nom
-                .iter()
-                .zip(&self.v_retreat)
-                .map(|(g, v)| {
-                    if g.abs() > 1e-12 {
-                        v / g.abs()
-                    } else {
-                        f64::INFINITY
-                    }
-                })
-                .fold(f64::INFINITY, f64::min);
-            if scale.is_finite() {
-                for g in &mut self.qdot_nom {
-                    *g *= scale;
-                }
-            } else {
-                self.qdot_nom.fill(0.0);
-            }
+            self.retreat();
             return 0.0;
         }
         let rate = tracking * self.speed;
@@ -494,6 +465,31 @@ impl<'a> Run<'a> {
                 rate * self.qd_ref[j] + c.tracking_gain_per_s * (self.q_ref[j] - self.q_cmd[j]);
         }
         rate
+    }
+
+    /// A yielding robot's nominal command: away from the human, the joint direction that
+    /// moves the seen pairs' robot points out along their normals (the closest pairs
+    /// weighted most), scaled to the largest step that keeps every joint within its retreat
+    /// speed (zero when no pair is in view).
+    fn retreat(&mut self) {
+        self.qdot_nom.fill(0.0);
+        for p in self.filter.pairs().iter().filter(|p| !p.obstacle) {
+            let w = 1.0 / (p.pair.distance_m.max(0.0) + 0.05);
+            for (v, a) in self.qdot_nom.iter_mut().zip(&p.normal_jacobian) {
+                *v += w * a;
+            }
+        }
+        let scale = self
+            .qdot_nom
+            .iter()
+            .zip(&self.v_retreat)
+            .filter(|(g, _)| g.abs() > 1e-12)
+            .map(|(g, v)| v / g.abs())
+            .fold(f64::INFINITY, f64::min);
+        let scale = if scale.is_finite() { scale } else { 0.0 };
+        for g in &mut self.qdot_nom {
+            *g *= scale;
+        }
     }
 
     /// Perception's estimate at `t`, its error against the truth, and the filter's command.
