@@ -900,6 +900,10 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         &format!("{cell_line}yield_resume_m = 0.0\n"),
         "yield_resume_m",
     );
+    bad(
+        &format!("{cell_line}yield_motion = \"jump\"\n"),
+        "yield_motion",
+    );
     // Each key in range, together contradictory: pairs would enter the filter inside d_min.
     bad(
         &format!("{cell_line}[safety]\ndetection_m = 0.01\nd_min_m = 0.1\n"),

@@ -11,7 +11,7 @@ use workcell_safety::{
 use workcell_sim::{CellModel, CellState, RobotCommand, step};
 
 use super::{EpisodeMetrics, EpisodeTrace, Evaluation, EvaluationConfig};
-use super::{HumanPerception, PerceptionInput};
+use super::{HumanPerception, PerceptionInput, YieldMotion};
 use crate::error::Result;
 
 /// A robot point slower than this counts as standing, m/s.
@@ -161,7 +161,7 @@ struct Run<'a> {
     seen_m: f64,
     /// How long the task has been held off its path near the human, s.
     blocked_s: f64,
-    /// Retreating from the human (see `yield_after_s`).
+    /// Yielding to the human (see `yield_after_s`).
     yielding: bool,
     /// The retreat's joint speed limits (`RETREAT_SPEED` of the joints' own).
     v_retreat: Vec<f64>,
@@ -447,7 +447,8 @@ impl<'a> Run<'a> {
             .fold(0.0, f64::max);
         let tracking = (1.0 - error / c.progress_tolerance_rad).clamp(0.0, 1.0);
         if self.yielding {
-            self.yielding = self.seen_m < c.yield_resume_m;
+            self.yielding = self.seen_m < c.yield_resume_m
+                && !(c.yield_motion == YieldMotion::Hold && self.path_is_clear());
         } else if tracking < 0.5 && !self.clear {
             self.blocked_s += dt;
             self.yielding = self.blocked_s >= c.yield_after_s;
@@ -456,7 +457,10 @@ impl<'a> Run<'a> {
         }
         if self.yielding {
             self.blocked_s = 0.0;
-            self.retreat();
+            match c.yield_motion {
+                YieldMotion::Hold => self.qdot_nom.fill(0.0),
+                YieldMotion::Retreat => self.retreat(),
+            }
             return 0.0;
         }
         let rate = tracking * self.speed;
@@ -465,6 +469,21 @@ impl<'a> Run<'a> {
                 rate * self.qd_ref[j] + c.tracking_gain_per_s * (self.q_ref[j] - self.q_cmd[j]);
         }
         rate
+    }
+
+    /// Whether the task's pull toward its path at the plan's speed (the command it would
+    /// resume with) is one that every human pair row of the last tick allows. Writes that
+    /// pull into `qdot_nom`, which the caller then sets.
+    fn path_is_clear(&mut self) -> bool {
+        let gain = self.c.tracking_gain_per_s;
+        for (j, v) in self.qdot_nom.iter_mut().enumerate() {
+            *v = self.qd_ref[j] + gain * (self.q_ref[j] - self.q_cmd[j]);
+        }
+        let safety = &self.c.safety;
+        self.filter.pairs().iter().filter(|p| !p.obstacle).all(|p| {
+            p.approach_m_s(&self.qdot_nom)
+                <= p.approach_bound_m_s(safety.gamma_per_s, safety.d_min_m)
+        })
     }
 
     /// A yielding robot's nominal command: away from the human, the joint direction that

@@ -72,18 +72,20 @@ pub struct EvaluationConfig {
     pub catch_up_speed: f64,
     /// Yielding: when the task has been held off its path near the human (tracking rate below
     /// half, a human part within the filter's detection distance) for this long, s, the
-    /// robot stops pulling toward its path, which holds it at the barrier where a sudden
-    /// reach can outrun its escape, and backs away instead: the joint direction that moves
-    /// the seen pairs' robot points out along their normals (the closest weighted most), at
-    /// up to half the joints' speed limits, until the filter's seen distance is above
-    /// `yield_resume_m`; then the task resumes where it stopped. Default inf (off): over
-    /// 1,000 seeds of `configs/evaluate.toml` (0.1 s, 0.2 m, beside an earlier re-timing)
-    /// it left 2 episodes below d_min instead of 6, but 10 went beyond a body region's
-    /// transient contact speed (the hand approached at up to 1.93 m/s against 1.35) and the
-    /// task took 1.18 instead of 1.14 (docs/safety.md).
+    /// robot stops pulling toward its path. Pulling presses the arm against the barrier,
+    /// where it slides along the inflated estimate into corners between the human and the
+    /// furniture (the obstacle rows hold it there), and a hand that then comes on even at
+    /// 0.5 m/s cannot be escaped: the four episodes of 1,000 below d_min with the pull on
+    /// were such cases (docs/safety.md, "Yielding"). What the robot does instead is
+    /// `yield_motion`. Default inf (off): holding after 0.5 s kept those four above d_min,
+    /// but over the 1,000 seeds 2 others came below it (one a reach at 1.7 m/s, faster than
+    /// the arm can back away) and the task took 1.174 times as long instead of 1.148.
     pub yield_after_s: f64,
-    /// See `yield_after_s`, m. Default 0.3.
+    /// The robot resumes its task once the filter's seen distance is above this, m.
+    /// Default 0.3.
     pub yield_resume_m: f64,
+    /// What a yielding robot does. Default `hold`.
+    pub yield_motion: YieldMotion,
     /// "Near the human" for the peak speed metric: true separation below this, m. Default 0.3.
     pub near_m: f64,
     pub perception: PerceptionConfig,
@@ -104,11 +106,30 @@ impl Default for EvaluationConfig {
             catch_up_speed: 1.0,
             yield_after_s: f64::INFINITY,
             yield_resume_m: 0.3,
+            yield_motion: YieldMotion::Hold,
             near_m: 0.3,
             perception: PerceptionConfig::default(),
             safety: FilterConfig::default(),
         }
     }
+}
+
+/// What a robot does while it yields to the human (`yield_after_s`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum YieldMotion {
+    /// Stands where it is (its nominal command is zero; the filter still moves it out of
+    /// the human's way), and resumes as soon as the seen distance is above
+    /// `yield_resume_m` or its pull toward the path is one every human pair row allows.
+    #[default]
+    Hold,
+    /// Backs away: the joint direction that moves the seen pairs' robot points out along
+    /// their normals (the closest weighted most), at up to half the joints' speed limits,
+    /// until the seen distance is above `yield_resume_m`. Over 1,000 seeds (0.1 s, 0.2 m,
+    /// beside an earlier re-timing) it left 2 episodes below d_min instead of 6, but 10
+    /// went beyond a body region's transient contact speed on the way back to the path
+    /// (the hand approached at up to 1.93 m/s against 1.35; docs/safety.md).
+    Retreat,
 }
 
 /// An evaluation file with its cell loaded.
