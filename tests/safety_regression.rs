@@ -165,7 +165,7 @@ fn episodes_are_deterministic() {
 /// The servos do not outrun the filter. Seed 790 of the README's evaluation evades the hand
 /// with a command the servo's acceleration limit cannot follow; integrated open-loop, the
 /// position command ran ahead, and the servo caught up later toward the forearm at 1.39 m/s,
-/// above its ISO/TS 15066 transient contact speed (1.21 m/s for the default Panda), while
+/// above its ISO/TS 15066 transient contact speed (1.21 m/s for the default iiwa 14), while
 /// the filter commanded about 0.2 m/s. With the command's lead over the servo bounded
 /// (`command_lead_rad`, default 2 mrad) the peak is 0.56 m/s.
 #[test]

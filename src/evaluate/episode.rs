@@ -143,6 +143,8 @@ struct Run<'a> {
     human_kinematics: KinematicState,
     robot_kinematics: KinematicState,
     truth: HumanEstimate,
+    /// The human's end point velocities at the last tick (two per part), m/s.
+    human_v_prev: Vec<Vector>,
     estimate: HumanEstimate,
     q_ref: Vec<f64>,
     qd_ref: Vec<f64>,
@@ -226,6 +228,7 @@ impl<'a> Run<'a> {
             peak_speed_near_human_m_s: 0.0,
             peak_approach_speed_m_s: 0.0,
             peak_human_speed_m_s: 0.0,
+            peak_human_acceleration_m_s2: 0.0,
             peak_approach_by_part_m_s: [0.0; 3],
             contacts_moving: 0,
             contacts_standing: 0,
@@ -246,6 +249,7 @@ impl<'a> Run<'a> {
             human_kinematics,
             robot_kinematics,
             truth: HumanEstimate::default(),
+            human_v_prev: Vec::new(),
             estimate: HumanEstimate::default(),
             q_ref: vec![0.0; dof],
             qd_ref: vec![0.0; dof],
@@ -294,6 +298,19 @@ impl<'a> Run<'a> {
                 .peak_human_speed_m_s
                 .max(p.v_a_W.length())
                 .max(p.v_b_W.length());
+        }
+        // The end points' accelerations over the last tick (none at the first).
+        let velocities = self.truth.parts.iter().flat_map(|p| [p.v_a_W, p.v_b_W]);
+        if self.human_v_prev.len() == 2 * self.truth.parts.len() {
+            for (v, v_prev) in velocities.zip(&mut self.human_v_prev) {
+                metrics.peak_human_acceleration_m_s2 = metrics
+                    .peak_human_acceleration_m_s2
+                    .max((v - *v_prev).length() / dt);
+                *v_prev = v;
+            }
+        } else {
+            self.human_v_prev.clear();
+            self.human_v_prev.extend(velocities);
         }
         model
             .robot

@@ -382,6 +382,12 @@ pub struct EpisodeMetrics {
     /// Fastest end point of any human part, m/s (the human's speed envelope).
     #[serde(with = "lossless::f64")]
     pub peak_human_speed_m_s: f64,
+    /// Largest acceleration of any human part's end point, m/s^2: the change of its
+    /// velocity between control ticks over the tick. A camera that extrapolates a stale
+    /// estimate bounds its error by an assumed acceleration (the noisy camera's
+    /// `human_acceleration_m_s2`); above it, that bound does not hold.
+    #[serde(default, with = "lossless::f64")]
+    pub peak_human_acceleration_m_s2: f64,
     /// Per arm part (upper arm, forearm, hand: [`HumanPart::ARM`]): the robot's fastest
     /// approach toward it at its closest point while the part's true separation was below
     /// the filter's `pfl_distance_m` (`near_m` when PFL is off), m/s. Compare with the

@@ -320,11 +320,12 @@ fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
 impl HumanPerception for NoisyCamera {
     fn name(&self) -> String {
         format!(
-            "camera {:.0} Hz, noise {:.0} mm, dropout {:.0} %, latency {:.0} ms",
+            "camera {:.0} Hz, noise {:.0} mm, dropout {:.0} %, latency {:.0} ms, human acceleration up to {} m/s^2",
             self.config.rate_hz,
             self.config.position_noise_m * 1e3,
             self.config.dropout * 100.0,
-            self.config.latency_s * 1e3
+            self.config.latency_s * 1e3,
+            self.config.human_acceleration_m_s2
         )
     }
 

@@ -22,6 +22,7 @@ pub struct Aggregate {
     pub peak_speed_near_human_m_s: f64,
     pub peak_approach_speed_m_s: f64,
     pub peak_human_speed_m_s: f64,
+    pub peak_human_acceleration_m_s2: f64,
     /// Per arm part ([`workcell_safety::HumanPart::ARM`]): the robot's fastest approach
     /// within the PFL distance, m/s.
     pub peak_approach_by_part_m_s: [f64; 3],
@@ -70,6 +71,10 @@ impl Aggregate {
             peak_human_speed_m_s: episodes
                 .iter()
                 .map(|e| e.peak_human_speed_m_s)
+                .fold(0.0, f64::max),
+            peak_human_acceleration_m_s2: episodes
+                .iter()
+                .map(|e| e.peak_human_acceleration_m_s2)
                 .fold(0.0, f64::max),
             peak_approach_by_part_m_s: std::array::from_fn(|i| {
                 episodes
@@ -122,7 +127,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,simulated_s,wall_s";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,simulated_s,wall_s";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -137,7 +142,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.3},{:.3}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.3},{:.3}",
             e.episode,
             e.seed,
             e.filter,
@@ -153,6 +158,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             e.peak_speed_near_human_m_s,
             e.peak_approach_speed_m_s,
             e.peak_human_speed_m_s,
+            e.peak_human_acceleration_m_s2,
             e.peak_approach_by_part_m_s[0],
             e.peak_approach_by_part_m_s[1],
             e.peak_approach_by_part_m_s[2],
@@ -235,8 +241,8 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
     let ticks = (a.ticks_pass + a.ticks_modified + a.ticks_relaxed + a.ticks_braking).max(1) as f64;
     let _ = writeln!(
         md,
-        "Fastest human part point: {:.2} m/s (ISO 13855 assumes 1.6 to 2.0 m/s).\n",
-        a.peak_human_speed_m_s
+        "Fastest human part point: {:.2} m/s (ISO 13855 assumes 1.6 to 2.0 m/s); largest acceleration: {:.1} m/s^2 (a camera's bound on a stale estimate holds only up to the acceleration it assumes).\n",
+        a.peak_human_speed_m_s, a.peak_human_acceleration_m_s2
     );
     let _ = writeln!(
         md,
@@ -445,6 +451,7 @@ mod tests {
             peak_speed_near_human_m_s: 0.1,
             peak_approach_speed_m_s: 0.1,
             peak_human_speed_m_s: 1.0,
+            peak_human_acceleration_m_s2: 5.0,
             peak_approach_by_part_m_s: [0.0; 3],
             contacts_moving: 1,
             contacts_standing: 2,
