@@ -316,7 +316,7 @@ fn the_reported_human_acceleration_is_the_second_derivative_of_its_motion() {
     use workcell::sim::CellModel;
 
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut evaluation =
+    let evaluation =
         Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
     let seed = 2;
     let (metrics, trace) =
