@@ -76,10 +76,11 @@ pub struct EvaluationConfig {
     /// where it slides along the inflated estimate into corners between the human and the
     /// furniture (the obstacle rows hold it there), and a hand that then comes on even at
     /// 0.5 m/s cannot be escaped: the four episodes of 1,000 below d_min with the pull on
-    /// were such cases (docs/safety.md, "Yielding"). What the robot does instead is
-    /// `yield_motion`. Default inf (off): holding after 0.5 s kept those four above d_min,
-    /// but over the 1,000 seeds 2 others came below it (one a reach at 1.7 m/s, faster than
-    /// the arm can back away) and the task took 1.174 times as long instead of 1.148.
+    /// were such cases (docs/safety.md, "Where the last four come from"). What the robot
+    /// does instead is `yield_motion`. Default inf (off): holding after 0.5 s kept those
+    /// four above d_min, but over the 1,000 seeds 2 others came below it (one a reach at
+    /// 1.7 m/s, faster than the arm can back away) and the task took 1.174 times as long
+    /// instead of 1.148.
     pub yield_after_s: f64,
     /// The robot resumes its task once the filter's seen distance is above this, m.
     /// Default 0.3.
