@@ -893,6 +893,14 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         "catch_up_speed: must be within 1 (off) and 3",
     );
     bad(
+        &format!("{cell_line}catch_up_beyond_m = 0.05\n"),
+        "catch_up_beyond_m: must be above safety.d_min_m = 0.1 m",
+    );
+    bad(
+        &format!("{cell_line}catch_up_beyond_m = nan\n"),
+        "catch_up_beyond_m: must be above safety.d_min_m",
+    );
+    bad(
         &format!("{cell_line}yield_after_s = -1.0\n"),
         "yield_after_s: must be >= 0",
     );

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use workcell::evaluate::report::Aggregate;
-use workcell::evaluate::{EpisodeMetrics, Evaluation, run_episode};
+use workcell::evaluate::{EpisodeMetrics, EpisodeTrace, Evaluation, run_episode};
 use workcell::safety::FilterMode;
 
 #[derive(Debug, Deserialize)]
@@ -174,8 +174,12 @@ fn the_servo_does_not_outrun_the_filter() {
     use workcell::safety::iso::{BodyRegion, effective_robot_mass_kg};
 
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let evaluation =
+    let mut evaluation =
         Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
+    // The controller of the run that found the case: pressing toward the path (no yielding)
+    // and re-timing only with no part in view.
+    evaluation.config.yield_after_s = f64::INFINITY;
+    evaluation.config.catch_up_beyond_m = f64::INFINITY;
     let robot = workcell::robots::RobotModel::load(
         &workcell::sim::Scenario::resolve_model_path(
             &evaluation.scenario.robot.model,
@@ -209,6 +213,17 @@ fn the_servo_does_not_outrun_the_filter() {
     assert!(unbounded > limit, "{unbounded} <= {limit}");
 }
 
+/// The README's evaluation (`configs/evaluate.toml`).
+fn readme_evaluation() -> Evaluation {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads")
+}
+
+/// One episode of `evaluation` with the QP filter: its metrics and trace.
+fn run_qp(evaluation: &Evaluation, seed: u64) -> (EpisodeMetrics, EpisodeTrace) {
+    run_episode(evaluation, FilterMode::Qp, 0, seed, None, |_| {}).expect("episode runs")
+}
+
 /// Re-timing wins back the time the filter cost, and never near the human. Seed 5 of the
 /// README's evaluation loses 7.6 s of its 12 s task to a hand that lingers on the tool's
 /// path (task time 19.56 s on plan). With `catch_up_speed` 1.75 the task runs faster than
@@ -220,12 +235,11 @@ fn the_servo_does_not_outrun_the_filter() {
 /// at ISO 13855's 2 m/s no part crosses 0.3 m in one tick.
 #[test]
 fn catching_up_wins_back_time_but_never_near_the_human() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut evaluation =
-        Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
-    let run = |evaluation: &Evaluation| {
-        run_episode(evaluation, FilterMode::Qp, 0, 5, None, |_| {}).expect("episode runs")
-    };
+    let mut evaluation = readme_evaluation();
+    let run = |evaluation: &Evaluation| run_qp(evaluation, 5);
+    // Re-timing only while no part is within the detection distance (the next test covers
+    // `catch_up_beyond_m`).
+    evaluation.config.catch_up_beyond_m = f64::INFINITY;
     evaluation.config.catch_up_speed = 1.0;
     let (planned, planned_trace) = run(&evaluation);
     evaluation.config.catch_up_speed = 1.75;
@@ -251,6 +265,53 @@ fn catching_up_wins_back_time_but_never_near_the_human() {
     assert_eq!(retimed.violations, 0);
 }
 
+/// Re-timing beside the human: with `catch_up_beyond_m` the task also runs faster than
+/// planned while every part the filter sees is beyond that distance, not only when none is
+/// within its detection distance, and wins back more of the time the filter cost. Seed 5 of
+/// the README's evaluation (the hand lingers on the tool's path): the task finishes sooner,
+/// faster than planned at true separations below the detection distance (0.6 m), where
+/// re-timing without the key keeps the plan's speed, and never within the power and force
+/// limiting distance (0.3 m): the seen distance is taken on the estimate inflated by its
+/// bound, so a part seen beyond 0.4 m is truly beyond it, less what it covers in one 4 ms
+/// tick.
+#[test]
+fn catching_up_beside_the_human_wins_back_more_time_and_keeps_out_of_reach() {
+    let mut evaluation = readme_evaluation();
+    let run = |evaluation: &Evaluation| run_qp(evaluation, 5);
+    evaluation.config.catch_up_beyond_m = f64::INFINITY;
+    let (clear_only, clear_trace) = run(&evaluation);
+    evaluation.config.catch_up_beyond_m = 0.4;
+    let (beside, trace) = run(&evaluation);
+    let (t_clear, t_beside) = (
+        clear_only.task_time_s.expect("finishes"),
+        beside.task_time_s.expect("finishes"),
+    );
+    // The smallest true separation at which each run went faster than its plan.
+    let closest_fast = |trace: &EpisodeTrace| {
+        trace
+            .separation_m
+            .iter()
+            .zip(&trace.task_speed)
+            .filter(|(_, s)| **s > 1.0)
+            .map(|(d, _)| *d)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (d_clear, d_beside) = (closest_fast(&clear_trace), closest_fast(&trace));
+    eprintln!(
+        "task time {t_clear:.2} s catching up with no part in view, {t_beside:.2} s beside \
+         the human; faster than planned down to {d_clear:.3} m and {d_beside:.3} m"
+    );
+    assert!(t_beside < t_clear - 0.5, "{t_beside} vs {t_clear}");
+    let detection = evaluation.config.safety.detection_m;
+    assert!(d_clear >= detection, "{d_clear}");
+    assert!(d_beside < detection, "{d_beside}");
+    assert!(
+        d_beside > evaluation.config.safety.pfl_distance_m,
+        "{d_beside}"
+    );
+    assert_eq!(beside.violations, 0);
+}
+
 /// Yielding keeps the arm out of reach while it waits. In seed 836 of the README's
 /// evaluation the hand lingers beside the arm, which the task pulls toward its path: the
 /// filter holds it at the barrier (seen distance 0.10-0.12 m, true 0.21 m) for more than
@@ -272,7 +333,10 @@ fn yielding_keeps_the_arm_out_of_reach_instead_of_waiting_at_the_barrier() {
             .expect("episode runs")
             .0
     };
-    assert!(evaluation.config.yield_after_s.is_infinite());
+    // The arm that waits at the barrier: no yielding, and re-timing only with no part in
+    // view (as when this case was found).
+    evaluation.config.yield_after_s = f64::INFINITY;
+    evaluation.config.catch_up_beyond_m = f64::INFINITY;
     let waiting = run(&evaluation);
     evaluation.config.yield_after_s = 0.5;
     evaluation.config.yield_resume_m = 0.3;

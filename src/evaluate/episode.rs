@@ -159,6 +159,9 @@ struct Run<'a> {
     speed: f64,
     /// No human part within the filter's detection distance at the last tick.
     clear: bool,
+    /// The task may run faster than planned: `clear`, or every part seen beyond
+    /// `catch_up_beyond_m` with no row relaxed, at the last tick.
+    may_catch_up: bool,
     /// The filter's smallest seen distance at the last tick (infinite: none in view), m.
     seen_m: f64,
     /// How long the task has been held off its path near the human, s.
@@ -260,6 +263,7 @@ impl<'a> Run<'a> {
             progress: 0.0,
             speed: 1.0,
             clear: true,
+            may_catch_up: true,
             seen_m: f64::INFINITY,
             blocked_s: 0.0,
             yielding: false,
@@ -432,7 +436,8 @@ impl<'a> Run<'a> {
 
     /// The nominal controller: tracks the task trajectory at the progress variable, which
     /// advances only as fast as the robot keeps up, and faster than planned (up to
-    /// `catch_up_speed`) while the task is behind schedule and no human part is near. Sets
+    /// `catch_up_speed`) while the task is behind schedule and no human part is near
+    /// (`may_catch_up`). Sets
     /// `qdot_nom`; returns the rate at which progress advances.
     fn nominal(&mut self, t: f64, dt: f64) -> f64 {
         let c = self.c;
@@ -440,7 +445,7 @@ impl<'a> Run<'a> {
         // drops to the plan's at once when a human part comes into view: ramped down over
         // 75 ms, it let the arm approach the hand at 0.95 m/s instead of 0.72 (100 seeds)
         // and seed 64 (perfect perception) come to 0.092 m.
-        let target = if self.clear && self.progress < t - dt {
+        let target = if self.may_catch_up && self.progress < t - dt {
             c.catch_up_speed
         } else {
             1.0
@@ -554,6 +559,9 @@ impl<'a> Run<'a> {
         // Clear: the filter saw the human (no brake for a missing estimate) and no part near.
         self.clear = out.active_pairs == 0 && out.status == FilterStatus::Pass;
         self.seen_m = out.min_distance_m;
+        self.may_catch_up = self.clear
+            || (out.min_distance_m > self.c.catch_up_beyond_m
+                && matches!(out.status, FilterStatus::Pass | FilterStatus::Modified));
         tracing::trace!(
             episode = self.metrics.episode,
             t,
