@@ -437,8 +437,7 @@ impl<'a> Run<'a> {
     /// The nominal controller: tracks the task trajectory at the progress variable, which
     /// advances only as fast as the robot keeps up, and faster than planned (up to
     /// `catch_up_speed`) while the task is behind schedule and no human part is near
-    /// (`may_catch_up`). Sets
-    /// `qdot_nom`; returns the rate at which progress advances.
+    /// (`may_catch_up`). Sets `qdot_nom`; returns the rate at which progress advances.
     fn nominal(&mut self, t: f64, dt: f64) -> f64 {
         let c = self.c;
         // The speed ramps up gently (the trajectory's accelerations grow with its square) and

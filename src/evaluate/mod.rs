@@ -68,7 +68,7 @@ pub struct EvaluationConfig {
     /// to this many times its planned speed, winning back time the filter cost. The joints'
     /// velocity limits, the filter's rows and power and force limiting still bound every
     /// command; the speed drops back to 1 on the tick a part is within the detection
-    /// distance. Default 1 (off); at most 3.
+    /// distance (or within `catch_up_beyond_m`, when set). Default 1 (off); at most 3.
     pub catch_up_speed: f64,
     /// Re-timing beside the human: the task may also run faster than its plan while every
     /// human part the filter sees is farther than this (on the inflated estimate, m) and the
