@@ -162,6 +162,26 @@ fn episodes_are_deterministic() {
     );
 }
 
+/// The README's evaluation (`configs/evaluate.toml`).
+fn readme_evaluation() -> Evaluation {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads")
+}
+
+/// The README's evaluation with the controller the older cases were found with: pressing
+/// toward the path (no yielding) and re-timing only with no part in view.
+fn pressing_evaluation() -> Evaluation {
+    let mut evaluation = readme_evaluation();
+    evaluation.config.yield_after_s = f64::INFINITY;
+    evaluation.config.catch_up_beyond_m = f64::INFINITY;
+    evaluation
+}
+
+/// One episode of `evaluation` with the QP filter: its metrics and trace.
+fn run_qp(evaluation: &Evaluation, seed: u64) -> (EpisodeMetrics, EpisodeTrace) {
+    run_episode(evaluation, FilterMode::Qp, 0, seed, None, |_| {}).expect("episode runs")
+}
+
 /// The servos do not outrun the filter. Seed 790 of the README's evaluation evades the hand
 /// with a command the servo's acceleration limit cannot follow; integrated open-loop, the
 /// position command ran ahead, and the servo caught up later toward the forearm at 1.39 m/s,
@@ -173,13 +193,7 @@ fn the_servo_does_not_outrun_the_filter() {
     use workcell::safety::HumanPart;
     use workcell::safety::iso::{BodyRegion, effective_robot_mass_kg};
 
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut evaluation =
-        Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
-    // The controller of the run that found the case: pressing toward the path (no yielding)
-    // and re-timing only with no part in view.
-    evaluation.config.yield_after_s = f64::INFINITY;
-    evaluation.config.catch_up_beyond_m = f64::INFINITY;
+    let evaluation = pressing_evaluation();
     let robot = workcell::robots::RobotModel::load(
         &workcell::sim::Scenario::resolve_model_path(
             &evaluation.scenario.robot.model,
@@ -211,17 +225,6 @@ fn the_servo_does_not_outrun_the_filter() {
     assert!(bounded <= limit, "{bounded} > {limit}");
     // The control: the same episode with an unbounded command breaks the limit.
     assert!(unbounded > limit, "{unbounded} <= {limit}");
-}
-
-/// The README's evaluation (`configs/evaluate.toml`).
-fn readme_evaluation() -> Evaluation {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads")
-}
-
-/// One episode of `evaluation` with the QP filter: its metrics and trace.
-fn run_qp(evaluation: &Evaluation, seed: u64) -> (EpisodeMetrics, EpisodeTrace) {
-    run_episode(evaluation, FilterMode::Qp, 0, seed, None, |_| {}).expect("episode runs")
 }
 
 /// Re-timing wins back the time the filter cost, and never near the human. Seed 5 of the
@@ -324,19 +327,10 @@ fn catching_up_beside_the_human_wins_back_more_time_and_keeps_out_of_reach() {
 fn yielding_keeps_the_arm_out_of_reach_instead_of_waiting_at_the_barrier() {
     use workcell::evaluate::YieldMotion;
 
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut evaluation =
-        Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
+    // The arm that waits at the barrier, as when this case was found.
+    let mut evaluation = pressing_evaluation();
     let d_min = evaluation.config.safety.d_min_m;
-    let run = |evaluation: &Evaluation| {
-        run_episode(evaluation, FilterMode::Qp, 0, 836, None, |_| {})
-            .expect("episode runs")
-            .0
-    };
-    // The arm that waits at the barrier: no yielding, and re-timing only with no part in
-    // view (as when this case was found).
-    evaluation.config.yield_after_s = f64::INFINITY;
-    evaluation.config.catch_up_beyond_m = f64::INFINITY;
+    let run = |evaluation: &Evaluation| run_qp(evaluation, 836).0;
     let waiting = run(&evaluation);
     evaluation.config.yield_after_s = 0.5;
     evaluation.config.yield_resume_m = 0.3;
@@ -379,9 +373,7 @@ fn the_reported_human_acceleration_is_the_second_derivative_of_its_motion() {
     use workcell::safety::{HumanEstimate, HumanGeometry};
     use workcell::sim::CellModel;
 
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let evaluation =
-        Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads");
+    let evaluation = readme_evaluation();
     let seed = 2;
     let (metrics, trace) =
         run_episode(&evaluation, FilterMode::None, 0, seed, None, |_| {}).expect("episode runs");
