@@ -152,6 +152,8 @@ def main() -> int:
           f"{o['solve_us'] / o['ours_us']:.2f}x / {o['solve_p90_us'] / o['ours_p90_us']:.2f}x |")
     print(f"| distances + Jacobian rows | {s['distance_jacobian_us']['median']:.2f} us | - | - |")
     print(f"| full control tick (median / p90) | {s['tick_us']['median']:.0f} / {s['tick_us']['p90']:.0f} us | - | - |")
+    ahead = s['tick_anticipating_0.15_s_us']
+    print(f"| same, anticipating 0.15 s (median / p90) | {ahead['median']:.0f} / {ahead['p90']:.0f} us | - | - |")
     print()
     print(f"Agreement: Coal distances within {coal_result['max_difference_m']:.1e} m of ours; OSQP commands within "
           f"{osqp_default['max_difference']:.1e} rad/s (eps 1e-3) and {osqp_tight['max_difference']:.1e} rad/s "

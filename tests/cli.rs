@@ -921,6 +921,15 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         &format!("{cell_line}[perception]\ndropout = 1.5\n"),
         "perception.dropout",
     );
+    bad(
+        &format!("{cell_line}[safety]\nanticipation_s = nan\n"),
+        "safety.anticipation_s",
+    );
+    // Only the oracle of the simulator can see the future, not a camera.
+    bad(
+        &format!("{cell_line}[perception]\nkind = \"noisy\"\nforesight_s = 0.5\n"),
+        "perception.foresight_s: only the ground_truth perception can see the future",
+    );
     bad(&format!("{cell_line}speed = 3\n"), "unknown field");
     bad(
         &format!(

@@ -55,6 +55,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut geometry = RobotGeometry::new(&robot)?;
     let config = FilterConfig::default();
     let mut filter = SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config.clone())?;
+    // The same tick guarding the parts 0.15 s ahead as well (`configs/evaluate.toml`).
+    let mut anticipating = SafetyFilter::new(
+        &robot,
+        Pose::IDENTITY,
+        FilterMode::Qp,
+        FilterConfig {
+            anticipation_s: 0.15,
+            ..config.clone()
+        },
+    )?;
     let mut qp = QpFilter::new(robot.dof(), config.max_pairs)?;
     let limits = robot.position_limits();
     let velocity: Vec<f64> = robot
@@ -66,8 +76,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut rng = ChaCha8Rng::seed_from_u64(2026);
     let mut kinematics = KinematicState::new(&robot);
 
-    let (mut t_distance, mut t_pairs, mut t_qp, mut t_tick) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut t_distance, mut t_pairs, mut t_qp, mut t_tick, mut t_tick_ahead) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut capsule_pairs = Vec::new(); // [a(3), b(3), r, a(3), b(3), r, distance]
     let mut qps = Vec::new();
     let mut active_rows = Vec::new();
@@ -171,6 +181,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let out = filter.tick(&robot, &q, &qdot_nom, &human, 0.004);
             std::hint::black_box(out.status == FilterStatus::Pass);
         }));
+        t_tick_ahead.push(median_us(50, || {
+            anticipating.reset();
+            let out = anticipating.tick(&robot, &q, &qdot_nom, &human, 0.004);
+            std::hint::black_box(out.status == FilterStatus::Pass);
+        }));
         for (link, c) in geometry.capsules(&kinematics) {
             for p in &human.parts {
                 let inflated = p.capsule.inflated(human.uncertainty_m);
@@ -205,6 +220,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "distance_jacobian_us": {"median": percentile(&mut t_pairs, 0.5), "p90": percentile(&mut t_pairs, 0.9)},
         "qp_us": {"median": percentile(&mut t_qp, 0.5), "p90": percentile(&mut t_qp, 0.9)},
         "tick_us": {"median": percentile(&mut t_tick, 0.5), "p90": percentile(&mut t_tick, 0.9)},
+        "tick_anticipating_0.15_s_us": {"median": percentile(&mut t_tick_ahead, 0.5), "p90": percentile(&mut t_tick_ahead, 0.9)},
     });
     println!("{}", serde_json::to_string_pretty(&summary)?);
     if let Some(path) = out {

@@ -7,7 +7,7 @@ use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
 
 use crate::error::{Result, SafetyError};
 use crate::geometry::{Capsule, SignedDistancePair, capsule_capsule, shape_capsule};
-use crate::human::{HumanEstimate, PartEstimate};
+use crate::human::{AnticipatedPart, HumanEstimate, PartEstimate};
 
 /// A segment-end row joins a pair's rows when it is within this of the pair's distance, m.
 const END_ROW_MARGIN_M: f64 = 0.02;
@@ -35,6 +35,56 @@ fn end_pairs(
         b0,
         b1,
     ]
+}
+
+/// Appends the rows of one link against human capsules (a part, or a copy of one).
+struct PairRows<'a> {
+    robot: &'a RobotModel,
+    kinematics: &'a KinematicState,
+    link: LinkId,
+    link_capsule: &'a Capsule,
+    uncertainty_rate_m_s: f64,
+    jacobian: &'a mut Jacobian,
+    out: &'a mut Vec<PairConstraint>,
+}
+
+impl PairRows<'_> {
+    /// The rows of `pair`, the link against `capsule` (the inflated `estimate`).
+    fn push(&mut self, estimate: &PartEstimate, capsule: &Capsule, pair: SignedDistancePair) {
+        self.push_one(estimate, pair);
+        // Where the axes are (nearly) parallel the closest points are not unique and the
+        // distance has a kink: turning either way brings one end closer. A single row's
+        // gradient then points across the kink and the QP chatters over it, losing distance
+        // every tick. Rows for the segment ends close to the minimum cover both sides.
+        for end in end_pairs(self.link, self.link_capsule, estimate.part, capsule) {
+            if end.distance_m <= pair.distance_m + END_ROW_MARGIN_M
+                && (end.p_WA - pair.p_WA).length() > END_ROW_SEPARATION_M
+            {
+                self.push_one(estimate, end);
+            }
+        }
+    }
+
+    fn push_one(&mut self, estimate: &PartEstimate, p: SignedDistancePair) {
+        self.robot
+            .point_jacobian(self.kinematics, self.link, p.p_WA, self.jacobian);
+        let mut normal_jacobian = [0.0; MAX_DOF];
+        for (j, col) in self.jacobian.columns().iter().enumerate() {
+            normal_jacobian[j] =
+                p.nhat_BA_W.x * col[0] + p.nhat_BA_W.y * col[1] + p.nhat_BA_W.z * col[2];
+        }
+        self.out.push(PairConstraint {
+            pair: p,
+            normal_jacobian,
+            // Only the approach counts: a withdrawing human is treated as standing, so that
+            // the arm cannot chase a hand that may turn back within the perception latency.
+            human_normal_speed_m_s: p.nhat_BA_W.dot(estimate.velocity_at(p.t_B)).max(0.0)
+                + self.uncertainty_rate_m_s,
+            max_approach_m_s: f64::INFINITY,
+            obstacle: false,
+            escape_margin_m: 0.0,
+        });
+    }
 }
 
 /// A static box of the cell the arm must not be pushed into.
@@ -126,6 +176,8 @@ pub struct RobotGeometry {
     links: Vec<GuardedLink>,
     dof: usize,
     jacobian: Jacobian,
+    /// Per human part, its normal against the link at hand (scratch of the pair queries).
+    normals: Vec<workcell_robots::math::Vector>,
 }
 
 #[derive(Debug, Clone)]
@@ -174,6 +226,7 @@ impl RobotGeometry {
             links,
             dof: robot.dof(),
             jacobian: Jacobian::zeros(robot.dof()),
+            normals: Vec::new(),
         })
     }
 
@@ -218,7 +271,26 @@ impl RobotGeometry {
         detection_m: f64,
         out: &mut Vec<PairConstraint>,
     ) {
+        self.pair_constraints_ahead(robot, kinematics, human, &[], detection_m, out);
+    }
+
+    /// [`RobotGeometry::pair_constraints`], and the constraints of the parts' anticipated
+    /// copies `ahead` ([`HumanEstimate::anticipate_into`]), inflated alike. A copy counts
+    /// for a link only while its path has not carried it past the link: where the copy's
+    /// normal points against the normal of the part it copies (the path crosses or passes
+    /// the link), its row would push the link back toward the part where it is, and it gets
+    /// none.
+    pub fn pair_constraints_ahead(
+        &mut self,
+        robot: &RobotModel,
+        kinematics: &KinematicState,
+        human: &HumanEstimate,
+        ahead: &[AnticipatedPart],
+        detection_m: f64,
+        out: &mut Vec<PairConstraint>,
+    ) {
         out.clear();
+        let margin = human.uncertainty_m;
         for g in &self.links {
             if !g.movable {
                 continue;
@@ -227,47 +299,33 @@ impl RobotGeometry {
                 .capsule
                 .segment_in_world(kinematics.link_pose(g.capsule.link));
             let link_capsule = Capsule::new(a_W, b_W, g.capsule.radius_m);
+            let mut rows = PairRows {
+                robot,
+                kinematics,
+                link: g.capsule.link,
+                link_capsule: &link_capsule,
+                uncertainty_rate_m_s: human.uncertainty_rate_m_s,
+                jacobian: &mut self.jacobian,
+                out,
+            };
+            self.normals.clear();
             for (estimate, capsule) in human.inflated() {
                 let pair = capsule_capsule(g.capsule.link, &link_capsule, estimate.part, &capsule);
-                if pair.distance_m > detection_m {
-                    continue;
+                self.normals.push(pair.nhat_BA_W);
+                if pair.distance_m <= detection_m {
+                    rows.push(estimate, &capsule, pair);
                 }
-                let mut push = |p: SignedDistancePair| {
-                    robot.point_jacobian(kinematics, g.capsule.link, p.p_WA, &mut self.jacobian);
-                    let mut normal_jacobian = [0.0; MAX_DOF];
-                    for (j, col) in self.jacobian.columns().iter().enumerate() {
-                        normal_jacobian[j] = p.nhat_BA_W.x * col[0]
-                            + p.nhat_BA_W.y * col[1]
-                            + p.nhat_BA_W.z * col[2];
-                    }
-                    out.push(PairConstraint {
-                        pair: p,
-                        normal_jacobian,
-                        // Only the approach counts: a withdrawing human is treated as standing,
-                        // so that the arm cannot chase a hand that may turn back within the
-                        // perception latency.
-                        human_normal_speed_m_s: p
-                            .nhat_BA_W
-                            .dot(estimate.velocity_at(p.t_B))
-                            .max(0.0)
-                            + human.uncertainty_rate_m_s,
-                        max_approach_m_s: f64::INFINITY,
-                        obstacle: false,
-                        escape_margin_m: 0.0,
-                    });
-                };
-                push(pair);
-                // Where the axes are (nearly) parallel the closest points are not unique and
-                // the distance has a kink: turning either way brings one end closer. A single
-                // row's gradient then points across the kink and the QP chatters over it,
-                // losing distance every tick. Rows for the segment ends close to the minimum
-                // cover both sides.
-                for end in end_pairs(g.capsule.link, &link_capsule, estimate.part, &capsule) {
-                    if end.distance_m <= pair.distance_m + END_ROW_MARGIN_M
-                        && (end.p_WA - pair.p_WA).length() > END_ROW_SEPARATION_M
-                    {
-                        push(end);
-                    }
+            }
+            for copy in ahead {
+                let capsule = copy.estimate.capsule.inflated(margin);
+                let pair =
+                    capsule_capsule(g.capsule.link, &link_capsule, copy.estimate.part, &capsule);
+                let passed = self
+                    .normals
+                    .get(copy.of)
+                    .is_some_and(|n| n.dot(pair.nhat_BA_W) < 0.0);
+                if pair.distance_m <= detection_m && !passed {
+                    rows.push(&copy.estimate, &capsule, pair);
                 }
             }
         }

@@ -7,7 +7,7 @@ use workcell_robots::{KinematicState, RobotModel};
 
 use crate::distance::{PairConstraint, RobotGeometry};
 use crate::error::{Result, invalid};
-use crate::human::{HumanEstimate, HumanPart};
+use crate::human::{AnticipatedPart, HumanEstimate, HumanPart};
 use crate::iso::{BodyRegion, SsmConfig, effective_robot_mass_kg};
 use crate::qp::{QpFailure, QpFilter};
 
@@ -85,6 +85,14 @@ pub struct FilterConfig {
     /// speed), so that it starts giving way before a hand can outrun it. s; 0 turns it off.
     /// Default 0.
     pub escape_horizon_s: f64,
+    /// Anticipation: the filter guards each moving human part also where it will be if it
+    /// keeps its estimated velocity for up to this long, s (copies of its capsule along that
+    /// path, [`HumanEstimate::anticipate_into`]). A part coming at the arm is met earlier, so
+    /// that the arm starts giving way while the hand is still setting off, not once it is
+    /// there; a resting part costs nothing. The rows of the part where it is now stay as
+    /// they are. QP only: speed and separation monitoring counts the human's travel in its
+    /// protective separation distance already. 0 turns it off. Default 0.
+    pub anticipation_s: f64,
     /// The QP keeps each link this far from the cell's static obstacles
     /// ([`SafetyFilter::set_obstacles`]) while it evades the human, m. Default 0.02.
     pub obstacle_clearance_m: f64,
@@ -117,6 +125,7 @@ impl Default for FilterConfig {
             pfl_distance_m: 0.3,
             pfl_deceleration_m_s2: 2.5,
             escape_horizon_s: 0.0,
+            anticipation_s: 0.0,
             obstacle_clearance_m: 0.02,
             obstacle_detection_m: 0.2,
             obstacle_gamma_per_s: 25.0,
@@ -156,6 +165,7 @@ impl FilterConfig {
             ("safety.payload_kg", self.payload_kg),
             ("safety.obstacle_clearance_m", self.obstacle_clearance_m),
             ("safety.escape_horizon_s", self.escape_horizon_s),
+            ("safety.anticipation_s", self.anticipation_s),
             ("safety.obstacle_detection_m", self.obstacle_detection_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
@@ -266,8 +276,9 @@ pub struct FilterOutput {
     pub status: FilterStatus,
     /// Pairs within the detection distance.
     pub active_pairs: usize,
-    /// Smallest capsule distance the filter saw (robot capsules against the inflated human),
-    /// m; infinite when no pair was within the detection distance.
+    /// Smallest capsule distance the filter saw (robot capsules against the inflated human,
+    /// and its anticipated copies when `anticipation_s` is on), m; infinite when no pair was
+    /// within the detection distance.
     pub min_distance_m: f64,
     /// SSM: the factor applied to the nominal command; QP: 1 (see the command itself).
     pub scale: f64,
@@ -297,6 +308,8 @@ pub struct SafetyFilter {
     /// [`HumanPart::ALL`] (infinite when PFL is off).
     pfl_limits_m_s: [f64; 4],
     obstacles: Vec<crate::distance::Obstacle>,
+    /// The human parts' anticipated copies of this tick (`anticipation_s`).
+    ahead: Vec<AnticipatedPart>,
 }
 
 impl SafetyFilter {
@@ -366,6 +379,7 @@ impl SafetyFilter {
         }
         Ok(Self {
             obstacles: Vec::new(),
+            ahead: Vec::new(),
             pfl_limits_m_s,
             mode,
             geometry,
@@ -490,6 +504,11 @@ impl SafetyFilter {
         if robot.forward_kinematics(q, &mut self.kinematics).is_err() {
             return self.brake(out, BrakeReason::InvalidRobotInput, dt_s);
         }
+        if self.mode == FilterMode::Qp {
+            human.anticipate_into(self.config.anticipation_s, &mut self.ahead);
+        } else {
+            self.ahead.clear();
+        }
         self.measure_pairs(robot, human, &mut out);
 
         // Joint bounds: velocity limit, acceleration from the last command, position limit.
@@ -546,10 +565,11 @@ impl SafetyFilter {
     /// The pairs within the detection distance at the configuration in `self.kinematics`,
     /// counted and their smallest distance recorded in `out`.
     fn measure_pairs(&mut self, robot: &RobotModel, human: &HumanEstimate, out: &mut FilterOutput) {
-        self.geometry.pair_constraints(
+        self.geometry.pair_constraints_ahead(
             robot,
             &self.kinematics,
             human,
+            &self.ahead,
             self.config.detection_m,
             &mut self.pairs,
         );

@@ -48,6 +48,19 @@ pub struct HumanEstimate {
     pub uncertainty_rate_m_s: f64,
 }
 
+/// At most this many copies of one part along its anticipated path
+/// ([`HumanEstimate::anticipate_into`]).
+pub const MAX_ANTICIPATED_COPIES: usize = 8;
+
+/// A copy of an estimated part carried along its velocity (anticipation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AnticipatedPart {
+    /// Index in the estimate's `parts` of the part this copies.
+    pub of: usize,
+    /// The part where it will be: its capsule moved, its velocities as estimated.
+    pub estimate: PartEstimate,
+}
+
 impl HumanEstimate {
     /// The inflated capsule of each part.
     pub fn inflated(&self) -> impl Iterator<Item = (&PartEstimate, Capsule)> {
@@ -55,6 +68,42 @@ impl HumanEstimate {
         self.parts
             .iter()
             .map(move |p| (p, p.capsule.inflated(margin)))
+    }
+
+    /// Copies of every part that moves, carried along its end points' velocities to evenly
+    /// spaced instants up to `horizon_s` ahead, into `out` (cleared first). The copies of a
+    /// part are spaced at most its radius apart (at most [`MAX_ANTICIPATED_COPIES`]), so that
+    /// together they cover the path it sweeps if it keeps its velocity; a part that would
+    /// move less than a tenth of its radius over the horizon gets none, and so does every
+    /// part when the horizon is not positive. Allocates only while `out` grows.
+    pub fn anticipate_into(&self, horizon_s: f64, out: &mut Vec<AnticipatedPart>) {
+        out.clear();
+        if !(horizon_s.is_finite() && horizon_s > 0.0) {
+            return;
+        }
+        for (of, p) in self.parts.iter().enumerate() {
+            let travel_m = p.v_a_W.length().max(p.v_b_W.length()) * horizon_s;
+            let radius_m = p.capsule.radius_m.max(1e-3);
+            if travel_m.is_nan() || travel_m < 0.1 * radius_m {
+                continue;
+            }
+            let copies =
+                ((travel_m / radius_m).ceil() as usize).clamp(1, MAX_ANTICIPATED_COPIES);
+            for k in 1..=copies {
+                let tau = horizon_s * k as f64 / copies as f64;
+                out.push(AnticipatedPart {
+                    of,
+                    estimate: PartEstimate {
+                        capsule: Capsule::new(
+                            p.capsule.a_W + p.v_a_W * tau,
+                            p.capsule.b_W + p.v_b_W * tau,
+                            p.capsule.radius_m,
+                        ),
+                        ..*p
+                    },
+                });
+            }
+        }
     }
 }
 

@@ -31,6 +31,6 @@ pub use distance::{MAX_DOF, Obstacle, PairConstraint, RobotGeometry};
 pub use error::{Result, SafetyError};
 pub use filter::{BrakeReason, FilterConfig, FilterMode, FilterOutput, FilterStatus, SafetyFilter};
 pub use geometry::{Capsule, SignedDistancePair};
-pub use human::{HumanEstimate, HumanGeometry, HumanPart, PartEstimate};
+pub use human::{AnticipatedPart, HumanEstimate, HumanGeometry, HumanPart, PartEstimate};
 pub use iso::{BodyRegion, SsmConfig};
 pub use qp::{QpFailure, QpFilter, QpProblem};

@@ -31,7 +31,7 @@ use crate::error::{Error, Result};
 
 pub use episode::{Recording, record_episode, run_episode};
 pub use perception::{
-    GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig, PerceptionInput,
+    Foresight, GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig, PerceptionInput,
     PerceptionKind,
 };
 
