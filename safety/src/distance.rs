@@ -44,6 +44,8 @@ struct PairRows<'a> {
     link: LinkId,
     link_capsule: &'a Capsule,
     uncertainty_rate_m_s: f64,
+    /// The rows are an anticipated copy's.
+    anticipated: bool,
     jacobian: &'a mut Jacobian,
     out: &'a mut Vec<PairConstraint>,
 }
@@ -82,6 +84,7 @@ impl PairRows<'_> {
                 + self.uncertainty_rate_m_s,
             max_approach_m_s: f64::INFINITY,
             obstacle: false,
+            anticipated: self.anticipated,
             escape_margin_m: 0.0,
         });
     }
@@ -134,6 +137,12 @@ pub struct PairConstraint {
     /// nothing. The filter keeps the arm from being pushed into the furniture while it
     /// evades the human.
     pub obstacle: bool,
+    /// A row against an anticipated copy of a human part
+    /// ([`HumanEstimate::anticipate_into`]) rather than the part where it is: it ranks after
+    /// the parts' and the obstacles' rows when the QP's rows run out, never weighs more than
+    /// the closest part's row in the slack, and is not the closest pair whose violation the
+    /// filter judges.
+    pub anticipated: bool,
     /// Extra separation this pair keeps beyond d_min, m: where the arm cannot move its
     /// witness point away along the normal as fast as a human may approach, the shortfall
     /// times the filter's `escape_horizon_s` (0 elsewhere).
@@ -178,6 +187,8 @@ pub struct RobotGeometry {
     jacobian: Jacobian,
     /// Per human part, its normal against the link at hand (scratch of the pair queries).
     normals: Vec<workcell_robots::math::Vector>,
+    /// Per human part, its anticipated copy closest to the link at hand and that distance.
+    closest_copy: Vec<Option<(usize, f64)>>,
 }
 
 #[derive(Debug, Clone)]
@@ -227,6 +238,7 @@ impl RobotGeometry {
             dof: robot.dof(),
             jacobian: Jacobian::zeros(robot.dof()),
             normals: Vec::new(),
+            closest_copy: Vec::new(),
         })
     }
 
@@ -274,12 +286,13 @@ impl RobotGeometry {
         self.pair_constraints_ahead(robot, kinematics, human, &[], detection_m, out);
     }
 
-    /// [`RobotGeometry::pair_constraints`], and the constraints of the parts' anticipated
-    /// copies `ahead` ([`HumanEstimate::anticipate_into`]), inflated alike. A copy counts
-    /// for a link only while its path has not carried it past the link: where the copy's
-    /// normal points against the normal of the part it copies (the path crosses or passes
-    /// the link), its row would push the link back toward the part where it is, and it gets
-    /// none.
+    /// [`RobotGeometry::pair_constraints`], and for each link and part the constraint of the
+    /// part's anticipated copy (`ahead`, [`HumanEstimate::anticipate_into`]) closest to the
+    /// link, inflated alike: the copies of one path are near-duplicate rows, and the closest
+    /// binds. A copy counts for a link only while its path has not carried it past the link:
+    /// where the copy's normal points against the normal of the part it copies (the path
+    /// crosses or passes the link), its row would push the link back toward the part where
+    /// it is, and it gets none.
     pub fn pair_constraints_ahead(
         &mut self,
         robot: &RobotModel,
@@ -305,28 +318,44 @@ impl RobotGeometry {
                 link: g.capsule.link,
                 link_capsule: &link_capsule,
                 uncertainty_rate_m_s: human.uncertainty_rate_m_s,
+                anticipated: false,
                 jacobian: &mut self.jacobian,
                 out,
             };
             self.normals.clear();
+            self.closest_copy.clear();
             for (estimate, capsule) in human.inflated() {
                 let pair = capsule_capsule(g.capsule.link, &link_capsule, estimate.part, &capsule);
                 self.normals.push(pair.nhat_BA_W);
+                self.closest_copy.push(None);
                 if pair.distance_m <= detection_m {
                     rows.push(estimate, &capsule, pair);
                 }
             }
-            for copy in ahead {
+            for (i, copy) in ahead.iter().enumerate() {
                 let capsule = copy.estimate.capsule.inflated(margin);
                 let pair =
                     capsule_capsule(g.capsule.link, &link_capsule, copy.estimate.part, &capsule);
-                let passed = self
-                    .normals
-                    .get(copy.of)
-                    .is_some_and(|n| n.dot(pair.nhat_BA_W) < 0.0);
-                if pair.distance_m <= detection_m && !passed {
-                    rows.push(&copy.estimate, &capsule, pair);
+                let (Some(normal), Some(closest)) = (
+                    self.normals.get(copy.of),
+                    self.closest_copy.get_mut(copy.of),
+                ) else {
+                    continue;
+                };
+                if pair.distance_m <= detection_m
+                    && normal.dot(pair.nhat_BA_W) >= 0.0
+                    && closest.is_none_or(|(_, d)| pair.distance_m < d)
+                {
+                    *closest = Some((i, pair.distance_m));
                 }
+            }
+            rows.anticipated = true;
+            for &(i, _) in self.closest_copy.iter().flatten() {
+                let copy = &ahead[i];
+                let capsule = copy.estimate.capsule.inflated(margin);
+                let pair =
+                    capsule_capsule(g.capsule.link, &link_capsule, copy.estimate.part, &capsule);
+                rows.push(&copy.estimate, &capsule, pair);
             }
         }
     }
@@ -389,6 +418,7 @@ impl RobotGeometry {
                     human_normal_speed_m_s: 0.0,
                     max_approach_m_s: gamma_per_s * (p.distance_m - clearance_m).max(0.0),
                     obstacle: true,
+                    anticipated: false,
                     escape_margin_m: 0.0,
                 });
             }

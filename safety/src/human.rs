@@ -87,8 +87,7 @@ impl HumanEstimate {
             if travel_m.is_nan() || travel_m < 0.1 * radius_m {
                 continue;
             }
-            let copies =
-                ((travel_m / radius_m).ceil() as usize).clamp(1, MAX_ANTICIPATED_COPIES);
+            let copies = ((travel_m / radius_m).ceil() as usize).clamp(1, MAX_ANTICIPATED_COPIES);
             for k in 1..=copies {
                 let tau = horizon_s * k as f64 / copies as f64;
                 out.push(AnticipatedPart {

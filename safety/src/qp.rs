@@ -223,22 +223,32 @@ impl QpFilter {
         let (n, rows) = (self.dof, self.max_pairs);
         let per_column = rows + 2;
         if pairs.len() > rows {
-            // The human's pairs first, closest first; obstacles fill the rows left.
+            // The human's pairs first, closest first; then the obstacles; anticipated copies
+            // of the human's parts fill the rows left.
+            let rank = |c: &PairConstraint| u8::from(c.obstacle) + 2 * u8::from(c.anticipated);
             pairs.select_nth_unstable_by(rows - 1, |x, y| {
-                x.obstacle
-                    .cmp(&y.obstacle)
+                rank(x)
+                    .cmp(&rank(y))
                     .then(x.pair.distance_m.total_cmp(&y.pair.distance_m))
             });
         }
         let used = pairs.len().min(rows);
         // Slack weights relative to the closest pair's (1 for it): the slack stays in m/s
-        // of the closest row, which keeps the solver's accuracy where it matters.
+        // of the closest row, which keeps the solver's accuracy where it matters. An
+        // anticipated copy never weighs less than it (it gives way no later than the part
+        // where it is), and is the reference only when no part has a row.
         let room = |c: &PairConstraint| (c.pair.distance_m - d_min_m).max(0.0) + SLACK_FLOOR_M;
-        let closest_room = pairs[..used]
-            .iter()
-            .filter(|c| !c.obstacle)
-            .map(room)
-            .fold(f64::INFINITY, f64::min);
+        let closest_room = |anticipated: bool| {
+            pairs[..used]
+                .iter()
+                .filter(|c| !c.obstacle && c.anticipated == anticipated)
+                .map(room)
+                .fold(f64::INFINITY, f64::min)
+        };
+        let closest_room = match closest_room(false) {
+            r if r.is_finite() => r,
+            _ => closest_room(true),
+        };
         for i in 0..rows {
             let slack_entry = n * per_column + i;
             if let Some(c) = pairs.get(i) {
@@ -252,7 +262,14 @@ impl QpFilter {
                     || c.max_approach_m_s
                         < gamma_per_s * (c.pair.distance_m - d_min_m - c.escape_margin_m)
                             - c.human_normal_speed_m_s;
-                self.a_values[slack_entry] = if capped { 0.0 } else { -room(c) / closest_room };
+                let weight = room(c) / closest_room;
+                self.a_values[slack_entry] = if capped {
+                    0.0
+                } else if c.anticipated {
+                    -weight.max(1.0)
+                } else {
+                    -weight
+                };
             } else {
                 for j in 0..n {
                     self.a_values[j * per_column + i] = 0.0;
@@ -296,7 +313,7 @@ impl QpFilter {
             if lhs > self.b[i] + weight * slack + ROW_TOLERANCE {
                 return Err(QpFailure::BadSolution);
             }
-            if !c.obstacle && c.pair.distance_m < closest {
+            if !c.obstacle && !c.anticipated && c.pair.distance_m < closest {
                 closest = c.pair.distance_m;
                 violation = (lhs - self.b[i]).max(0.0);
             }

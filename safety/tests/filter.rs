@@ -29,6 +29,7 @@ fn row(normal_jacobian: &[f64], distance_m: f64, human_normal_speed_m_s: f64) ->
         human_normal_speed_m_s,
         max_approach_m_s: f64::INFINITY,
         obstacle: false,
+        anticipated: false,
         escape_margin_m: 0.0,
     }
 }
@@ -126,6 +127,37 @@ fn qp_keeps_the_closest_pairs_when_rows_run_out() {
         .expect("solved");
     // Binding row: qdot >= 0.3 - 0.02 = 0.28.
     assert_abs_diff_eq!(qdot[0], 0.28, epsilon = 1e-6);
+}
+
+/// Anticipated copies come last when rows run out: with room for two rows, the far pair of
+/// a part where it is (qdot >= 0.2) and an obstacle row (qdot <= 1) keep theirs, and the
+/// closer copy (which alone would bind: qdot >= 0.58) gets none. With room for three the
+/// copy binds.
+#[test]
+fn qp_ranks_anticipated_copies_after_parts_and_obstacles() {
+    let mut qp = QpFilter::new(1, 2).expect("setup");
+    let mut qdot = [0.0];
+    let copy = PairConstraint {
+        anticipated: true,
+        ..row(&[1.0], 0.12, 0.6)
+    };
+    let obstacle = PairConstraint {
+        obstacle: true,
+        max_approach_m_s: 1.0,
+        ..row(&[-1.0], 0.05, 0.0)
+    };
+    // At gamma 1: 0.3 m of room, closing at 0.5 m/s.
+    let part = row(&[1.0], 0.4, 0.5);
+    let mut pairs = [copy, obstacle, part];
+    qp.solve(&[-1.0], &mut pairs, &[-2.0], &[2.0], 1.0, 0.1, &mut qdot)
+        .expect("solved");
+    assert!(pairs[..2].iter().all(|c| !c.anticipated));
+    assert_abs_diff_eq!(qdot[0], 0.2, epsilon = 1e-6);
+    let mut qp = QpFilter::new(1, 3).expect("setup");
+    qp.solve(&[-1.0], &mut pairs, &[-2.0], &[2.0], 1.0, 0.1, &mut qdot)
+        .expect("solved");
+    // Binding: qdot >= 0.6 - 0.02 = 0.58.
+    assert_abs_diff_eq!(qdot[0], 0.58, epsilon = 1e-6);
 }
 
 /// Two pairs that no command keeps: the closest (at d_min, the human closing at 1.5 m/s)
@@ -568,13 +600,25 @@ fn anticipation_carries_moving_parts_along_their_velocities() {
         let tau = horizon * (k + 1) as f64 / 7.0;
         let p = copy.estimate;
         assert_eq!(copy.of, 0);
-        assert_abs_diff_eq!((p.capsule.a_W - (a + v_a * tau)).length(), 0.0, epsilon = 1e-12);
-        assert_abs_diff_eq!((p.capsule.b_W - (b + v_b * tau)).length(), 0.0, epsilon = 1e-12);
+        assert_abs_diff_eq!(
+            (p.capsule.a_W - (a + v_a * tau)).length(),
+            0.0,
+            epsilon = 1e-12
+        );
+        assert_abs_diff_eq!(
+            (p.capsule.b_W - (b + v_b * tau)).length(),
+            0.0,
+            epsilon = 1e-12
+        );
         assert_eq!((p.part, p.v_a_W, p.v_b_W), (HumanPart::Forearm, v_a, v_b));
         assert_eq!(p.capsule.radius_m, 0.04);
     }
     let last = ahead[6].estimate.capsule;
-    assert_abs_diff_eq!((last.b_W - (b + v_b * horizon)).length(), 0.0, epsilon = 1e-12);
+    assert_abs_diff_eq!(
+        (last.b_W - (b + v_b * horizon)).length(),
+        0.0,
+        epsilon = 1e-12
+    );
     let mut previous = human.parts[0].capsule.b_W;
     for copy in &ahead {
         let step = (copy.estimate.capsule.b_W - previous).length();
@@ -595,39 +639,79 @@ fn anticipation_carries_moving_parts_along_their_velocities() {
     assert!(ahead.is_empty());
 }
 
-/// A copy that the path carries past a link gets no row against it: its normal would push
-/// the link back toward the part where it is. A forearm beside the tool moving 0.6 m toward
-/// and past it in the horizon: the copies before the tool have rows with normals along the
-/// present one; none beyond it.
+/// Per link and part, the anticipated copy closest to the link gets the rows, unless the
+/// path has carried it past the link: its normal would then push the link back toward the
+/// part where it is. A forearm 0.3 m beside the last link, coming at it at 2 m/s, 0.3 s
+/// ahead: the copies on the far side are closer to the link than any before it (one
+/// overlaps it), and the link's anticipated rows are those of the last copy before it.
 #[test]
-fn anticipated_copies_past_a_link_get_no_row() {
+fn the_closest_anticipated_copy_before_a_link_gets_its_rows() {
     let robot = iiwa();
     let q = [0.0, 0.5, 0.0, -1.2, 0.0, 0.8, 0.0];
     let mut kinematics = KinematicState::new(&robot);
     robot.forward_kinematics(&q, &mut kinematics).expect("fk");
-    let tool = robot.link_id("tool0").expect("tool0");
-    let p_tool = kinematics.link_pose(tool).translation;
-    // A forearm 0.3 m beyond the tool along +x, parallel to y, coming along -x at 2 m/s: in
-    // 0.3 s it is 0.3 m on the other side.
+    let mut geometry = workcell_safety::RobotGeometry::new(&robot).expect("geometry");
+    let link = robot.link_id("link7").expect("link7");
+    let (_, capsule) = geometry
+        .capsules(&kinematics)
+        .find(|(l, _)| *l == link)
+        .expect("link 7 has a capsule");
     let v = Vector::new(-2.0, 0.0, 0.0);
-    let centre = p_tool + Vector::new(0.3, 0.0, 0.0);
+    let centre = capsule.axis_point(0.5) + Vector::new(0.3, 0.0, 0.0);
     let human = forearm(centre - Vector::Y * 0.15, centre + Vector::Y * 0.15, v);
     let mut ahead = Vec::new();
     human.anticipate_into(0.3, &mut ahead);
+    // Eight copies 0.075 m apart: 0.225 m beside the link's axis down to 0.3 m past it.
     assert_eq!(ahead.len(), 8);
-    let mut geometry = workcell_safety::RobotGeometry::new(&robot).expect("geometry");
     let (mut now, mut with_ahead) = (Vec::new(), Vec::new());
     geometry.pair_constraints(&robot, &kinematics, &human, 10.0, &mut now);
     geometry.pair_constraints_ahead(&robot, &kinematics, &human, &ahead, 10.0, &mut with_ahead);
-    assert_eq!(with_ahead[..now.len()], now[..]);
-    let link = |c: &&PairConstraint| c.pair.link == tool;
-    let present = now.iter().find(link).expect("the tool sees the forearm").pair.nhat_BA_W;
-    assert!(present.x < -0.9, "{present:?}");
-    let copies: Vec<&PairConstraint> = with_ahead[now.len()..].iter().filter(link).collect();
-    // Eight copies at 0.075 m steps: those still on the +x side of the tool count.
-    assert!(!copies.is_empty() && copies.len() < 8, "{} copies", copies.len());
-    for c in &copies {
-        assert!(c.pair.nhat_BA_W.dot(present) >= 0.0, "{:?}", c.pair);
+    let present_rows: Vec<PairConstraint> = with_ahead
+        .iter()
+        .filter(|c| !c.anticipated)
+        .copied()
+        .collect();
+    assert_eq!(present_rows, now);
+    let present = now
+        .iter()
+        .find(|c| c.pair.link == link)
+        .expect("link 7 sees the forearm")
+        .pair;
+    assert!(present.nhat_BA_W.x < -0.5, "{present:?}");
+    let rows: Vec<&PairConstraint> = with_ahead
+        .iter()
+        .filter(|c| c.anticipated && c.pair.link == link)
+        .collect();
+    assert!(!rows.is_empty());
+    // The same copies against the link's capsule directly.
+    let pairs: Vec<SignedDistancePair> = ahead
+        .iter()
+        .map(|c| capsule_capsule(link, &capsule, c.estimate.part, &c.estimate.capsule))
+        .collect();
+    let before: Vec<&SignedDistancePair> = pairs
+        .iter()
+        .filter(|p| p.nhat_BA_W.dot(present.nhat_BA_W) >= 0.0)
+        .collect();
+    assert!(before.len() < pairs.len(), "some copies are past the link");
+    let closest_before = before
+        .iter()
+        .map(|p| p.distance_m)
+        .fold(f64::INFINITY, f64::min);
+    let closest = pairs
+        .iter()
+        .map(|p| p.distance_m)
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        closest < closest_before - 0.05,
+        "{closest} vs {closest_before}"
+    );
+    assert_abs_diff_eq!(rows[0].pair.distance_m, closest_before, epsilon = 1e-12);
+    for c in &rows {
+        assert!(
+            c.pair.nhat_BA_W.dot(present.nhat_BA_W) >= 0.0,
+            "{:?}",
+            c.pair
+        );
     }
 }
 
@@ -658,9 +742,20 @@ fn anticipation_meets_an_approaching_part_where_it_will_be() {
     let now = plain.tick(&robot, &q, &qdot_nom, &human, 0.004);
     let later = ahead.tick(&robot, &q, &qdot_nom, &human, 0.004);
     let moved = forearm(a + v * horizon, b + v * horizon, v);
-    assert_abs_diff_eq!(now.min_distance_m, capsule_gap(&plain, &robot, &q, &human), epsilon = 1e-9);
-    assert_abs_diff_eq!(later.min_distance_m, capsule_gap(&ahead, &robot, &q, &moved), epsilon = 1e-9);
-    assert!(later.min_distance_m < now.min_distance_m - 0.2, "{later:?} vs {now:?}");
+    assert_abs_diff_eq!(
+        now.min_distance_m,
+        capsule_gap(&plain, &robot, &q, &human),
+        epsilon = 1e-9
+    );
+    assert_abs_diff_eq!(
+        later.min_distance_m,
+        capsule_gap(&ahead, &robot, &q, &moved),
+        epsilon = 1e-9
+    );
+    assert!(
+        later.min_distance_m < now.min_distance_m - 0.2,
+        "{later:?} vs {now:?}"
+    );
     assert_eq!(now.status, FilterStatus::Pass);
     assert!(
         matches!(later.status, FilterStatus::Modified | FilterStatus::Relaxed),
@@ -668,8 +763,13 @@ fn anticipation_meets_an_approaching_part_where_it_will_be() {
     );
 
     let run = |anticipation_s: f64| {
-        let mut filter = SafetyFilter::new(&robot, Pose::IDENTITY, FilterMode::Qp, config(anticipation_s))
-            .expect("filter");
+        let mut filter = SafetyFilter::new(
+            &robot,
+            Pose::IDENTITY,
+            FilterMode::Qp,
+            config(anticipation_s),
+        )
+        .expect("filter");
         let dt = 0.001;
         let mut q = q.to_vec();
         let (mut a, mut b) = (a, b);
@@ -686,7 +786,12 @@ fn anticipation_meets_an_approaching_part_where_it_will_be() {
                 a += v * dt;
                 b += v * dt;
             }
-            min_gap = min_gap.min(capsule_gap(&filter, &robot, &q, &forearm(a, b, Vector::ZERO)));
+            min_gap = min_gap.min(capsule_gap(
+                &filter,
+                &robot,
+                &q,
+                &forearm(a, b, Vector::ZERO),
+            ));
         }
         min_gap
     };

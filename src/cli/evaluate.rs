@@ -16,9 +16,7 @@ use workcell::evaluate::replay::episode_glb;
 use workcell::evaluate::report::{
     Aggregate, SummaryContext, metrics_csv, summary_markdown, write_plots,
 };
-use workcell::evaluate::{
-    Evaluation, EvaluationConfig, MaskKind, PerceptionKind, record_episode, run_episode,
-};
+use workcell::evaluate::{Evaluation, EvaluationConfig, record_episode, run_episode};
 use workcell::safety::iso::effective_robot_mass_kg;
 use workcell::safety::{BodyRegion, FilterMode, HumanPart};
 
@@ -61,6 +59,23 @@ pub enum PerceptionArg {
     Procnet,
     /// As `procnet` with the forearm's true pixels for its mask: the pose search alone.
     PoseGtMasks,
+}
+
+impl PerceptionArg {
+    /// The keys of the evaluation file this choice sets, as `--set` overrides: applied with
+    /// the file's own, so that the file is checked as it will run (a key such as
+    /// `perception.foresight_s` is valid for one kind only).
+    fn overrides(self) -> Vec<String> {
+        let (kind, masks) = match self {
+            PerceptionArg::GroundTruth => ("ground_truth", None),
+            PerceptionArg::Noisy => ("noisy", None),
+            PerceptionArg::Procnet => ("procnet", Some("network")),
+            PerceptionArg::PoseGtMasks => ("procnet", Some("ground_truth")),
+        };
+        let mut overrides = vec![format!("perception.kind = \"{kind}\"")];
+        overrides.extend(masks.map(|m| format!("perception.masks = \"{m}\"")));
+        overrides
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -213,20 +228,13 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     if args.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let mut evaluation = Evaluation::from_file_with(path, &args.overrides)?;
-    if let Some(p) = args.perception {
-        let perception = &mut evaluation.config.perception;
-        perception.kind = match p {
-            PerceptionArg::GroundTruth => PerceptionKind::GroundTruth,
-            PerceptionArg::Noisy => PerceptionKind::Noisy,
-            PerceptionArg::Procnet | PerceptionArg::PoseGtMasks => PerceptionKind::Procnet,
-        };
-        match p {
-            PerceptionArg::Procnet => perception.masks = MaskKind::Network,
-            PerceptionArg::PoseGtMasks => perception.masks = MaskKind::GroundTruth,
-            _ => {}
-        }
-    }
+    let mut overrides = args.overrides.clone();
+    overrides.extend(
+        args.perception
+            .map(PerceptionArg::overrides)
+            .unwrap_or_default(),
+    );
+    let evaluation = Evaluation::from_file_with(path, &overrides)?;
     let mode = match args.filter {
         FilterArg::None => FilterMode::None,
         FilterArg::Qp => FilterMode::Qp,

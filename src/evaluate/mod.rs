@@ -31,8 +31,8 @@ use crate::error::{Error, Result};
 
 pub use episode::{Recording, record_episode, run_episode};
 pub use perception::{
-    Foresight, GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig, PerceptionInput,
-    PerceptionKind,
+    Foresight, GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig,
+    PerceptionInput, PerceptionKind,
 };
 
 /// An evaluation file: the cell, the task, perception and the safety filter's settings.
