@@ -23,6 +23,10 @@
 //! that pair's distance against a far one. The caller decides what violation of the closest
 //! pair's row is acceptable ([`crate::FilterConfig::max_relaxation_m_s`]).
 //!
+//! Rows of anticipated copies of the human's parts ([`PairConstraint::anticipated`]) rank
+//! after the parts' own and the obstacles' when the rows run out, never get a smaller slack
+//! weight than the closest part's row, and are not the row whose violation is returned.
+//!
 //! Power and force limiting needs no rows of its own: its cap on the approach speed of a
 //! pair's witness point has the same coefficients as the pair's barrier row, so each row's
 //! bound is the smaller of the two ([`PairConstraint::approach_bound_m_s`]). A row that its
