@@ -139,8 +139,8 @@ pub struct PairConstraint {
     pub obstacle: bool,
     /// A row against an anticipated copy of a human part
     /// ([`HumanEstimate::anticipate_into`]) rather than the part where it is: it ranks after
-    /// the parts' and the obstacles' rows when the QP's rows run out, never weighs more than
-    /// the closest part's row in the slack, and is not the closest pair whose violation the
+    /// the parts' and the obstacles' rows when the QP's rows run out, gives way in the slack
+    /// no later than the closest part's row, and is not the closest pair whose violation the
     /// filter judges.
     pub anticipated: bool,
     /// Extra separation this pair keeps beyond d_min, m: where the arm cannot move its
@@ -187,8 +187,9 @@ pub struct RobotGeometry {
     jacobian: Jacobian,
     /// Per human part, its normal against the link at hand (scratch of the pair queries).
     normals: Vec<workcell_robots::math::Vector>,
-    /// Per human part, its anticipated copy closest to the link at hand and that distance.
-    closest_copy: Vec<Option<(usize, f64)>>,
+    /// Per human part, its anticipated copy closest to the link at hand (index in `ahead`)
+    /// and their pair.
+    closest_copy: Vec<Option<(usize, SignedDistancePair)>>,
 }
 
 #[derive(Debug, Clone)]
@@ -344,18 +345,15 @@ impl RobotGeometry {
                 };
                 if pair.distance_m <= detection_m
                     && normal.dot(pair.nhat_BA_W) >= 0.0
-                    && closest.is_none_or(|(_, d)| pair.distance_m < d)
+                    && closest.is_none_or(|(_, c)| pair.distance_m < c.distance_m)
                 {
-                    *closest = Some((i, pair.distance_m));
+                    *closest = Some((i, pair));
                 }
             }
             rows.anticipated = true;
-            for &(i, _) in self.closest_copy.iter().flatten() {
-                let copy = &ahead[i];
-                let capsule = copy.estimate.capsule.inflated(margin);
-                let pair =
-                    capsule_capsule(g.capsule.link, &link_capsule, copy.estimate.part, &capsule);
-                rows.push(&copy.estimate, &capsule, pair);
+            for &(i, pair) in self.closest_copy.iter().flatten() {
+                let copy = &ahead[i].estimate;
+                rows.push(copy, &copy.capsule.inflated(margin), pair);
             }
         }
     }
