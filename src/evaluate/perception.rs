@@ -227,10 +227,7 @@ impl PerceptionConfig {
     pub fn describe(&self) -> String {
         match self.kind {
             PerceptionKind::GroundTruth if self.foresight_s > 0.0 => {
-                format!(
-                    "ground truth and {} s of foresight (an oracle)",
-                    self.foresight_s
-                )
+                foresight_name(self.foresight_s)
             }
             PerceptionKind::GroundTruth => GroundTruth.name(),
             PerceptionKind::Noisy => NoisyCamera::new(self.clone(), 0).name(),
@@ -264,6 +261,11 @@ impl HumanPerception for GroundTruth {
     fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
         out.clone_from(input.truth);
     }
+}
+
+/// The report's name of [`Foresight`] `horizon_s` ahead.
+fn foresight_name(horizon_s: f64) -> String {
+    format!("ground truth and {horizon_s} s of foresight (an oracle)")
 }
 
 /// Instants of [`Foresight`]'s look ahead.
@@ -302,10 +304,7 @@ impl Foresight {
 
 impl HumanPerception for Foresight {
     fn name(&self) -> String {
-        format!(
-            "ground truth and {} s of foresight (an oracle)",
-            self.horizon_s
-        )
+        foresight_name(self.horizon_s)
     }
 
     fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
