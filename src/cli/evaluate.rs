@@ -211,9 +211,16 @@ fn shell_quote(word: &str) -> String {
 }
 
 pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
+    // `--perception` sets its keys as overrides after the user's, before the file is checked.
+    let mut overrides = args.overrides.clone();
+    overrides.extend(
+        args.perception
+            .map(PerceptionArg::overrides)
+            .unwrap_or_default(),
+    );
     if args.print_defaults {
         let config = match &args.evaluation {
-            Some(path) => Evaluation::from_file_with(path, &args.overrides)?.config,
+            Some(path) => Evaluation::from_file_with(path, &overrides)?.config,
             None => EvaluationConfig::default(),
         };
         say_inline!(
@@ -228,12 +235,6 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     if args.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let mut overrides = args.overrides.clone();
-    overrides.extend(
-        args.perception
-            .map(PerceptionArg::overrides)
-            .unwrap_or_default(),
-    );
     let evaluation = Evaluation::from_file_with(path, &overrides)?;
     let mode = match args.filter {
         FilterArg::None => FilterMode::None,
