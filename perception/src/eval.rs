@@ -45,6 +45,137 @@ pub struct Scores {
     /// (a perfect network's Dice loss at the model's input, `PartLabel::perfect_dice_loss`).
     pub ceiling: f64,
     pub ceiling_frames: usize,
+    /// Where the forearm's loss goes, from the thresholded masks ([`ForearmBreakdown`]).
+    pub breakdown: BreakdownSums,
+}
+
+/// Sums over a group's frames of each frame's [`ForearmBreakdown`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BreakdownSums {
+    /// Per-frame forearm Dice loss of the thresholded masks.
+    pub hard_dice: f64,
+    /// The same with the arm's inner boundaries right ([`ForearmBreakdown::inner_dice_loss`]).
+    pub inner_dice: f64,
+    /// Frames with a true forearm of which no pixel is predicted forearm.
+    pub missed: usize,
+    /// Frames with a true forearm.
+    pub present: usize,
+    /// True forearm pixels, by the class predicted for them (indexed by `Class as u8`).
+    pub truth_as: [f64; CLASSES],
+}
+
+impl BreakdownSums {
+    fn add(&mut self, b: &ForearmBreakdown) {
+        self.hard_dice += b.dice_loss();
+        self.inner_dice += b.inner_dice_loss();
+        self.present += usize::from(b.present());
+        self.missed += usize::from(b.missed());
+        for (sum, &n) in self.truth_as.iter_mut().zip(&b.truth_as) {
+            *sum += n as f64;
+        }
+    }
+
+    /// The share of the true forearm's pixels predicted as `class`.
+    #[must_use]
+    pub fn truth_share(&self, class: Class) -> f64 {
+        let total: f64 = self.truth_as.iter().sum();
+        if total > 0.0 {
+            self.truth_as[class as usize] / total
+        } else {
+            f64::NAN
+        }
+    }
+}
+
+/// Every [`Class`], background included.
+const CLASSES: usize = Class::ALL.len();
+
+/// The arm's parts: the classes between which the forearm's ends are drawn (the elbow and the
+/// wrist), not by colour (a bare arm is one skin from shoulder to fingers).
+const ARM: [Class; 3] = [Class::UpperArm, Class::Forearm, Class::Hand];
+
+/// One frame's forearm, thresholded as the contact sheet draws it (each pixel the most probable
+/// class above one half, else the background), counted so that its loss can be split into the
+/// forearm not found at all, found but cut at the wrong place along the arm, and the rest.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ForearmBreakdown {
+    /// Pixels true forearm and predicted forearm.
+    pub found: u64,
+    /// Predicted forearm, truly another class.
+    pub false_found: u64,
+    /// True forearm, predicted another class.
+    pub missed_pixels: u64,
+    /// Of `false_found`: truly upper arm or hand.
+    pub false_found_in_arm: u64,
+    /// Of `missed_pixels`: predicted upper arm or hand.
+    pub missed_in_arm: u64,
+    /// True forearm pixels by the class predicted for them (indexed by `Class as u8`).
+    pub truth_as: [u64; CLASSES],
+}
+
+impl ForearmBreakdown {
+    /// Counts one frame; `truth` and `predicted` hold `Class as u8` per pixel (equal lengths).
+    #[must_use]
+    pub fn count(truth: &[u8], predicted: &[u8]) -> Self {
+        let (forearm, in_arm) = (Class::Forearm as u8, |v: u8| {
+            ARM.iter().any(|&c| c as u8 == v)
+        });
+        let mut b = Self::default();
+        for (&t, &p) in truth.iter().zip(predicted) {
+            match (t == forearm, p == forearm) {
+                (true, true) => b.found += 1,
+                (false, true) => {
+                    b.false_found += 1;
+                    b.false_found_in_arm += u64::from(in_arm(t));
+                }
+                (true, false) => {
+                    b.missed_pixels += 1;
+                    b.missed_in_arm += u64::from(in_arm(p));
+                }
+                (false, false) => {}
+            }
+            if t == forearm
+                && let Some(n) = b.truth_as.get_mut(usize::from(p))
+            {
+                *n += 1;
+            }
+        }
+        b
+    }
+
+    fn smoothed_loss(found: u64, false_found: u64, missed: u64) -> f64 {
+        let (tp, fp, fneg) = (found as f64, false_found as f64, missed as f64);
+        1.0 - (2.0 * tp + 1.0) / (2.0 * tp + fp + fneg + 1.0)
+    }
+
+    /// The forearm's Dice loss on the thresholded masks, smoothed as the per-frame loss is.
+    #[must_use]
+    pub fn dice_loss(&self) -> f64 {
+        Self::smoothed_loss(self.found, self.false_found, self.missed_pixels)
+    }
+
+    /// The same loss had every pixel that is arm in both truth and prediction been given its
+    /// true part: what is left when the elbow and the wrist are put in the right place.
+    #[must_use]
+    pub fn inner_dice_loss(&self) -> f64 {
+        Self::smoothed_loss(
+            self.found + self.missed_in_arm,
+            self.false_found - self.false_found_in_arm,
+            self.missed_pixels - self.missed_in_arm,
+        )
+    }
+
+    /// Whether the frame has a true forearm.
+    #[must_use]
+    pub fn present(&self) -> bool {
+        self.found + self.missed_pixels > 0
+    }
+
+    /// A true forearm of which no pixel is predicted forearm.
+    #[must_use]
+    pub fn missed(&self) -> bool {
+        self.present() && self.found == 0
+    }
 }
 
 /// One frame's scores, per class.
@@ -57,6 +188,7 @@ struct FrameScores {
     predicted: Vec<f32>,
     truth: Vec<f32>,
     ceiling: Option<f64>,
+    breakdown: ForearmBreakdown,
 }
 
 impl Scores {
@@ -84,6 +216,7 @@ impl Scores {
             self.ceiling += v;
             self.ceiling_frames += 1;
         }
+        self.breakdown.add(&f.breakdown);
         self.frames += 1;
         self.sequences.insert(sequence);
     }
@@ -267,18 +400,39 @@ pub fn evaluate(
             let p = sigmoid(logits.clone());
             let sums =
                 |t: Tensor<4>| row(t.reshape([1i32, c as i32, -1]).sum_dim(2).reshape([1, c]));
+            let probabilities = p
+                .clone()
+                .into_data()
+                .try_into_vec::<f32>()
+                .unwrap_or_default();
+            let truth: Vec<u8> = seq
+                .class_frame(t)
+                .iter()
+                .map(|&v| {
+                    let class = dataset.manifest.classes.get(usize::from(v));
+                    class.map_or(Class::Background, |&c| c) as u8
+                })
+                .collect();
+            let predicted: Vec<u8> = argmax(&probabilities, c, w * h)
+                .into_iter()
+                .map(|k| {
+                    let class = k.checked_sub(1).map(|k| config.classes[usize::from(k)]);
+                    class.unwrap_or(Class::Background) as u8
+                })
+                .collect();
             let scores = FrameScores {
                 dice: row(dice_per_class(p.clone(), y.clone())),
                 focal: row(focal_per_class(logits, y.clone(), 0.5, 2.0)),
                 iou: row(iou_per_class(p.clone(), y.clone(), 0.5)),
                 intersection: sums(p.clone() * y.clone()),
-                predicted: sums(p.clone()),
+                predicted: sums(p),
                 truth: sums(y),
                 ceiling: seq
                     .labels
                     .get(t)
                     .and_then(|l| l.part(Class::Forearm))
                     .and_then(|part| part.perfect_dice_loss),
+                breakdown: ForearmBreakdown::count(&truth, &predicted),
             };
             if let Some(f) = forearm
                 && keep_worst > 0
@@ -287,7 +441,6 @@ pub fn evaluate(
                 let worse_than_kept = ev.worst.len() < keep_worst
                     || ev.worst.last().is_some_and(|w| loss > w.forearm_dice);
                 if worse_than_kept {
-                    let probabilities = p.into_data().try_into_vec::<f32>().unwrap_or_default();
                     ev.worst.push(ScoredFrame {
                         sequence: entry.index,
                         frame: t,
@@ -295,22 +448,8 @@ pub fn evaluate(
                         occlusion_level: entry.occlusion_level.clone(),
                         forearm_dice: loss,
                         rgb: interleave(seq.rgb_frame(t), w * h),
-                        truth: seq
-                            .class_frame(t)
-                            .iter()
-                            .map(|&v| {
-                                let class = dataset.manifest.classes.get(usize::from(v));
-                                class.map_or(Class::Background, |&c| c) as u8
-                            })
-                            .collect(),
-                        predicted: argmax(&probabilities, c, w * h)
-                            .into_iter()
-                            .map(|k| {
-                                let class =
-                                    k.checked_sub(1).map(|k| config.classes[usize::from(k)]);
-                                class.unwrap_or(Class::Background) as u8
-                            })
-                            .collect(),
+                        truth,
+                        predicted,
                         width: w,
                         height: h,
                     });
@@ -425,6 +564,7 @@ impl Evaluation {
             (name, *s)
         }));
         groups.extend(occ.iter().map(|(k, s)| (format!("occlusion {k}"), *s)));
+        let coarse = groups.len();
         groups.extend(pairs.iter().map(|((d, o), s)| (format!("{d} / {o}"), *s)));
         let _ = writeln!(
             md,
@@ -434,7 +574,7 @@ impl Evaluation {
              | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |\n\
              |---|---|---|---|---|---|---|---|---|"
         );
-        for (name, s) in groups {
+        for (name, s) in &groups {
             let _ = writeln!(
                 md,
                 "| {name} | {} | {} | {} | {} | {} | {} | {} | {} |",
@@ -446,6 +586,36 @@ impl Evaluation {
                 fmt(s.focal(f)),
                 fmt(s.ceiling()),
                 fmt(s.class_mean_dice())
+            );
+        }
+        let _ = writeln!(
+            md,
+            "\nWhere the forearm's loss goes, on the masks as the contact sheet draws them (each \
+             pixel the most probable class above one half): the per-frame Dice loss of those \
+             masks; the same had every pixel that is arm in both truth and prediction been given \
+             its true part (the elbow and the wrist in the right place); the frames whose forearm \
+             was not found at all; and what the true forearm's pixels were predicted as:\n\n\
+             | group | frames | Dice loss, thresholded | with the elbow and wrist right | forearm missed (frames) | as forearm | as upper arm | as hand | as torso | as robot | as background |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|"
+        );
+        for (name, s) in &groups[..coarse] {
+            let b = &s.breakdown;
+            let n = s.frames.max(1) as f64;
+            let share = |c| format!("{:.1} %", 100.0 * b.truth_share(c));
+            let _ = writeln!(
+                md,
+                "| {name} | {} | {} | {} | {} of {} | {} | {} | {} | {} | {} | {} |",
+                s.frames,
+                fmt(b.hard_dice / n),
+                fmt(b.inner_dice / n),
+                b.missed,
+                b.present,
+                share(Class::Forearm),
+                share(Class::UpperArm),
+                share(Class::Hand),
+                share(Class::Torso),
+                share(Class::Robot),
+                share(Class::Background),
             );
         }
         md
@@ -465,6 +635,7 @@ mod tests {
             predicted: vec![pred, 0.0],
             truth: vec![truth, 0.0],
             ceiling: None,
+            breakdown: ForearmBreakdown::default(),
         }
     }
 
@@ -482,6 +653,54 @@ mod tests {
         assert_eq!(s.class_mean_dice(), 0.1875);
         assert_eq!((s.frames, s.sequences.len()), (2, 2));
         assert!(s.ceiling().is_nan());
+    }
+
+    #[test]
+    fn the_forearm_breakdown_splits_its_loss_at_the_elbow_and_wrist() {
+        use Class::{Background as B, Forearm as F, Hand as H, Robot as R, UpperArm as U};
+        // Ten pixels. Truth: forearm on 0-5, upper arm on 6-7, background on 8-9.
+        // Prediction: forearm on 0-2 and 6 (found 3, one upper-arm pixel taken for forearm),
+        // hand on 3-4 (the wrist drawn too far up the arm), robot on 5, background elsewhere.
+        let truth = [F, F, F, F, F, F, U, U, B, B].map(|c| c as u8);
+        let predicted = [F, F, F, H, H, R, F, U, B, B].map(|c| c as u8);
+        let b = ForearmBreakdown::count(&truth, &predicted);
+        assert_eq!(
+            (
+                b.found,
+                b.false_found,
+                b.missed_pixels,
+                b.false_found_in_arm,
+                b.missed_in_arm
+            ),
+            (3, 1, 3, 1, 2)
+        );
+        // 1 - (2*3 + 1) / (2*3 + 1 + 3 + 1)
+        assert!((b.dice_loss() - (1.0 - 7.0 / 11.0)).abs() < 1e-12);
+        // With the arm's parts right: found 5, false 0, missed 1 (the robot's pixel).
+        assert!((b.inner_dice_loss() - (1.0 - 11.0 / 12.0)).abs() < 1e-12);
+        assert_eq!(b.truth_as[F as usize], 3);
+        assert_eq!(b.truth_as[H as usize], 2);
+        assert_eq!(b.truth_as[R as usize], 1);
+        assert!(b.present() && !b.missed());
+
+        // A frame whose forearm is all taken for the hand is missed, but lost only to the
+        // wrist's place; one without a forearm is neither present nor missed, and scores 0.
+        let all_hand = ForearmBreakdown::count(&[F as u8; 4], &[H as u8; 4]);
+        assert!(all_hand.missed());
+        assert!((all_hand.dice_loss() - (1.0 - 1.0 / 5.0)).abs() < 1e-12);
+        assert_eq!(all_hand.inner_dice_loss(), 0.0);
+        let none = ForearmBreakdown::count(&[B as u8; 4], &[B as u8; 4]);
+        assert!(!none.present() && !none.missed());
+        assert_eq!(none.dice_loss(), 0.0);
+
+        let mut sums = BreakdownSums::default();
+        sums.add(&b);
+        sums.add(&all_hand);
+        sums.add(&none);
+        assert_eq!((sums.present, sums.missed), (2, 1));
+        // Ten true forearm pixels: 3 found, 6 taken for the hand, 1 for the robot.
+        assert!((sums.truth_share(H) - 0.6).abs() < 1e-12);
+        assert!(BreakdownSums::default().truth_share(F).is_nan());
     }
 
     #[test]
