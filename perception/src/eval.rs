@@ -62,6 +62,8 @@ pub struct BreakdownSums {
     pub present: usize,
     /// True forearm pixels, by the class predicted for them (indexed by `Class as u8`).
     pub truth_as: [f64; CLASSES],
+    /// Of the true forearm pixels predicted background: those on the true mask's edge.
+    pub background_at_edge: f64,
 }
 
 impl BreakdownSums {
@@ -73,6 +75,7 @@ impl BreakdownSums {
         for (sum, &n) in self.truth_as.iter_mut().zip(&b.truth_as) {
             *sum += n as f64;
         }
+        self.background_at_edge += b.background_at_edge as f64;
     }
 
     /// The share of the true forearm's pixels predicted as `class`.
@@ -81,6 +84,17 @@ impl BreakdownSums {
         let total: f64 = self.truth_as.iter().sum();
         if total > 0.0 {
             self.truth_as[class as usize] / total
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// The share of the true forearm's pixels predicted background on the true mask's edge.
+    #[must_use]
+    pub fn background_at_edge_share(&self) -> f64 {
+        let total: f64 = self.truth_as.iter().sum();
+        if total > 0.0 {
+            self.background_at_edge / total
         } else {
             f64::NAN
         }
@@ -111,17 +125,36 @@ pub struct ForearmBreakdown {
     pub missed_in_arm: u64,
     /// True forearm pixels by the class predicted for them (indexed by `Class as u8`).
     pub truth_as: [u64; CLASSES],
+    /// Of the true forearm pixels predicted background: those with a 4-neighbour in the image
+    /// that is not true forearm (a mask drawn thinner than the forearm loses these first; a
+    /// hidden stretch not filled in loses inner ones too).
+    pub background_at_edge: u64,
 }
 
 impl ForearmBreakdown {
-    /// Counts one frame; `truth` and `predicted` hold `Class as u8` per pixel (equal lengths).
+    /// Counts one frame; `truth` and `predicted` hold `Class as u8` per pixel, row by row,
+    /// `width` pixels a row (equal lengths).
     #[must_use]
-    pub fn count(truth: &[u8], predicted: &[u8]) -> Self {
+    pub fn count(truth: &[u8], predicted: &[u8], width: usize) -> Self {
         let (forearm, in_arm) = (Class::Forearm as u8, |v: u8| {
             ARM.iter().any(|&c| c as u8 == v)
         });
+        let is_forearm = |i: Option<usize>| i.and_then(|i| truth.get(i)) == Some(&forearm);
+        let on_edge = |i: usize| {
+            let x = i % width.max(1);
+            let left = (x > 0).then(|| i - 1);
+            let right = (x + 1 < width).then_some(i + 1);
+            [
+                left,
+                right,
+                i.checked_sub(width),
+                Some(i + width).filter(|&j| j < truth.len()),
+            ]
+            .into_iter()
+            .any(|n| n.is_some() && !is_forearm(n))
+        };
         let mut b = Self::default();
-        for (&t, &p) in truth.iter().zip(predicted) {
+        for (i, (&t, &p)) in truth.iter().zip(predicted).enumerate() {
             match (t == forearm, p == forearm) {
                 (true, true) => b.found += 1,
                 (false, true) => {
@@ -138,6 +171,9 @@ impl ForearmBreakdown {
                 && let Some(n) = b.truth_as.get_mut(usize::from(p))
             {
                 *n += 1;
+                if p == Class::Background as u8 && on_edge(i) {
+                    b.background_at_edge += 1;
+                }
             }
         }
         b
@@ -432,7 +468,7 @@ pub fn evaluate(
                     .get(t)
                     .and_then(|l| l.part(Class::Forearm))
                     .and_then(|part| part.perfect_dice_loss),
-                breakdown: ForearmBreakdown::count(&truth, &predicted),
+                breakdown: ForearmBreakdown::count(&truth, &predicted, w),
             };
             if let Some(f) = forearm
                 && keep_worst > 0
@@ -594,9 +630,10 @@ impl Evaluation {
              pixel the most probable class above one half): the per-frame Dice loss of those \
              masks; the same had every pixel that is arm in both truth and prediction been given \
              its true part (the elbow and the wrist in the right place); the frames whose forearm \
-             was not found at all; and what the true forearm's pixels were predicted as:\n\n\
-             | group | frames | Dice loss, thresholded | with the elbow and wrist right | forearm missed (frames) | as forearm | as upper arm | as hand | as torso | as robot | as background |\n\
-             |---|---|---|---|---|---|---|---|---|---|---|"
+             was not found at all; and what the true forearm's pixels were predicted as (of those \
+             taken for the background, the ones on the true mask's edge):\n\n\
+             | group | frames | Dice loss, thresholded | with the elbow and wrist right | forearm missed (frames) | as forearm | as upper arm | as hand | as torso | as robot | as background | of which on its edge |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for (name, s) in &groups[..coarse] {
             let b = &s.breakdown;
@@ -604,7 +641,7 @@ impl Evaluation {
             let share = |c| format!("{:.1} %", 100.0 * b.truth_share(c));
             let _ = writeln!(
                 md,
-                "| {name} | {} | {} | {} | {} of {} | {} | {} | {} | {} | {} | {} |",
+                "| {name} | {} | {} | {} | {} of {} | {} | {} | {} | {} | {} | {} | {:.1} % |",
                 s.frames,
                 fmt(b.hard_dice / n),
                 fmt(b.inner_dice / n),
@@ -616,6 +653,7 @@ impl Evaluation {
                 share(Class::Torso),
                 share(Class::Robot),
                 share(Class::Background),
+                100.0 * b.background_at_edge_share(),
             );
         }
         md
@@ -663,7 +701,7 @@ mod tests {
         // hand on 3-4 (the wrist drawn too far up the arm), robot on 5, background elsewhere.
         let truth = [F, F, F, F, F, F, U, U, B, B].map(|c| c as u8);
         let predicted = [F, F, F, H, H, R, F, U, B, B].map(|c| c as u8);
-        let b = ForearmBreakdown::count(&truth, &predicted);
+        let b = ForearmBreakdown::count(&truth, &predicted, 10);
         assert_eq!(
             (
                 b.found,
@@ -685,11 +723,11 @@ mod tests {
 
         // A frame whose forearm is all taken for the hand is missed, but lost only to the
         // wrist's place; one without a forearm is neither present nor missed, and scores 0.
-        let all_hand = ForearmBreakdown::count(&[F as u8; 4], &[H as u8; 4]);
+        let all_hand = ForearmBreakdown::count(&[F as u8; 4], &[H as u8; 4], 2);
         assert!(all_hand.missed());
         assert!((all_hand.dice_loss() - (1.0 - 1.0 / 5.0)).abs() < 1e-12);
         assert_eq!(all_hand.inner_dice_loss(), 0.0);
-        let none = ForearmBreakdown::count(&[B as u8; 4], &[B as u8; 4]);
+        let none = ForearmBreakdown::count(&[B as u8; 4], &[B as u8; 4], 2);
         assert!(!none.present() && !none.missed());
         assert_eq!(none.dice_loss(), 0.0);
 
@@ -701,6 +739,41 @@ mod tests {
         // Ten true forearm pixels: 3 found, 6 taken for the hand, 1 for the robot.
         assert!((sums.truth_share(H) - 0.6).abs() < 1e-12);
         assert!(BreakdownSums::default().truth_share(F).is_nan());
+    }
+
+    #[test]
+    fn a_thinner_mask_loses_the_forearms_edge_a_hole_its_inside() {
+        use Class::{Background as B, Forearm as F};
+        // A 3x3 forearm in a 5x5 frame. Drawn one column wide (the middle), it loses its two
+        // side columns: six pixels, all on the edge of the true mask.
+        let block = |inside: Class| {
+            let mut m = [B as u8; 25];
+            for y in 1..4 {
+                for x in 1..4 {
+                    m[y * 5 + x] = inside as u8;
+                }
+            }
+            m
+        };
+        let truth = block(F);
+        let mut thin = [B as u8; 25];
+        for y in 1..4 {
+            thin[y * 5 + 2] = F as u8;
+        }
+        let b = ForearmBreakdown::count(&truth, &thin, 5);
+        assert_eq!((b.truth_as[B as usize], b.background_at_edge), (6, 6));
+        // Drawn whole but for its centre: one pixel lost, inside the mask.
+        let mut holed = truth;
+        holed[2 * 5 + 2] = B as u8;
+        let b = ForearmBreakdown::count(&truth, &holed, 5);
+        assert_eq!((b.truth_as[B as usize], b.background_at_edge), (1, 0));
+        // The frame's border is not an edge: a forearm filling the frame, all missed, has
+        // none (the mask goes on beyond the crop).
+        let b = ForearmBreakdown::count(&[F as u8; 9], &[B as u8; 9], 3);
+        assert_eq!((b.truth_as[B as usize], b.background_at_edge), (9, 0));
+        let mut sums = BreakdownSums::default();
+        sums.add(&ForearmBreakdown::count(&truth, &thin, 5));
+        assert!((sums.background_at_edge_share() - 6.0 / 9.0).abs() < 1e-12);
     }
 
     #[test]
