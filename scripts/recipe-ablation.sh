@@ -37,7 +37,8 @@ for v in "${VARIANTS[@]}"; do
     fi
 done
 # | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |
-col() { grep -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }
+# The first row of a group is the forearm table's (the loss breakdown below it repeats the names).
+col() { grep -m1 -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }
 {
     echo "| variant (seed $SEED, $STEPS steps) | forearm Dice loss | batch Dice loss | IoU | heavy occlusion | distance large | five-class mean |"
     echo "|---|---|---|---|---|---|---|"

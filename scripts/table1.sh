@@ -69,7 +69,8 @@ done
 [ "$failed" -eq 0 ] || { echo "table1: a variant failed (its log is in $OUT); rerun to resume" >&2; exit 1; }
 # Columns of a row of `eval segmentation`'s forearm table:
 # | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |
-col() { grep -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }
+# The first row of a group is the forearm table's (the loss breakdown below it repeats the names).
+col() { grep -m1 -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }
 {
     echo "| cell | prediction loss | axonal delay | forearm Dice loss | heavy occlusion | medium | light | five-class mean | x 29/50 |"
     echo "|---|---|---|---|---|---|---|---|---|"

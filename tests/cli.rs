@@ -466,7 +466,9 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         md.contains("| forearm |")
             && md.contains("occlusion")
             && md.contains("batch Dice loss")
-            && md.contains("x 29/50"),
+            && md.contains("x 29/50")
+            && md.contains("with the elbow and wrist right")
+            && md.contains("of which on its edge"),
         "{md}"
     );
     // The worst frames' sheet: two frames to a row, four 32x32 images each.
