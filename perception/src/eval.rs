@@ -78,26 +78,26 @@ impl BreakdownSums {
         self.background_at_edge += b.background_at_edge as f64;
     }
 
-    /// The share of the true forearm's pixels predicted as `class`.
-    #[must_use]
-    pub fn truth_share(&self, class: Class) -> f64 {
+    /// `pixels` as a share of the true forearm's pixels (NaN when there are none).
+    fn share(&self, pixels: f64) -> f64 {
         let total: f64 = self.truth_as.iter().sum();
         if total > 0.0 {
-            self.truth_as[class as usize] / total
+            pixels / total
         } else {
             f64::NAN
         }
     }
 
+    /// The share of the true forearm's pixels predicted as `class`.
+    #[must_use]
+    pub fn truth_share(&self, class: Class) -> f64 {
+        self.share(self.truth_as[class as usize])
+    }
+
     /// The share of the true forearm's pixels predicted background on the true mask's edge.
     #[must_use]
     pub fn background_at_edge_share(&self) -> f64 {
-        let total: f64 = self.truth_as.iter().sum();
-        if total > 0.0 {
-            self.background_at_edge / total
-        } else {
-            f64::NAN
-        }
+        self.share(self.background_at_edge)
     }
 }
 
