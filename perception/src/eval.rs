@@ -746,16 +746,12 @@ mod tests {
         use Class::{Background as B, Forearm as F};
         // A 3x3 forearm in a 5x5 frame. Drawn one column wide (the middle), it loses its two
         // side columns: six pixels, all on the edge of the true mask.
-        let block = |inside: Class| {
-            let mut m = [B as u8; 25];
-            for y in 1..4 {
-                for x in 1..4 {
-                    m[y * 5 + x] = inside as u8;
-                }
+        let mut truth = [B as u8; 25];
+        for y in 1..4 {
+            for x in 1..4 {
+                truth[y * 5 + x] = F as u8;
             }
-            m
-        };
-        let truth = block(F);
+        }
         let mut thin = [B as u8; 25];
         for y in 1..4 {
             thin[y * 5 + 2] = F as u8;
