@@ -20,57 +20,20 @@ JOBS="${WORKCELL_TABLE1_JOBS:-2}"
 BIN="${WORKCELL_BIN:-target/release/workcell}"
 DATASET="${WORKCELL_DATASET:-out/dataset}"
 OUT=out/table1
-mkdir -p "$OUT"
-[ -f "$DATASET/manifest.json" ] || { echo "table1: no finished dataset at $DATASET" >&2; exit 1; }
-# Absolute: the variants' configurations live in $OUT, and a relative path from there breaks
-# when out/ is a symbolic link (`..` follows the link's target, not the path).
-DATASET_ABS="$(cd "$DATASET" && pwd -P)"
+SPLIT=test
+. scripts/lib/variants.sh
+variants_setup
 VARIANTS=(hgru:true:false hgru:false:false hgru:true:true convlstm:true:false convlstm:false:false
           conv:true:false conv:false:false)
-THREADS=$(( $(nproc) / JOBS )); [ "$THREADS" -ge 1 ] || THREADS=1
-
-run_variant() {
-    local name="$1" cfg="$2"
-    if [ ! -f "$OUT/$name/test.md" ]; then
-        if ! "$BIN" train --config "$cfg" --out "$OUT/$name" > "$OUT/$name.log" 2>&1 ||
-           ! "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" \
-                --dataset "$DATASET_ABS" --split test --backend "${WORKCELL_EVAL_BACKEND:-flex}" \
-                --threads "$THREADS" --out "$OUT/$name/test.md" >> "$OUT/$name.log" 2>&1; then
-            echo "$name: FAILED: $(tail -n 1 "$OUT/$name.log")" >&2
-            return 1
-        fi
-    fi
-    echo "$name: $(tail -n 3 "$OUT/$name.log" | head -n 2 | tr '\n' ' ')"
-}
-
-running=0
-failed=0
 for v in "${VARIANTS[@]}"; do
     IFS=: read -r cell pred delay <<< "$v"
     name="${cell}-pred-${pred}-delay-${delay}"
-    cfg="$OUT/$name.toml"
-    sed -e "s/^cell = .*/cell = \"$cell\"/" \
-        -e "s/^prediction_loss = .*/prediction_loss = $pred/" \
-        -e "s/^axonal_delay = .*/axonal_delay = $delay/" \
-        -e "s|^dataset = .*|dataset = \"$DATASET_ABS\"|" \
-        -e "s/^threads = .*/threads = $THREADS/" \
-        -e "s/^steps = .*/steps = $STEPS/" "$BASE" > "$cfg"
-    run_variant "$name" "$cfg" &
-    running=$((running + 1))
-    if [ "$running" -ge "$JOBS" ]; then
-        wait -n || failed=1
-        running=$((running - 1))
-    fi
+    base_config "$BASE" "$STEPS" "s/^cell = .*/cell = \"$cell\"/" \
+        "s/^prediction_loss = .*/prediction_loss = $pred/" \
+        "s/^axonal_delay = .*/axonal_delay = $delay/" > "$OUT/$name.toml"
+    queue_variant "$name" "$OUT/$name.toml"
 done
-while [ "$running" -gt 0 ]; do
-    wait -n || failed=1
-    running=$((running - 1))
-done
-[ "$failed" -eq 0 ] || { echo "table1: a variant failed (its log is in $OUT); rerun to resume" >&2; exit 1; }
-# Columns of a row of `eval segmentation`'s forearm table:
-# | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |
-# The first row of a group is the forearm table's (the loss breakdown below it repeats the names).
-col() { grep -m1 -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }
+variants_finish
 {
     echo "| cell | prediction loss | axonal delay | forearm Dice loss | heavy occlusion | medium | light | five-class mean | x 29/50 |"
     echo "|---|---|---|---|---|---|---|---|---|"

@@ -1,0 +1,64 @@
+# Sourced by scripts/table1.sh and scripts/recipe-ablation.sh: trains variants of a base recipe
+# and scores each on one split of the dataset, JOBS variants side by side.
+#
+# The caller sets BIN, DATASET, OUT, SPLIT and JOBS, then calls variants_setup, queue_variant
+# NAME CONFIG for each variant (resumable: a variant whose $OUT/NAME/$SPLIT.md exists is
+# skipped, a stopped one goes on from its checkpoint) and variants_finish.
+
+variants_setup() {
+    mkdir -p "$OUT"
+    [ -f "$DATASET/manifest.json" ] || { echo "$0: no finished dataset at $DATASET" >&2; exit 1; }
+    # Absolute: the variants' configurations live in $OUT, and a relative path from there
+    # breaks when out/ is a symbolic link (`..` follows the link's target, not the path).
+    DATASET_ABS="$(cd "$DATASET" && pwd -P)"
+    THREADS=$(( $(nproc) / JOBS )); [ "$THREADS" -ge 1 ] || THREADS=1
+    running=0
+    failed=0
+}
+
+# A base configuration with the dataset, thread count and steps of this run: base_config BASE
+# STEPS [SED-EXPRESSION...] > CONFIG.
+base_config() {
+    local base="$1" steps="$2"
+    shift 2
+    local args=(-e "s|^dataset = .*|dataset = \"$DATASET_ABS\"|"
+                -e "s/^threads = .*/threads = $THREADS/" -e "s/^steps = .*/steps = $steps/")
+    for e in "$@"; do [ -n "$e" ] && args+=(-e "$e"); done
+    sed "${args[@]}" "$base"
+}
+
+run_variant() {
+    local name="$1" cfg="$2"
+    if [ ! -f "$OUT/$name/$SPLIT.md" ]; then
+        if ! "$BIN" train --config "$cfg" --out "$OUT/$name" > "$OUT/$name.log" 2>&1 ||
+           ! "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" \
+                --dataset "$DATASET_ABS" --split "$SPLIT" --backend "${WORKCELL_EVAL_BACKEND:-flex}" \
+                --threads "$THREADS" --out "$OUT/$name/$SPLIT.md" >> "$OUT/$name.log" 2>&1; then
+            echo "$name: FAILED: $(tail -n 1 "$OUT/$name.log")" >&2
+            return 1
+        fi
+    fi
+    echo "$name: forearm Dice loss $(col "$OUT/$name/$SPLIT.md" all 5) on the $SPLIT split"
+}
+
+queue_variant() {
+    run_variant "$1" "$2" &
+    running=$((running + 1))
+    if [ "$running" -ge "$JOBS" ]; then
+        wait -n || failed=1
+        running=$((running - 1))
+    fi
+}
+
+variants_finish() {
+    while [ "$running" -gt 0 ]; do
+        wait -n || failed=1
+        running=$((running - 1))
+    done
+    [ "$failed" -eq 0 ] || { echo "$0: a variant failed (its log is in $OUT); rerun to resume" >&2; exit 1; }
+}
+
+# A column of the first row of a group in `eval segmentation`'s forearm table:
+# | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |
+# (the loss breakdown below that table repeats the group names): col FILE GROUP FIELD.
+col() { grep -m1 -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }
