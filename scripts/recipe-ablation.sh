@@ -23,6 +23,9 @@ OUT=out/ablation
 SPLIT=validation
 . scripts/lib/variants.sh
 variants_setup
+# Layer 0's frame prediction starting at a bias of 0.5 (docs/perception.md, "A colour channel
+# that never learns"); the base recipe's own setting is removed first.
+BIAS='/^frame_prediction_bias = /d;s/^window = /frame_prediction_bias = 0.5\nwindow = /'
 # name|seed|sed expression applied to the base recipe
 VARIANTS=(
     "recipe|$SEED|"
@@ -31,6 +34,8 @@ VARIANTS=(
     "frame-dice|$SEED|s/^dice = .*/dice = 1.0/;s/^batch_dice = .*/batch_dice = 0.0/"
     "no-class-weights|$SEED|s/^class_weights = .*/class_weights = {}/"
     "no-crop|$SEED|s/^min_crop = .*/min_crop = 1.0/"
+    "frame-prediction-bias|$SEED|$BIAS"
+    "frame-prediction-bias|$((SEED + 1))|$BIAS"
     "both-dice|$SEED|s/^dice = .*/dice = 1.0/"
     "no-focal|$SEED|s/^focal = .*/focal = 0.0/"
 )

@@ -1,7 +1,7 @@
 //! ProcNet: PredNet's predictive-coding layers with recurrent representation cells and a
 //! segmentation decoder (`reference/PROCNET.md`, "The model per time step").
 
-use burn::module::Module;
+use burn::module::{Module, Param};
 use burn::tensor::module::max_pool2d;
 use burn::tensor::ops::MaxPoolOptions;
 use burn::tensor::{Device, Tensor};
@@ -116,6 +116,30 @@ impl ProcNetConfig {
 }
 
 impl ProcNetModel {
+    /// Sets the bias of layer 0's frame prediction `Ahat_0 = ReLU(conv1x1(R_0))` to `bias` in
+    /// every colour channel (the parameter keeps its id, so an optimizer state still
+    /// applies). The uniform draw of PyTorch's initialisation can start a colour channel
+    /// below zero at every pixel (`R_0` is non-negative): that channel then predicts black
+    /// and gets no gradient, for good (docs/perception.md, "A colour channel that never
+    /// learns"). A bias about the frames' mean brightness starts every channel alive. Returns
+    /// false, changing nothing, for a model without the prediction loss.
+    pub fn set_frame_prediction_bias(&mut self, bias: f32) -> bool {
+        let Some(param) = self
+            .layers
+            .first_mut()
+            .and_then(|layer| layer.predict.as_mut())
+            .and_then(|conv| conv.bias.as_mut())
+        else {
+            return false;
+        };
+        let old = param.val();
+        let fresh = Tensor::full(old.dims(), bias, &old.device());
+        let id = param.id;
+        *param = Param::from_tensor(fresh);
+        param.id = id;
+        true
+    }
+
     /// The state before the first frame: zeros.
     #[must_use]
     pub fn initial_state(

@@ -141,6 +141,11 @@ pub struct TrainConfig {
     /// or full-size training on top of a run on smaller frames. Relative to the config file.
     /// A checkpoint in the run folder still wins (resuming).
     pub init_weights: Option<PathBuf>,
+    /// Layer 0's frame prediction starts with this bias in every colour channel instead of
+    /// the seed's uniform draw, so that no channel starts dead (a ReLU below zero at every
+    /// pixel); about the frames' mean brightness. Ignored without the prediction loss, and
+    /// when the run starts from `init_weights` or a checkpoint.
+    pub frame_prediction_bias: Option<f32>,
     /// The network (starts from the `cpu` preset; override any key).
     pub model: ProcNetConfig,
 }
@@ -165,6 +170,7 @@ impl Default for TrainConfig {
             validate_every: 250,
             validation_sequences: 24,
             init_weights: None,
+            frame_prediction_bias: None,
             model: ProcNetConfig::cpu(),
         }
     }
@@ -257,6 +263,14 @@ impl TrainConfig {
         }
         if self.checkpoint_every == 0 {
             return bad("checkpoint_every", "at least 1".into());
+        }
+        if let Some(bias) = self.frame_prediction_bias
+            && !(0.0..=1.0).contains(&bias)
+        {
+            return bad(
+                "frame_prediction_bias",
+                format!("in [0, 1] (frames are in [0, 1]), got {bias}"),
+            );
         }
         if !(0.25..=1.0).contains(&self.augment.min_crop) {
             return bad(
@@ -611,6 +625,10 @@ impl Trainer {
 
         let device: Device = cfg.backend.device()?.autodiff();
         let mut model = cfg.model.init(&device, cfg.seed)?;
+        if let Some(bias) = cfg.frame_prediction_bias {
+            // A checkpoint or `init_weights`, loaded below, replaces it.
+            model.set_frame_prediction_bias(bias);
+        }
         let mut optim: ModuleOptimizer = AdamWConfig::new()
             .with_weight_decay(cfg.weight_decay)
             .with_grad_clipping(Some(GradientClippingConfig::Norm(cfg.clip_norm)))
@@ -945,6 +963,8 @@ mod tests {
             ),
             ("steps = 100000000000", "steps"),
             ("window = 1000000", "window"),
+            ("frame_prediction_bias = nan", "frame_prediction_bias"),
+            ("frame_prediction_bias = -0.5", "frame_prediction_bias"),
         ] {
             let config: TrainConfig = match toml::from_str(toml) {
                 Ok(c) => c,

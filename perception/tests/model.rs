@@ -145,6 +145,45 @@ fn seeds_decide_the_initial_weights() {
 }
 
 #[test]
+fn the_frame_prediction_bias_sets_the_first_predicted_frame() {
+    let device = Device::flex();
+    let config = tiny(CellKind::Hgru);
+    let s = config.input_size;
+    // Before the first frame R_0 is zero, so Ahat_0 = ReLU(bias): the set value at every pixel
+    // of every colour channel.
+    let first_prediction = |model: &workcell_perception::model::ProcNetModel| {
+        let state = model.initial_state(1, s, s, &device);
+        let (out, _) = model.step(frame(0, 1, s, &device), state);
+        out.prediction.unwrap().into_data().to_vec::<f32>().unwrap()
+    };
+    let mut model = config.init(&device, 3).unwrap();
+    let drawn = first_prediction(&model);
+    let ids: Vec<_> = model.layers[0]
+        .predict
+        .as_ref()
+        .map(|c| c.bias.as_ref().unwrap().id)
+        .into_iter()
+        .collect();
+    assert!(model.set_frame_prediction_bias(0.4));
+    let set = first_prediction(&model);
+    assert_eq!(set.len(), 3 * s * s);
+    assert!(set.iter().all(|&v| (v - 0.4).abs() < 1e-6), "{set:?}");
+    assert!(drawn.iter().any(|&v| (v - 0.4).abs() > 1e-3));
+    // The parameter keeps its id: a saved optimizer state still applies to it.
+    let after: Vec<_> = model.layers[0]
+        .predict
+        .as_ref()
+        .map(|c| c.bias.as_ref().unwrap().id)
+        .into_iter()
+        .collect();
+    assert_eq!(ids, after);
+    // No prediction, nothing to set.
+    let baseline = config.feed_forward_baseline();
+    let mut model = baseline.init(&device, 3).unwrap();
+    assert!(!model.set_frame_prediction_bias(0.4));
+}
+
+#[test]
 fn bad_frames_are_clear_errors() {
     let device = Device::flex();
     let config = tiny(CellKind::Hgru);
