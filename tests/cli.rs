@@ -468,7 +468,8 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             && md.contains("batch Dice loss")
             && md.contains("x 29/50")
             && md.contains("with the elbow and wrist right")
-            && md.contains("of which on its edge"),
+            && md.contains("of which on its edge")
+            && md.contains("Layer 0's prediction of the frame: mean absolute error"),
         "{md}"
     );
     // The worst frames' sheet: two frames to a row, four 32x32 images each.

@@ -315,6 +315,85 @@ impl Scores {
     }
 }
 
+/// Layer 0's prediction of each frame (`clamp(Ahat_0, 0, 1)`, the prediction loss on) against
+/// the frame, summed over the frames scored. A colour channel predicted black at every pixel
+/// has a ReLU below zero everywhere: it gets no gradient and never learns (docs/perception.md,
+/// "A colour channel that never learns").
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FramePrediction {
+    /// Pixels of each colour channel predicted exactly 0.
+    pub black: [u64; 3],
+    /// Pixels per colour channel.
+    pub pixels: u64,
+    /// The sum of |prediction - frame| over every value.
+    pub abs_error: f64,
+}
+
+impl FramePrediction {
+    /// A channel at least this share of whose pixels is black is reported as never learning.
+    pub const DEAD: f64 = 0.999;
+
+    /// Adds one frame: planar `[3, n]` prediction and frame.
+    pub fn add(&mut self, predicted: &[f32], frame: &[f32]) {
+        let n = predicted.len() / 3;
+        for (c, black) in self.black.iter_mut().enumerate() {
+            *black += predicted[c * n..][..n]
+                .iter()
+                .filter(|&&v| v <= 0.0)
+                .count() as u64;
+        }
+        self.pixels += n as u64;
+        self.abs_error += predicted
+            .iter()
+            .zip(frame)
+            .map(|(p, f)| f64::from((p - f).abs()))
+            .sum::<f64>();
+    }
+
+    /// The share of each colour channel's pixels predicted black.
+    #[must_use]
+    pub fn black_share(&self) -> [f64; 3] {
+        self.black.map(|b| b as f64 / self.pixels.max(1) as f64)
+    }
+
+    /// The mean absolute error of the prediction, per value.
+    #[must_use]
+    pub fn mean_abs_error(&self) -> f64 {
+        self.abs_error / (3 * self.pixels.max(1)) as f64
+    }
+
+    /// One sentence for the report.
+    #[must_use]
+    pub fn summary(&self) -> String {
+        let share = self.black_share();
+        let dead: Vec<&str> = ["red", "green", "blue"]
+            .into_iter()
+            .zip(share)
+            .filter(|&(_, s)| s >= Self::DEAD)
+            .map(|(name, _)| name)
+            .collect();
+        let mut text = format!(
+            "Layer 0's prediction of the frame: mean absolute error {:.4}; pixels predicted \
+             black: red {:.1} %, green {:.1} %, blue {:.1} %.",
+            self.mean_abs_error(),
+            100.0 * share[0],
+            100.0 * share[1],
+            100.0 * share[2]
+        );
+        if !dead.is_empty() {
+            text.push_str(&format!(
+                " **The {} channel{} predict{} black everywhere: {} never learned** \
+                 (docs/perception.md, \"A colour channel that never learns\").",
+                dead.join(" and "),
+                if dead.len() > 1 { "s" } else { "" },
+                if dead.len() > 1 { "" } else { "s" },
+                if dead.len() > 1 { "they" } else { "it" },
+            ));
+        }
+        text
+    }
+}
+
 /// A frame kept for the contact sheet of the worst predictions.
 #[derive(Debug, Clone)]
 pub struct ScoredFrame {
@@ -350,6 +429,8 @@ pub struct Evaluation {
     pub by_pair: BTreeMap<(String, String), Scores>,
     /// The frames of highest forearm Dice loss, worst first (as many as asked for).
     pub worst: Vec<ScoredFrame>,
+    /// Layer 0's prediction of the frames (none without the prediction loss).
+    pub frame_prediction: Option<FramePrediction>,
 }
 
 /// Order of the dataset's distance classes and occlusion levels in tables (others last).
@@ -420,6 +501,15 @@ pub fn evaluate(
             state = next;
             if t == 0 {
                 continue;
+            }
+            if let Some(prediction) = out.prediction {
+                let predicted = prediction
+                    .into_data()
+                    .try_into_vec::<f32>()
+                    .unwrap_or_default();
+                ev.frame_prediction
+                    .get_or_insert_default()
+                    .add(&predicted, &frames[t * 3 * s * s..][..3 * s * s]);
             }
             let logits = if (h, w) == (s, s) {
                 out.logits
@@ -580,6 +670,9 @@ impl Evaluation {
                 fmt(mean * AUTHORS_SCALE)
             );
         }
+        if let Some(prediction) = &self.frame_prediction {
+            let _ = writeln!(md, "\n{}", prediction.summary());
+        }
         let Some(f) = self.classes.iter().position(|&c| c == Class::Forearm) else {
             return md;
         };
@@ -663,6 +756,35 @@ impl Evaluation {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_channel_predicted_black_everywhere_is_reported_dead() {
+        // Two pixels, planar RGB: red predicted right, green black at both pixels, blue black
+        // at one.
+        let frame = [0.5, 0.25, 0.5, 0.5, 0.25, 0.75];
+        let mut p = FramePrediction::default();
+        p.add(&[0.5, 0.25, 0.0, 0.0, 0.0, 0.5], &frame);
+        assert_eq!(p.black, [0, 2, 1]);
+        assert_eq!(p.pixels, 2);
+        assert_eq!(p.black_share(), [0.0, 1.0, 0.5]);
+        // |0 - 0.5| + |0 - 0.5| + |0 - 0.25| + |0.5 - 0.75| over 6 values.
+        assert!((p.mean_abs_error() - 1.5 / 6.0).abs() < 1e-12);
+        let text = p.summary();
+        assert!(text.contains("green 100.0 %, blue 50.0 %"), "{text}");
+        assert!(
+            text.contains("The green channel predicts black everywhere"),
+            "{text}"
+        );
+        // A second frame where blue is black too at both pixels: blue is at 75 %, still alive.
+        p.add(&[0.5, 0.25, 0.0, 0.0, 0.0, 0.0], &frame);
+        assert_eq!(p.black, [0, 4, 3]);
+        assert!(!p.summary().contains("blue channel"));
+        // Nothing black: no warning.
+        let mut alive = FramePrediction::default();
+        alive.add(&frame, &frame);
+        assert_eq!(alive.mean_abs_error(), 0.0);
+        assert!(!alive.summary().contains("never learned"));
+    }
 
     fn frame(dice: f32, inter: f32, pred: f32, truth: f32) -> FrameScores {
         FrameScores {
