@@ -18,7 +18,15 @@ const COLORS: [&str; 8] = [
 /// Panels stacked vertically over a common x axis (`x_label`), as an SVG document.
 #[must_use]
 pub fn svg_panels(x: &[f64], x_label: &str, panels: &[Panel]) -> String {
-    let (width, panel_h, left, right, top, gap) = (940.0, 220.0, 70.0, 190.0, 30.0, 50.0);
+    let (plot_w, panel_h, left, top, gap) = (680.0, 220.0, 70.0, 30.0, 50.0);
+    // The legend's column is as wide as its longest name (about 7 px a character at 12 px).
+    let longest = panels
+        .iter()
+        .flat_map(|p| p.series.iter().map(|(name, _)| name.chars().count()))
+        .max()
+        .unwrap_or(0);
+    let right = (40.0 + 7.0 * longest as f64).max(190.0);
+    let width = left + plot_w + right;
     let height = top + panels.len() as f64 * (panel_h + gap) + 20.0;
     let mut svg = String::new();
     let _ = writeln!(
@@ -30,7 +38,6 @@ pub fn svg_panels(x: &[f64], x_label: &str, panels: &[Panel]) -> String {
     for (k, panel) in panels.iter().enumerate() {
         let y_top = top + k as f64 * (panel_h + gap);
         let (y0, y1) = bounds(panel.series.iter().flat_map(|(_, v)| v.iter().copied()));
-        let plot_w = width - left - right;
         let sx = |v: f64| left + (v - x0) / (x1 - x0) * plot_w;
         let sy = |v: f64| y_top + panel_h - (v - y0) / (y1 - y0) * panel_h;
         let _ = writeln!(
@@ -295,6 +302,29 @@ mod tests {
         assert_eq!(svg.matches("<polyline").count(), 2);
         assert!(svg.contains("a &lt; b"));
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
+    }
+
+    #[test]
+    fn the_legend_is_as_wide_as_its_longest_name() {
+        let x = [0.0, 1.0];
+        let panel = |name: &str| Panel {
+            title: "t".into(),
+            y_label: "y".into(),
+            series: vec![(name.into(), vec![0.0, 1.0])],
+        };
+        let width = |svg: &str| -> f64 {
+            let w = svg
+                .split("width=\"")
+                .nth(1)
+                .and_then(|s| s.split('"').next());
+            w.and_then(|w| w.parse().ok()).unwrap_or(f64::NAN)
+        };
+        // Short names keep the 190 px column: 70 + 680 + 190.
+        assert_eq!(width(&svg_panels(&x, "step", &[panel("seed-1")])), 940.0);
+        // 40 characters need 40 + 7 x 40 = 320 px, so that none is cut off.
+        let long = "no-frame-prediction-bias-seed-1-and-more";
+        assert_eq!(long.len(), 40);
+        assert_eq!(width(&svg_panels(&x, "step", &[panel(long)])), 1070.0);
     }
 
     #[test]
