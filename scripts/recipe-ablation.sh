@@ -28,11 +28,12 @@ variants_setup
 VARIANTS=(
     "recipe|$SEED|"
     "recipe|$((SEED + 1))|"
-    "frame-dice|$SEED|s/^dice = .*/dice = 1.0/;s/^batch_dice = .*/batch_dice = 0.0/"
+    "batch-dice|$SEED|s/^dice = .*/dice = 0.0/;s/^batch_dice = .*/batch_dice = 1.0/"
+    "batch-dice|$((SEED + 1))|s/^dice = .*/dice = 0.0/;s/^batch_dice = .*/batch_dice = 1.0/"
     "no-class-weights|$SEED|s/^class_weights = .*/class_weights = {}/"
     "no-crop|$SEED|s/^min_crop = .*/min_crop = 1.0/"
     "decoder-half-resolution|$SEED|s/^decoder_full_resolution = .*/decoder_full_resolution = false/"
-    "both-dice|$SEED|s/^dice = .*/dice = 1.0/"
+    "both-dice|$SEED|s/^batch_dice = .*/batch_dice = 1.0/"
     "no-focal|$SEED|s/^focal = .*/focal = 0.0/"
     # Layer 0's frame prediction starting from the seed's uniform draw, as before the recipe
     # set its bias (docs/perception.md, "A colour channel that never learns").
