@@ -24,12 +24,17 @@ OUT="${WORKCELL_ABLATION_OUT:-out/ablation}"
 SPLIT=validation
 . scripts/lib/variants.sh
 variants_setup
-# name|seed|sed expression applied to the base recipe; the most telling first.
+# name|seed|sed expression applied to the base recipe|train's arguments; the most telling first.
 VARIANTS=(
     "recipe|$SEED|"
     "recipe|$((SEED + 1))|"
     "batch-dice|$SEED|s/^dice = .*/dice = 0.0/;s/^batch_dice = .*/batch_dice = 1.0/"
     "batch-dice|$((SEED + 1))|s/^dice = .*/dice = 0.0/;s/^batch_dice = .*/batch_dice = 1.0/"
+    # The feed-forward baseline of the same parameter count, trained by the same recipe (it
+    # has no frame prediction, so no prediction loss): the issue's "ProcNet ahead of the
+    # baseline by more than the spread between two seeds".
+    "baseline|$SEED||--model baseline"
+    "baseline|$((SEED + 1))||--model baseline"
     "no-class-weights|$SEED|s/^class_weights = .*/class_weights = {}/"
     "no-crop|$SEED|s/^min_crop = .*/min_crop = 1.0/"
     "decoder-half-resolution|$SEED|s/^decoder_full_resolution = .*/decoder_full_resolution = false/"
@@ -41,17 +46,18 @@ VARIANTS=(
     "no-frame-prediction-bias|$((SEED + 1))|/^frame_prediction_bias = /d"
 )
 for v in "${VARIANTS[@]}"; do
-    IFS='|' read -r variant seed expr <<< "$v"
+    IFS='|' read -r variant seed expr args <<< "$v"
     name="$variant-seed-$seed"
     base_config "$BASE" "$STEPS" "s/^seed = .*/seed = $seed/" "$expr" > "$OUT/$name.toml"
-    queue_variant "$name" "$OUT/$name.toml"
+    # shellcheck disable=SC2086 # the arguments are words
+    queue_variant "$name" "$OUT/$name.toml" $args
 done
 variants_finish
 {
     echo "| variant ($STEPS steps) | seed | forearm Dice loss | thresholded | elbow and wrist right | short | medium | heavy occlusion | five-class mean | layer 0 channels that never learned |"
     echo "|---|---|---|---|---|---|---|---|---|---|"
     for v in "${VARIANTS[@]}"; do
-        IFS='|' read -r variant seed expr <<< "$v"
+        IFS='|' read -r variant seed _ <<< "$v"
         f="$OUT/$variant-seed-$seed/$SPLIT.md"
         # The breakdown's first row: | all | frames | thresholded | elbow and wrist right | ...
         br() { grep -E "^\| all \|" "$f" | sed -n 2p | cut -d'|' -f"$1" | tr -d ' '; }

@@ -2,8 +2,9 @@
 # and scores each on one split of the dataset, JOBS variants side by side.
 #
 # The caller sets BIN, DATASET, OUT, SPLIT and JOBS, then calls variants_setup, queue_variant
-# NAME CONFIG for each variant (resumable: a variant whose $OUT/NAME/$SPLIT.md exists is
-# skipped, a stopped one goes on from its checkpoint) and variants_finish.
+# NAME CONFIG [TRAIN-ARGUMENT...] for each variant (resumable: a variant whose
+# $OUT/NAME/$SPLIT.md exists is skipped, a stopped one goes on from its checkpoint) and
+# variants_finish.
 
 variants_setup() {
     mkdir -p "$OUT"
@@ -29,20 +30,24 @@ base_config() {
 
 run_variant() {
     local name="$1" cfg="$2"
+    shift 2
+    local log="$OUT/$name.log"
     if [ ! -f "$OUT/$name/$SPLIT.md" ]; then
-        if ! "$BIN" train --config "$cfg" --out "$OUT/$name" > "$OUT/$name.log" 2>&1 ||
-           ! "$BIN" eval segmentation --weights "$OUT/$name/procnet.safetensors" \
-                --dataset "$DATASET_ABS" --split "$SPLIT" --backend "${WORKCELL_EVAL_BACKEND:-flex}" \
-                --threads "$THREADS" --out "$OUT/$name/$SPLIT.md" >> "$OUT/$name.log" 2>&1; then
-            echo "$name: FAILED: $(tail -n 1 "$OUT/$name.log")" >&2
-            return 1
-        fi
+        "$BIN" train --config "$cfg" "$@" --out "$OUT/$name" > "$log" 2>&1 ||
+            { echo "$name: FAILED: $(tail -n 1 "$log")" >&2; return 1; }
+        # `train --model baseline` names its weights baseline.safetensors.
+        local weights="$OUT/$name/procnet.safetensors"
+        [ -f "$weights" ] || weights="$OUT/$name/baseline.safetensors"
+        "$BIN" eval segmentation --weights "$weights" \
+            --dataset "$DATASET_ABS" --split "$SPLIT" --backend "${WORKCELL_EVAL_BACKEND:-flex}" \
+            --threads "$THREADS" --out "$OUT/$name/$SPLIT.md" >> "$log" 2>&1 ||
+            { echo "$name: FAILED: $(tail -n 1 "$log")" >&2; return 1; }
     fi
     echo "$name: forearm Dice loss $(col "$OUT/$name/$SPLIT.md" all 5) on the $SPLIT split"
 }
 
 queue_variant() {
-    run_variant "$1" "$2" &
+    run_variant "$@" &
     running=$((running + 1))
     if [ "$running" -ge "$JOBS" ]; then
         wait -n || failed=1
