@@ -3,7 +3,8 @@
 # configs/train-64.toml) and one change at a time, each trained for the same STEPS steps with
 # the same seed, then scored on the validation split (the test split stays for the final
 # figures). The recipe is trained with a second seed too: a change is worth something only
-# when it moves the forearm by more than the two recipe seeds differ.
+# when it moves the forearm by more than the two recipe seeds differ. The feed-forward
+# baseline (`train --model baseline`) is trained the same way, two seeds.
 #
 #   scripts/recipe-ablation.sh [STEPS] [SEED]   (needs out/dataset and a release build; tch recipe)
 #
