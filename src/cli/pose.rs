@@ -56,8 +56,7 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
         "gt" => Box::new(GroundTruthMasks),
         "visible" => Box::new(VisibleMasks),
         "procnet" | "baseline" => {
-            // The shipped ProcNet is the 128x128 one; the shipped baseline is trained by its
-            // 64x64 first stage's recipe (configs/train-64.toml).
+            // The shipped ProcNet and baseline, both 64x64 networks of the cpu preset.
             let weights = args.weights.clone().unwrap_or_else(|| {
                 PathBuf::from(if kind == "procnet" {
                     "perception/weights/procnet-cpu.safetensors"
