@@ -479,14 +479,35 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         u32::from_be_bytes(png[20..24].try_into().expect("4 bytes")),
     );
     assert!(w >= 2 * 4 * 32 && h >= 2 * 32, "{w}x{h}");
-    // A subset of the split: two of its sequences.
-    let subset = eval_test(&["--sequences", "2"]);
+    // A subset of the split: two of its sequences, each scored frame also written as CSV.
+    let frames_csv = tmp.path().join("frames.csv");
+    let subset = eval_test(&[
+        "--sequences",
+        "2",
+        "--frames",
+        frames_csv.to_str().expect("utf-8"),
+    ]);
     assert!(subset.status.success(), "{}", text(&subset.stderr));
     let md = text(&subset.stdout);
     assert!(
-        md.contains("(2 of its ") && md.contains("Split `test`: 2 sequences, 6 frames scored"),
+        md.contains("(2 of its ")
+            && md.contains("Split `test`: 2 sequences, 6 frames scored")
+            && md.contains("ceiling, input")
+            && md.contains("| 1-9 | 2 | 6 |"),
         "{md}"
     );
+    // One row per scored frame (frames 1 to 3 of each 4-frame sequence), eight fields each.
+    let csv = std::fs::read_to_string(&frames_csv).expect("the frames are written");
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 1 + 6, "{csv}");
+    assert_eq!(rows[0][..2], ["sequence", "frame"], "{csv}");
+    assert!(rows.iter().all(|r| r.len() == 8), "{csv}");
+    let scored: Vec<&str> = rows[1..].iter().map(|r| r[1]).collect();
+    assert_eq!(scored, ["1", "2", "3", "1", "2", "3"], "{csv}");
+    for r in &rows[1..] {
+        let dice: f64 = r[5].parse().expect("a loss");
+        assert!((0.0..=1.0).contains(&dice), "{csv}");
+    }
     // With standard output closed (`| true`), the table is still written to --out.
     let table = tmp.path().join("table.md");
     let (reader, writer) = std::io::pipe().expect("pipe");

@@ -10,6 +10,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use workcell_render::Class;
+use workcell_render::roi::perfect_dice_loss;
 
 use burn::tensor::activation::sigmoid;
 use burn::tensor::module::interpolate;
@@ -45,6 +46,11 @@ pub struct Scores {
     /// (a perfect network's Dice loss at the model's input, `PartLabel::perfect_dice_loss`).
     pub ceiling: f64,
     pub ceiling_frames: usize,
+    /// Sum and count of the forearm's ceiling at the model's input: the stored truth averaged
+    /// to the input grid, upsampled back as the predictions are and thresholded at one half
+    /// (`workcell_render::roi::perfect_dice_loss`), scored against the stored labels.
+    pub input_ceiling: f64,
+    pub input_ceiling_frames: usize,
     /// Where the forearm's loss goes, from the thresholded masks ([`ForearmBreakdown`]).
     pub breakdown: BreakdownSums,
 }
@@ -224,6 +230,7 @@ struct FrameScores {
     predicted: Vec<f32>,
     truth: Vec<f32>,
     ceiling: Option<f64>,
+    input_ceiling: Option<f64>,
     breakdown: ForearmBreakdown,
 }
 
@@ -251,6 +258,10 @@ impl Scores {
         if let Some(v) = f.ceiling {
             self.ceiling += v;
             self.ceiling_frames += 1;
+        }
+        if let Some(v) = f.input_ceiling {
+            self.input_ceiling += v;
+            self.input_ceiling_frames += 1;
         }
         self.breakdown.add(&f.breakdown);
         self.frames += 1;
@@ -311,6 +322,16 @@ impl Scores {
             f64::NAN
         } else {
             self.ceiling / self.ceiling_frames as f64
+        }
+    }
+
+    /// The mean forearm ceiling at the model's input (NaN when no frame has a forearm).
+    #[must_use]
+    pub fn input_ceiling(&self) -> f64 {
+        if self.input_ceiling_frames == 0 {
+            f64::NAN
+        } else {
+            self.input_ceiling / self.input_ceiling_frames as f64
         }
     }
 }
@@ -414,6 +435,59 @@ pub struct ScoredFrame {
     pub height: usize,
 }
 
+/// Frames per span of the table by time in the sequence.
+pub const TIME_SPAN: usize = 10;
+
+/// One scored frame's forearm (a row of `workcell eval segmentation --frames`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameRecord {
+    pub sequence: usize,
+    pub frame: usize,
+    /// The distance class, or the camera of the cell.
+    pub camera: String,
+    pub occlusion_level: String,
+    /// True forearm pixels at the stored size.
+    pub forearm_px: u64,
+    /// The per-frame Dice loss (probabilities).
+    pub forearm_dice: f64,
+    /// The per-frame Dice loss of the thresholded mask ([`ForearmBreakdown::dice_loss`]).
+    pub forearm_dice_thresholded: f64,
+    /// A perfect network's Dice loss at the model's input (`None`: no true forearm).
+    pub input_ceiling: Option<f64>,
+}
+
+impl FrameRecord {
+    /// The CSV header of [`FrameRecord::csv_row`].
+    pub const CSV_HEADER: &str = "sequence,frame,camera,occlusion,forearm_px,forearm_dice,forearm_dice_thresholded,input_ceiling";
+
+    /// One CSV row (an empty field for a missing ceiling).
+    #[must_use]
+    pub fn csv_row(&self) -> String {
+        format!(
+            "{},{},{},{},{},{:.6},{:.6},{}",
+            self.sequence,
+            self.frame,
+            csv_field(&self.camera),
+            csv_field(&self.occlusion_level),
+            self.forearm_px,
+            self.forearm_dice,
+            self.forearm_dice_thresholded,
+            self.input_ceiling
+                .map_or(String::new(), |v| format!("{v:.6}"))
+        )
+    }
+}
+
+/// A CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line break, as a
+/// camera's name from a scenario file may.
+fn csv_field(s: &str) -> std::borrow::Cow<'_, str> {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\"")).into()
+    } else {
+        s.into()
+    }
+}
+
 /// The scores of a split, overall and per group.
 #[derive(Debug, Clone, Default)]
 pub struct Evaluation {
@@ -427,8 +501,13 @@ pub struct Evaluation {
     pub by_distance: BTreeMap<String, Scores>,
     /// Keyed by (distance class or camera, occlusion level).
     pub by_pair: BTreeMap<(String, String), Scores>,
+    /// Keyed by the first frame index of a span of [`TIME_SPAN`] frames: how the scores
+    /// change as the recurrent network sees more of a sequence.
+    pub by_time: BTreeMap<usize, Scores>,
     /// The frames of highest forearm Dice loss, worst first (as many as asked for).
     pub worst: Vec<ScoredFrame>,
+    /// Every scored frame's forearm, in the order scored (empty without a forearm class).
+    pub frames: Vec<FrameRecord>,
     /// Layer 0's prediction of the frames (none without the prediction loss).
     pub frame_prediction: Option<FramePrediction>,
 }
@@ -546,6 +625,10 @@ pub fn evaluate(
                     class.unwrap_or(Class::Background) as u8
                 })
                 .collect();
+            let forearm_mask: Vec<u8> = truth
+                .iter()
+                .map(|&v| u8::from(v == Class::Forearm as u8))
+                .collect();
             let scores = FrameScores {
                 dice: row(dice_per_class(p.clone(), y.clone())),
                 focal: row(focal_per_class(logits, y.clone(), 0.5, 2.0)),
@@ -558,8 +641,21 @@ pub fn evaluate(
                     .get(t)
                     .and_then(|l| l.part(Class::Forearm))
                     .and_then(|part| part.perfect_dice_loss),
+                input_ceiling: perfect_dice_loss(&forearm_mask, w, h, s, s),
                 breakdown: ForearmBreakdown::count(&truth, &predicted, w),
             };
+            if let Some(f) = forearm {
+                ev.frames.push(FrameRecord {
+                    sequence: entry.index,
+                    frame: t,
+                    camera: entry.camera_class(),
+                    occlusion_level: entry.occlusion_level.clone(),
+                    forearm_px: scores.breakdown.found + scores.breakdown.missed_pixels,
+                    forearm_dice: f64::from(scores.dice[f]),
+                    forearm_dice_thresholded: scores.breakdown.dice_loss(),
+                    input_ceiling: scores.input_ceiling,
+                });
+            }
             if let Some(f) = forearm
                 && keep_worst > 0
             {
@@ -596,6 +692,10 @@ pub fn evaluate(
                 .add(entry.index, &scores);
             ev.by_pair
                 .entry((d, o))
+                .or_default()
+                .add(entry.index, &scores);
+            ev.by_time
+                .entry(t / TIME_SPAN * TIME_SPAN)
                 .or_default()
                 .add(entry.index, &scores);
         }
@@ -697,16 +797,18 @@ impl Evaluation {
         groups.extend(pairs.iter().map(|((d, o), s)| (format!("{d} / {o}"), *s)));
         let _ = writeln!(
             md,
-            "\nForearm by distance class (the paper's cameras) or camera of the cell, and occlusion level (ceiling: a perfect network's Dice \
-             loss at the dataset's stored size, from the labels; for a network of another input size it is \
-             the stored frames' ceiling, not its input's):\n\n\
-             | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |\n\
-             |---|---|---|---|---|---|---|---|---|"
+            "\nForearm by distance class (the paper's cameras) or camera of the cell, and occlusion \
+             level. Two ceilings, each a perfect network's Dice loss: at the stored size against \
+             the camera's image (from the labels), and at the model's input against the stored \
+             labels (the truth averaged to the input grid, upsampled as the predictions are, \
+             thresholded at one half):\n\n\
+             | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling, stored | ceiling, input | class mean Dice |\n\
+             |---|---|---|---|---|---|---|---|---|---|"
         );
         for (name, s) in &groups {
             let _ = writeln!(
                 md,
-                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 s.sequences.len(),
                 s.frames,
                 fmt(s.dice(f)),
@@ -714,6 +816,28 @@ impl Evaluation {
                 fmt(s.iou(f)),
                 fmt(s.focal(f)),
                 fmt(s.ceiling()),
+                fmt(s.input_ceiling()),
+                fmt(s.class_mean_dice())
+            );
+        }
+        let _ = writeln!(
+            md,
+            "\nForearm by time in the sequence (the recurrent state carried from frame 0; \
+             training windows are shorter than a sequence):\n\n\
+             | frames | sequences | frames scored | Dice loss | batch Dice loss | IoU | class mean Dice |\n\
+             |---|---|---|---|---|---|---|"
+        );
+        for (start, s) in &self.by_time {
+            let _ = writeln!(
+                md,
+                "| {}-{} | {} | {} | {} | {} | {} | {} |",
+                (*start).max(1),
+                start + TIME_SPAN - 1,
+                s.sequences.len(),
+                s.frames,
+                fmt(s.dice(f)),
+                fmt(s.batch_dice(f)),
+                fmt(s.iou(f)),
                 fmt(s.class_mean_dice())
             );
         }
@@ -795,6 +919,7 @@ mod tests {
             predicted: vec![pred, 0.0],
             truth: vec![truth, 0.0],
             ceiling: None,
+            input_ceiling: None,
             breakdown: ForearmBreakdown::default(),
         }
     }
@@ -813,6 +938,61 @@ mod tests {
         assert_eq!(s.class_mean_dice(), 0.1875);
         assert_eq!((s.frames, s.sequences.len()), (2, 2));
         assert!(s.ceiling().is_nan());
+    }
+
+    #[test]
+    fn the_input_ceiling_is_averaged_over_the_frames_that_have_one() {
+        let mut s = Scores::default();
+        s.add(
+            0,
+            &FrameScores {
+                input_ceiling: Some(0.25),
+                ..frame(0.5, 0.0, 0.0, 1.0)
+            },
+        );
+        s.add(
+            0,
+            &FrameScores {
+                input_ceiling: Some(0.75),
+                ..frame(0.5, 0.0, 0.0, 1.0)
+            },
+        );
+        // A frame without a forearm has no ceiling and leaves the mean alone.
+        s.add(1, &frame(0.0, 0.0, 0.0, 0.0));
+        assert_eq!(s.input_ceiling(), 0.5);
+        assert!(Scores::default().input_ceiling().is_nan());
+    }
+
+    #[test]
+    fn a_frame_record_is_one_csv_row_of_the_headers_fields() {
+        let mut r = FrameRecord {
+            sequence: 1225,
+            frame: 17,
+            camera: "short".into(),
+            occlusion_level: "medium".into(),
+            forearm_px: 42,
+            forearm_dice: 0.98,
+            forearm_dice_thresholded: 1.0,
+            input_ceiling: Some(0.0625),
+        };
+        assert_eq!(
+            r.csv_row(),
+            "1225,17,short,medium,42,0.980000,1.000000,0.062500"
+        );
+        assert_eq!(
+            r.csv_row().split(',').count(),
+            FrameRecord::CSV_HEADER.split(',').count()
+        );
+        r.input_ceiling = None;
+        assert!(r.csv_row().ends_with("1.000000,"), "{}", r.csv_row());
+        // A camera named with a comma and a quote stays one field.
+        r.camera = "left, \"high\" camera".into();
+        assert!(
+            r.csv_row()
+                .starts_with("1225,17,\"left, \"\"high\"\" camera\",medium,"),
+            "{}",
+            r.csv_row()
+        );
     }
 
     #[test]

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use workcell::perception::eval::evaluate;
+use workcell::perception::eval::{FrameRecord, evaluate};
 use workcell::perception::train::{TrainConfig, Trainer, read_metrics};
 use workcell::perception::{Backend, backend, weights};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
@@ -88,6 +88,11 @@ pub struct EvalSegmentationArgs {
     /// Frames on the sheet.
     #[arg(long, default_value_t = 24)]
     pub worst: usize,
+    /// Write every scored frame's forearm to this CSV file: sequence, frame, camera,
+    /// occlusion, true forearm pixels, Dice loss (probabilities and thresholded) and the
+    /// ceiling at the model's input.
+    #[arg(long)]
+    pub frames: Option<PathBuf>,
 }
 
 fn on_off(b: bool) -> &'static str {
@@ -436,6 +441,16 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
     say_inline!("{md}");
     if let Some(out) = &args.out {
         std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
+    }
+    if let Some(path) = &args.frames {
+        let mut csv = String::from(FrameRecord::CSV_HEADER);
+        csv.push('\n');
+        for r in &ev.frames {
+            csv.push_str(&r.csv_row());
+            csv.push('\n');
+        }
+        std::fs::write(path, csv).with_context(|| format!("writing {}", path.display()))?;
+        say!("frames: {}", path.display());
     }
     if let Some(path) = &args.sheet {
         let titles: Vec<String> = ev
