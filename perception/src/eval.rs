@@ -43,7 +43,8 @@ pub struct Scores {
     pub predicted: Vec<f64>,
     pub truth: Vec<f64>,
     /// Sum and count of the forearm's resolution ceiling over the frames whose labels have it
-    /// (a perfect network's Dice loss at the model's input, `PartLabel::perfect_dice_loss`).
+    /// (a perfect network's Dice loss at the dataset's stored size against the camera's image,
+    /// `PartLabel::perfect_dice_loss`).
     pub ceiling: f64,
     pub ceiling_frames: usize,
     /// Sum and count of the forearm's ceiling at the model's input: the stored truth averaged
