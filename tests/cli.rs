@@ -493,7 +493,8 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         md.contains("(2 of its ")
             && md.contains("Split `test`: 2 sequences, 6 frames scored")
             && md.contains("ceiling, input")
-            && md.contains("| 1-9 | 2 | 6 |"),
+            && md.contains("| 1-9 | 2 | 6 |")
+            && md.contains("The 2 sequences of highest mean forearm Dice loss"),
         "{md}"
     );
     // One row per scored frame (frames 1 to 3 of each 4-frame sequence), eight fields each.

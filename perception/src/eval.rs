@@ -874,9 +874,59 @@ impl Evaluation {
                 100.0 * b.background_at_edge_share(),
             );
         }
+        self.worst_sequences_markdown(&mut md, f);
         md
     }
+
+    /// The sequences of highest mean forearm Dice loss, each beside its distance class (or
+    /// camera) without it: whether a group's figure is one sequence's or all of them.
+    fn worst_sequences_markdown(&self, md: &mut String, forearm: usize) {
+        let mut by_sequence: BTreeMap<usize, (&str, &str, usize, f64)> = BTreeMap::new();
+        for r in &self.frames {
+            let e =
+                by_sequence
+                    .entry(r.sequence)
+                    .or_insert((&r.camera, &r.occlusion_level, 0, 0.0));
+            e.2 += 1;
+            e.3 += r.forearm_dice;
+        }
+        let mut worst: Vec<_> = by_sequence.into_iter().collect();
+        worst.sort_by(|a, b| (b.1.3 / b.1.2 as f64).total_cmp(&(a.1.3 / a.1.2 as f64)));
+        worst.truncate(WORST_SEQUENCES);
+        if worst.is_empty() {
+            return;
+        }
+        let _ = writeln!(
+            md,
+            "\nThe {} sequences of highest mean forearm Dice loss, and the rest of their distance \
+             class (or camera) without each:\n\n\
+             | sequence | distance or camera / occlusion | frames | Dice loss | its distance or camera without it |\n\
+             |---|---|---|---|---|",
+            worst.len()
+        );
+        for (sequence, (camera, occlusion, n, sum)) in worst {
+            let without = self.by_distance.get(camera).map_or(f64::NAN, |s| {
+                let rest = s.frames.saturating_sub(n);
+                s.dice.get(forearm).map_or(f64::NAN, |total| {
+                    if rest == 0 {
+                        f64::NAN
+                    } else {
+                        (total - sum) / rest as f64
+                    }
+                })
+            });
+            let _ = writeln!(
+                md,
+                "| {sequence} | {camera} / {occlusion} | {n} | {} | {} |",
+                fmt(sum / n as f64),
+                fmt(without)
+            );
+        }
+    }
 }
+
+/// Rows of the table of worst sequences.
+const WORST_SEQUENCES: usize = 5;
 
 #[cfg(test)]
 mod tests {
@@ -962,6 +1012,56 @@ mod tests {
         s.add(1, &frame(0.0, 0.0, 0.0, 0.0));
         assert_eq!(s.input_ceiling(), 0.5);
         assert!(Scores::default().input_ceiling().is_nan());
+    }
+
+    #[test]
+    fn the_worst_sequences_are_listed_beside_their_distance_without_them() {
+        let record = |sequence, camera: &str, forearm_dice| FrameRecord {
+            sequence,
+            frame: 1,
+            camera: camera.into(),
+            occlusion_level: "medium".into(),
+            forearm_px: 10,
+            forearm_dice,
+            forearm_dice_thresholded: forearm_dice,
+            input_ceiling: None,
+        };
+        let mut ev = Evaluation {
+            classes: vec![Class::Forearm],
+            frames: vec![
+                record(1, "short", 0.9),
+                record(1, "short", 0.7),
+                record(2, "short", 0.1),
+                record(2, "short", 0.1),
+                record(3, "medium", 0.2),
+            ],
+            ..Evaluation::default()
+        };
+        let group = |frames, dice| Scores {
+            frames,
+            dice: vec![dice],
+            ..Scores::default()
+        };
+        ev.by_distance.insert("short".into(), group(4, 1.8));
+        ev.by_distance.insert("medium".into(), group(1, 0.2));
+        let mut md = String::new();
+        ev.worst_sequences_markdown(&mut md, 0);
+        let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| ")).collect();
+        assert_eq!(
+            rows[1..],
+            [
+                // Sequence 1 (mean 0.8) against the other short sequence's 0.1.
+                "| 1 | short / medium | 2 | 0.8000 | 0.1000 |",
+                // The only medium sequence: nothing is left without it.
+                "| 3 | medium / medium | 1 | 0.2000 | - |",
+                "| 2 | short / medium | 2 | 0.1000 | 0.8000 |",
+            ],
+            "{md}"
+        );
+        // No scored frame, no table.
+        let mut empty = String::new();
+        Evaluation::default().worst_sequences_markdown(&mut empty, 0);
+        assert!(empty.is_empty());
     }
 
     #[test]
