@@ -319,22 +319,19 @@ impl Scores {
     /// The mean forearm resolution ceiling (NaN when no frame's labels have it).
     #[must_use]
     pub fn ceiling(&self) -> f64 {
-        if self.ceiling_frames == 0 {
-            f64::NAN
-        } else {
-            self.ceiling / self.ceiling_frames as f64
-        }
+        mean_or_nan(self.ceiling, self.ceiling_frames)
     }
 
     /// The mean forearm ceiling at the model's input (NaN when no frame has a forearm).
     #[must_use]
     pub fn input_ceiling(&self) -> f64 {
-        if self.input_ceiling_frames == 0 {
-            f64::NAN
-        } else {
-            self.input_ceiling / self.input_ceiling_frames as f64
-        }
+        mean_or_nan(self.input_ceiling, self.input_ceiling_frames)
     }
+}
+
+/// `sum / n`, NaN for no frames.
+fn mean_or_nan(sum: f64, n: usize) -> f64 {
+    if n == 0 { f64::NAN } else { sum / n as f64 }
 }
 
 /// Layer 0's prediction of each frame (`clamp(Ahat_0, 0, 1)`, the prediction loss on) against
