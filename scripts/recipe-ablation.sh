@@ -51,6 +51,10 @@ VARIANTS=(
     # set its bias (docs/perception.md, "A colour channel that never learns").
     "no-frame-prediction-bias|$SEED|/^frame_prediction_bias = /d"
     "no-frame-prediction-bias|$((SEED + 1))|/^frame_prediction_bias = /d"
+    # Windows of 20 frames, two to a step (the same frames a step): evaluation carries the
+    # state through 29 frames, and past the 10-frame window the loss creeps up
+    # (docs/perception.md, "Two hours at 64x64").
+    "window-20|$SEED|s/^window = .*/window = 20/;s/^batch = .*/batch = 2/"
 )
 for v in "${VARIANTS[@]}"; do
     IFS='|' read -r variant seed expr args <<< "$v"
