@@ -75,7 +75,7 @@ pub fn time(
         ..LossConfig::default()
     };
     let mut step = |model: crate::model::ProcNetModel| {
-        let l = window_loss(&model, &rgb, &target, &loss, None);
+        let l = window_loss(&model, &rgb, &target, &loss, None, None);
         let grads = GradientsParams::from_grads(l.total.backward(), &model);
         optim.step(1e-3, model, grads)
     };

@@ -59,6 +59,26 @@ pub struct ProcNetState {
     pub frames: usize,
 }
 
+impl ProcNetState {
+    /// The same state with `f` applied to every tensor (detach it, move it on or off the
+    /// autodiff device).
+    #[must_use]
+    pub fn map_tensors(self, f: impl Fn(Tensor<4>) -> Tensor<4>) -> Self {
+        Self {
+            cells: self
+                .cells
+                .into_iter()
+                .map(|c| CellState {
+                    h: f(c.h),
+                    c: c.c.map(&f),
+                })
+                .collect(),
+            errors: self.errors.into_iter().map(&f).collect(),
+            frames: self.frames,
+        }
+    }
+}
+
 /// What one step produces.
 #[derive(Debug, Clone)]
 pub struct StepOutput {
@@ -312,16 +332,5 @@ impl ProcNetModel {
 /// Detaches a state from the autodiff graph (the end of a BPTT window).
 #[must_use]
 pub fn detach(state: ProcNetState) -> ProcNetState {
-    ProcNetState {
-        cells: state
-            .cells
-            .into_iter()
-            .map(|c| CellState {
-                h: c.h.detach(),
-                c: c.c.map(Tensor::detach),
-            })
-            .collect(),
-        errors: state.errors.into_iter().map(Tensor::detach).collect(),
-        frames: state.frames,
-    }
+    state.map_tensors(Tensor::detach)
 }

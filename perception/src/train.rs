@@ -20,7 +20,7 @@ use crate::config::ProcNetConfig;
 use crate::data::{Augment, SequenceTensors, load_split, make_batch};
 use crate::error::{PerceptionError, Result};
 use crate::loss::{batch_dice_per_class, dice_per_class, focal_per_class};
-use crate::model::{ProcNetModel, StepOutput};
+use crate::model::{ProcNetModel, ProcNetState, StepOutput};
 use crate::weights;
 
 /// Weights of the loss terms and the focal loss's parameters.
@@ -102,6 +102,8 @@ impl Default for AugmentConfig {
 pub const MAX_STEPS: usize = 10_000_000;
 /// The longest training window, frames.
 pub const MAX_WINDOW: usize = 64;
+/// The longest burn-in before a window, frames.
+pub const MAX_BURN_IN: usize = 1024;
 /// The largest loss weight (a weight of 1e300 is infinite in f32).
 pub const MAX_LOSS_WEIGHT: f32 = 1e3;
 
@@ -120,6 +122,13 @@ pub struct TrainConfig {
     pub batch: usize,
     /// Frames per BPTT window (random start within a sequence).
     pub window: usize,
+    /// Frames before each window that the network runs through without gradients, from
+    /// the sequence's first frame on, at most this many (0: every window starts from a zero
+    /// state). Evaluation carries the state through whole sequences; a window that starts
+    /// with the state those frames leave sees what evaluation sees. With burn-in, the
+    /// windows of a step share their start frame (one batch of states), and a window's
+    /// first frame counts in the loss unless it is the sequence's first.
+    pub burn_in: usize,
     /// Peak learning rate of the one-cycle schedule.
     pub lr: f64,
     /// Fraction of the steps spent warming up.
@@ -160,6 +169,7 @@ impl Default for TrainConfig {
             steps: 2000,
             batch: 4,
             window: 10,
+            burn_in: 0,
             lr: 1e-3,
             warmup_fraction: 0.3,
             weight_decay: 1e-4,
@@ -244,6 +254,12 @@ impl TrainConfig {
                     "at least 2 frames (frame 0 has weight 0), got {}",
                     self.window
                 ),
+            );
+        }
+        if self.burn_in > MAX_BURN_IN {
+            return bad(
+                "burn_in",
+                format!("at most {MAX_BURN_IN} frames, got {}", self.burn_in),
             );
         }
         if !(self.lr.is_finite() && self.lr > 0.0) {
@@ -410,25 +426,27 @@ pub struct WindowLoss {
     pub prediction: Option<Tensor<1>>,
 }
 
-/// Runs `model` over a batch of windows from a zero state and returns the weighted losses
-/// (frame weight 0 at the window's first frame, where a recurrent network has seen nothing
-/// yet, and 1 after; a feed-forward network's first frame weighs 1 too. Per-class weights,
-/// one per output channel, when given).
+/// Runs `model` over a batch of windows and returns the weighted losses. From a zero state
+/// (`initial` is `None`) the window's first frame weighs 0, since a recurrent network has seen
+/// nothing yet, and the others 1; from a burnt-in state ([`burn_in_state`]), and in a
+/// feed-forward network, every frame weighs 1. Per-class weights, one per output channel,
+/// when given.
 pub fn window_loss(
     model: &ProcNetModel,
     rgb: &[Tensor<4>],
     target: &[Tensor<4>],
     loss: &LossConfig,
     class_weights: Option<&[f32]>,
+    initial: Option<ProcNetState>,
 ) -> WindowLoss {
     let [b, _, h, w] = rgb[0].dims();
     let device = rgb[0].device();
-    let mut state = model.initial_state(b, h, w, &device);
+    let first = usize::from(!model.is_feed_forward() && initial.is_none());
+    let mut state = initial.unwrap_or_else(|| model.initial_state(b, h, w, &device));
     let mut dice_sum: Option<Tensor<1>> = None;
     let mut focal_sum: Option<Tensor<1>> = None;
     let mut pred_sum: Option<Tensor<1>> = None;
     let add = |acc: Option<Tensor<1>>, v: Tensor<1>| Some(acc.map_or(v.clone(), |a| a + v));
-    let first = usize::from(!model.is_feed_forward());
     let weighted = (rgb.len() - first) as f64;
     let c = target[0].dims()[1];
     let class_weights = class_weights.map(|w| Tensor::<1>::from_floats(w, &device).reshape([1, c]));
@@ -487,6 +505,21 @@ pub fn window_loss(
         focal,
         prediction,
     }
+}
+
+/// The state that `frames` (`[b, 3, h, w]` each, from a sequence's first frame on) leave in
+/// `model`, from a zero state, computed without the autodiff graph and handed back on
+/// `model`'s device: the start of a window that follows them ([`TrainConfig::burn_in`]).
+pub fn burn_in_state(model: &ProcNetModel, frames: &[Tensor<4>]) -> Option<ProcNetState> {
+    let [b, _, h, w] = frames.first()?.dims();
+    let inner = model.valid();
+    let mut state = None;
+    for x in frames {
+        let x = x.clone().inner();
+        let s = state.unwrap_or_else(|| inner.initial_state(b, h, w, &x.device()));
+        state = Some(inner.step(x, s).1);
+    }
+    state.map(|s| s.map_tensors(Tensor::autodiff))
 }
 
 /// What a progress callback is told after every step.
@@ -688,7 +721,7 @@ impl Trainer {
             let mut rng = ChaCha8Rng::seed_from_u64(
                 cfg.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ step as u64,
             );
-            let picks: Vec<(&SequenceTensors, usize, Augment)> = (0..cfg.batch)
+            let mut picks: Vec<(&SequenceTensors, usize, Augment)> = (0..cfg.batch)
                 .map(|_| {
                     let seq = usable[rng.random_range(0..usable.len())];
                     let start = rng.random_range(0..=seq.frames - cfg.window);
@@ -711,14 +744,27 @@ impl Trainer {
                     (seq, start, aug)
                 })
                 .collect();
-            let batch = make_batch(&picks, cfg.window, classes, &device);
+            // With burn-in, the windows share the first one's start (one batch of states),
+            // and the frames before it, up to `burn_in`, join the batch in front.
+            let mut burn = 0;
+            if cfg.burn_in > 0 && !model.is_feed_forward() {
+                let last = picks.iter().map(|(s, _, _)| s.frames).min().unwrap_or(0);
+                let start = picks.first().map_or(0, |p| p.1).min(last - cfg.window);
+                burn = cfg.burn_in.min(start);
+                for p in &mut picks {
+                    p.1 = start - burn;
+                }
+            }
+            let batch = make_batch(&picks, burn + cfg.window, classes, &device);
             let lr = cfg.learning_rate(step);
+            let initial = burn_in_state(&model, &batch.rgb[..burn]);
             let losses = window_loss(
                 &model,
-                &batch.rgb,
-                &batch.target,
+                &batch.rgb[burn..],
+                &batch.target[burn..],
                 &cfg.loss,
                 class_weights.as_deref(),
+                initial,
             );
             let total = scalar(&losses.total);
             if !total.is_finite() {
@@ -963,6 +1009,7 @@ mod tests {
             ),
             ("steps = 100000000000", "steps"),
             ("window = 1000000", "window"),
+            ("burn_in = 1000000", "burn_in"),
             ("frame_prediction_bias = nan", "frame_prediction_bias"),
             ("frame_prediction_bias = -0.5", "frame_prediction_bias"),
         ] {

@@ -9,7 +9,7 @@ use common::{reference_frame, tiny};
 use workcell_perception::cells::Cell;
 use workcell_perception::loss::dice_per_class;
 use workcell_perception::model::ProcNetModel;
-use workcell_perception::train::{LossConfig, window_loss};
+use workcell_perception::train::{LossConfig, burn_in_state, window_loss};
 use workcell_perception::{CellKind, ProcNetConfig};
 use workcell_render::Class;
 
@@ -213,10 +213,10 @@ fn a_tiny_batch_overfits() {
     let mut model = config.init(&device, 4).unwrap();
     let mut optim = AdamWConfig::new().init();
     let loss = LossConfig::default();
-    let first = window_loss(&model, &rgb, &target, &loss, None);
+    let first = window_loss(&model, &rgb, &target, &loss, None, None);
     let first_dice = f64::from(first.dice.into_scalar::<f32>());
     for _ in 0..150 {
-        let l = window_loss(&model, &rgb, &target, &loss, None);
+        let l = window_loss(&model, &rgb, &target, &loss, None, None);
         let grads = GradientsParams::from_grads(l.total.backward(), &model);
         model = optim.step(1e-2, model, grads);
     }
@@ -265,7 +265,14 @@ fn a_window_weighs_its_first_frame_only_for_a_feed_forward_network() {
         ..LossConfig::default()
     };
     let total = |model: &ProcNetModel, range: std::ops::Range<usize>| {
-        let l = window_loss(model, &xs[range.clone()], &targets[range], &loss, None);
+        let l = window_loss(
+            model,
+            &xs[range.clone()],
+            &targets[range],
+            &loss,
+            None,
+            None,
+        );
         f64::from(l.total.into_scalar::<f32>())
     };
     // Feed-forward: each frame alone, so the window's loss is the mean of the frames' own.
@@ -277,7 +284,7 @@ fn a_window_weighs_its_first_frame_only_for_a_feed_forward_network() {
     assert!(single.iter().all(|l| l.is_finite() && *l > 0.0));
     // Recurrent: frame 0 is not scored, so frames 1 and 2 alone decide the window's loss.
     let model = tiny(CellKind::Hgru).init(&device, 2).unwrap();
-    let window = window_loss(&model, &xs, &targets, &loss, None);
+    let window = window_loss(&model, &xs, &targets, &loss, None, None);
     let mut state = model.initial_state(1, s, s, &device);
     let mut sum = 0.0;
     for t in 0..3 {
@@ -298,6 +305,53 @@ fn a_window_weighs_its_first_frame_only_for_a_feed_forward_network() {
         "{dice} against {}",
         sum / 2.0
     );
+}
+
+/// A window after a burn-in scores what the same frames score inside one run from the
+/// sequence's start: the burnt-in state is the state evaluation carries, and every frame
+/// of the window counts, its first too.
+#[test]
+fn a_burnt_in_window_scores_the_frames_of_the_whole_run() {
+    let device = Device::flex().autodiff();
+    let s = 16;
+    let n = 5;
+    let xs = frames(n, s, &device);
+    let targets: Vec<Tensor<4>> = (0..n)
+        .map(|t| {
+            let y: Vec<f32> = (0..2 * s * s)
+                .map(|i| f32::from(u8::from((i + 3 * t) % 5 < 2)))
+                .collect();
+            Tensor::from_data(TensorData::new(y, [1, 2, s, s]), &device)
+        })
+        .collect();
+    let loss = LossConfig::default();
+    let model = tiny(CellKind::Hgru).init(&device, 3).unwrap();
+    let scalar = |t: Tensor<1>| f64::from(t.into_scalar::<f32>());
+    // Frames 1..n from a zero state (frame 0 weighs 0), against frame 0 burnt in.
+    let whole = window_loss(&model, &xs, &targets, &loss, None, None);
+    let initial = burn_in_state(&model, &xs[..1]);
+    assert!(initial.is_some());
+    let after = window_loss(&model, &xs[1..], &targets[1..], &loss, None, initial);
+    for (a, b) in [(whole.total, after.total), (whole.dice, after.dice)] {
+        let (a, b) = (scalar(a), scalar(b));
+        assert!((a - b).abs() < 1e-5, "{a} against {b}");
+    }
+    // Without the burn-in, the same frames start from nothing and score otherwise.
+    let cold = window_loss(&model, &xs[1..], &targets[1..], &loss, None, None);
+    let whole = window_loss(&model, &xs, &targets, &loss, None, None);
+    assert!((scalar(cold.total) - scalar(whole.total)).abs() > 1e-4);
+    // The burnt-in state joins the window's graph as a constant: on the autodiff device,
+    // tracked by no graph, so the window's gradients reach the parameters through its own
+    // frames only.
+    let state = burn_in_state(&model, &xs[..2]).expect("two frames");
+    assert_eq!(state.frames, 2);
+    for t in state.cells.iter().map(|c| &c.h).chain(&state.errors) {
+        assert!(t.is_autodiff() && !t.is_tracked());
+    }
+    let after = window_loss(&model, &xs[2..], &targets[2..], &loss, None, Some(state));
+    let grads = GradientsParams::from_grads(after.total.backward(), &model);
+    assert!(!grads.is_empty());
+    assert!(burn_in_state(&model, &[]).is_none());
 }
 
 /// A weight file whose metadata claims a model larger than its tensors is refused before
