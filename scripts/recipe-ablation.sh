@@ -63,6 +63,8 @@ VARIANTS=(
     # after two hours, so it underfits, and the schedule may be what holds it back.
     "lr-2e-3|$SEED|s/^lr = .*/lr = 2e-3/"
     "lr-4e-3|$SEED|s/^lr = .*/lr = 4e-3/"
+    "lr-4e-3|$((SEED + 1))|s/^lr = .*/lr = 4e-3/"
+    "lr-8e-3|$SEED|s/^lr = .*/lr = 8e-3/"
 )
 for v in "${VARIANTS[@]}"; do
     IFS='|' read -r variant seed expr args <<< "$v"

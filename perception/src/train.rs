@@ -122,12 +122,13 @@ pub struct TrainConfig {
     pub batch: usize,
     /// Frames per BPTT window (random start within a sequence).
     pub window: usize,
-    /// Frames before each window that the network runs through without gradients, from
-    /// the sequence's first frame on, at most this many (0: every window starts from a zero
-    /// state). Evaluation carries the state through whole sequences; a window that starts
-    /// with the state those frames leave sees what evaluation sees. With burn-in, the
-    /// windows of a step share their start frame (one batch of states), and a window's
-    /// first frame counts in the loss unless it is the sequence's first.
+    /// Up to this many frames just before each window run through the network without
+    /// gradients, from a zero state (0: every window starts from a zero state). Evaluation
+    /// carries the state through whole sequences; a burn-in at least as long as the
+    /// sequences gives every window the state evaluation gives it. With burn-in, the windows
+    /// of a step share their start frame (one batch of states), and a window's first frame
+    /// counts in the loss unless nothing came before it. The feed-forward baseline has no
+    /// state and ignores it.
     pub burn_in: usize,
     /// Peak learning rate of the one-cycle schedule.
     pub lr: f64,
