@@ -24,6 +24,24 @@ fn frames(n: usize, s: usize, device: &Device) -> Vec<Tensor<4>> {
         .collect()
 }
 
+/// `n` two-class targets `[1, 2, s, s]` of diagonal stripes: pixel `i` of frame `t` is on
+/// where `(i + shift * t) % period < 2`, so every frame differs from the one before.
+fn striped_targets(
+    n: usize,
+    s: usize,
+    (shift, period): (usize, usize),
+    device: &Device,
+) -> Vec<Tensor<4>> {
+    (0..n)
+        .map(|t| {
+            let y: Vec<f32> = (0..2 * s * s)
+                .map(|i| f32::from(u8::from((i + shift * t) % period < 2)))
+                .collect();
+            Tensor::from_data(TensorData::new(y, [1, 2, s, s]), device)
+        })
+        .collect()
+}
+
 /// A scalar of the model's outputs over a few frames: a fixed weighting of the logits.
 fn objective(model: &ProcNetModel, xs: &[Tensor<4>], device: &Device) -> Tensor<1> {
     let [b, _, s, _] = xs[0].dims();
@@ -252,14 +270,7 @@ fn a_window_weighs_its_first_frame_only_for_a_feed_forward_network() {
     let device = Device::flex();
     let s = 16;
     let xs = frames(3, s, &device);
-    let targets: Vec<Tensor<4>> = (0..3)
-        .map(|t| {
-            let y: Vec<f32> = (0..2 * s * s)
-                .map(|i| f32::from(u8::from((i + 5 * t) % 7 < 2)))
-                .collect();
-            Tensor::from_data(TensorData::new(y, [1, 2, s, s]), &device)
-        })
-        .collect();
+    let targets = striped_targets(3, s, (5, 7), &device);
     let loss = LossConfig {
         prediction: 0.0,
         ..LossConfig::default()
@@ -316,14 +327,7 @@ fn a_burnt_in_window_scores_the_frames_of_the_whole_run() {
     let s = 16;
     let n = 5;
     let xs = frames(n, s, &device);
-    let targets: Vec<Tensor<4>> = (0..n)
-        .map(|t| {
-            let y: Vec<f32> = (0..2 * s * s)
-                .map(|i| f32::from(u8::from((i + 3 * t) % 5 < 2)))
-                .collect();
-            Tensor::from_data(TensorData::new(y, [1, 2, s, s]), &device)
-        })
-        .collect();
+    let targets = striped_targets(n, s, (3, 5), &device);
     let loss = LossConfig::default();
     let model = tiny(CellKind::Hgru).init(&device, 3).unwrap();
     let scalar = |t: Tensor<1>| f64::from(t.into_scalar::<f32>());
