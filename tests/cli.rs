@@ -497,18 +497,38 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             && md.contains("The 2 sequences of highest mean forearm Dice loss"),
         "{md}"
     );
-    // One row per scored frame (frames 1 to 3 of each 4-frame sequence), eight fields each.
+    // One row per scored frame (frames 1 to 3 of each 4-frame sequence), nine fields each.
     let csv = std::fs::read_to_string(&frames_csv).expect("the frames are written");
     let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 1 + 6, "{csv}");
     assert_eq!(rows[0][..2], ["sequence", "frame"], "{csv}");
-    assert!(rows.iter().all(|r| r.len() == 8), "{csv}");
+    assert_eq!(rows[0][8], "forearm_luma", "{csv}");
+    assert!(rows.iter().all(|r| r.len() == 9), "{csv}");
     let scored: Vec<&str> = rows[1..].iter().map(|r| r[1]).collect();
     assert_eq!(scored, ["1", "2", "3", "1", "2", "3"], "{csv}");
     for r in &rows[1..] {
         let dice: f64 = r[5].parse().expect("a loss");
         assert!((0.0..=1.0).contains(&dice), "{csv}");
+        // The luma is empty exactly where there is no true forearm (no input ceiling either).
+        assert_eq!(r[7].is_empty(), r[8].is_empty(), "{csv}");
+        if !r[8].is_empty() {
+            let luma: f64 = r[8].parse().expect("a luma");
+            assert!((0.0..=1.0).contains(&luma), "{csv}");
+        }
     }
+    // The luma bands hold exactly the frames that show a forearm, each once.
+    let with_forearm = rows[1..].iter().filter(|r| !r[8].is_empty()).count();
+    let in_bands: usize = ["dark", "mid", "light"]
+        .iter()
+        .filter_map(|band| {
+            let row = md
+                .lines()
+                .find(|l| l.starts_with(&format!("| forearm {band} |")))?;
+            row.split('|').nth(3)?.trim().parse::<usize>().ok()
+        })
+        .sum();
+    assert!(with_forearm > 0, "{csv}");
+    assert_eq!(in_bands, with_forearm, "{md}");
     // With standard output closed (`| true`), the table is still written to --out.
     let table = tmp.path().join("table.md");
     let (reader, writer) = std::io::pipe().expect("pipe");

@@ -452,17 +452,20 @@ pub struct FrameRecord {
     pub forearm_dice_thresholded: f64,
     /// A perfect network's Dice loss at the model's input (`None`: no true forearm).
     pub input_ceiling: Option<f64>,
+    /// The visible forearm's mean luma in the input image ([`masked_luma`]; `None`: no true
+    /// forearm).
+    pub forearm_luma: Option<f64>,
 }
 
 impl FrameRecord {
     /// The CSV header of [`FrameRecord::csv_row`].
-    pub const CSV_HEADER: &str = "sequence,frame,camera,occlusion,forearm_px,forearm_dice,forearm_dice_thresholded,input_ceiling";
+    pub const CSV_HEADER: &str = "sequence,frame,camera,occlusion,forearm_px,forearm_dice,forearm_dice_thresholded,input_ceiling,forearm_luma";
 
-    /// One CSV row (an empty field for a missing ceiling).
+    /// One CSV row (an empty field for a missing ceiling or luma).
     #[must_use]
     pub fn csv_row(&self) -> String {
         format!(
-            "{},{},{},{},{},{:.6},{:.6},{}",
+            "{},{},{},{},{},{:.6},{:.6},{},{}",
             self.sequence,
             self.frame,
             csv_field(&self.camera),
@@ -471,7 +474,9 @@ impl FrameRecord {
             self.forearm_dice,
             self.forearm_dice_thresholded,
             self.input_ceiling
-                .map_or(String::new(), |v| format!("{v:.6}"))
+                .map_or(String::new(), |v| format!("{v:.6}")),
+            self.forearm_luma
+                .map_or(String::new(), |v| format!("{v:.4}"))
         )
     }
 }
@@ -502,12 +507,70 @@ pub struct Evaluation {
     /// Keyed by the first frame index of a span of [`TIME_SPAN`] frames: how the scores
     /// change as the recurrent network sees more of a sequence.
     pub by_time: BTreeMap<usize, Scores>,
+    /// Keyed by the band of the visible forearm's luma ([`LumaBand`]): whether a dark
+    /// forearm (dark skin, a dark sleeve, shade) is found as well as a light one.
+    pub by_luma: BTreeMap<LumaBand, Scores>,
     /// The frames of highest forearm Dice loss, worst first (as many as asked for).
     pub worst: Vec<ScoredFrame>,
     /// Every scored frame's forearm, in the order scored (empty without a forearm class).
     pub frames: Vec<FrameRecord>,
     /// Layer 0's prediction of the frames (none without the prediction loss).
     pub frame_prediction: Option<FramePrediction>,
+}
+
+/// How light the visible forearm is in a frame: the mean luma of its pixels in the input
+/// image (Rec. 709 weights on the stored sRGB values, 0 black to 1 white). The bounds split
+/// the default dataset's test sequences roughly into the darkest quarter, the middle half and
+/// the lightest quarter (a sequence by the mean luma of its forearm in three frames).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum LumaBand {
+    /// Luma below [`LumaBand::DARK_BELOW`].
+    Dark,
+    Mid,
+    /// Luma at or above [`LumaBand::LIGHT_FROM`].
+    Light,
+}
+
+impl LumaBand {
+    pub const DARK_BELOW: f64 = 0.08;
+    pub const LIGHT_FROM: f64 = 0.35;
+
+    #[must_use]
+    pub fn of(luma: f64) -> Self {
+        if luma < Self::DARK_BELOW {
+            Self::Dark
+        } else if luma < Self::LIGHT_FROM {
+            Self::Mid
+        } else {
+            Self::Light
+        }
+    }
+
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Dark => "dark",
+            Self::Mid => "mid",
+            Self::Light => "light",
+        }
+    }
+}
+
+/// The mean luma of the pixels where `mask` is set, in a planar `[3, n]` sRGB image with
+/// values in [0, 1]; `None` when the mask is empty.
+#[must_use]
+pub fn masked_luma(planar: &[f32], mask: &[bool]) -> Option<f64> {
+    let n = mask.len();
+    if planar.len() < 3 * n {
+        return None;
+    }
+    let (mut sum, mut count) = (0.0, 0usize);
+    for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+        let [r, g, b] = [0, 1, 2].map(|ch| f64::from(planar[ch * n + p]));
+        sum += 0.2126 * r + 0.7152 * g + 0.0722 * b;
+        count += 1;
+    }
+    (count > 0).then(|| sum / count as f64)
 }
 
 /// Order of the dataset's distance classes and occlusion levels in tables (others last).
@@ -627,6 +690,10 @@ pub fn evaluate(
                 .iter()
                 .map(|&v| u8::from(v == Class::Forearm as u8))
                 .collect();
+            let forearm_luma = masked_luma(
+                seq.rgb_frame(t),
+                &forearm_mask.iter().map(|&v| v == 1).collect::<Vec<_>>(),
+            );
             let scores = FrameScores {
                 dice: row(dice_per_class(p.clone(), y.clone())),
                 focal: row(focal_per_class(logits, y.clone(), 0.5, 2.0)),
@@ -652,6 +719,7 @@ pub fn evaluate(
                     forearm_dice: f64::from(scores.dice[f]),
                     forearm_dice_thresholded: scores.breakdown.dice_loss(),
                     input_ceiling: scores.input_ceiling,
+                    forearm_luma,
                 });
             }
             if let Some(f) = forearm
@@ -696,6 +764,12 @@ pub fn evaluate(
                 .entry(t / TIME_SPAN * TIME_SPAN)
                 .or_default()
                 .add(entry.index, &scores);
+            if let Some(luma) = forearm_luma {
+                ev.by_luma
+                    .entry(LumaBand::of(luma))
+                    .or_default()
+                    .add(entry.index, &scores);
+            }
         }
         progress(k + 1, entries.len());
     }
@@ -791,17 +865,25 @@ impl Evaluation {
             (name, *s)
         }));
         groups.extend(occ.iter().map(|(k, s)| (format!("occlusion {k}"), *s)));
+        groups.extend(
+            self.by_luma
+                .iter()
+                .map(|(k, s)| (format!("forearm {}", k.name()), s)),
+        );
         let coarse = groups.len();
         groups.extend(pairs.iter().map(|((d, o), s)| (format!("{d} / {o}"), *s)));
         let _ = writeln!(
             md,
-            "\nForearm by distance class (the paper's cameras) or camera of the cell, and occlusion \
-             level. Two ceilings, each a perfect network's Dice loss: at the stored size against \
+            "\nForearm by distance class (the paper's cameras) or camera of the cell, occlusion \
+             level, and how light the visible forearm is in the frame (its mean luma: dark below \
+             {}, light from {}). Two ceilings, each a perfect network's Dice loss: at the stored size against \
              the camera's image (from the labels), and at the model's input against the stored \
              labels (the truth averaged to the input grid, upsampled as the predictions are, \
              thresholded at one half):\n\n\
              | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling, stored | ceiling, input | class mean Dice |\n\
-             |---|---|---|---|---|---|---|---|---|---|"
+             |---|---|---|---|---|---|---|---|---|---|",
+            LumaBand::DARK_BELOW,
+            LumaBand::LIGHT_FROM
         );
         for (name, s) in &groups {
             let _ = writeln!(
@@ -1022,6 +1104,7 @@ mod tests {
             forearm_dice,
             forearm_dice_thresholded: forearm_dice,
             input_ceiling: None,
+            forearm_luma: None,
         };
         let mut ev = Evaluation {
             classes: vec![Class::Forearm],
@@ -1072,17 +1155,18 @@ mod tests {
             forearm_dice: 0.98,
             forearm_dice_thresholded: 1.0,
             input_ceiling: Some(0.0625),
+            forearm_luma: Some(0.05),
         };
         assert_eq!(
             r.csv_row(),
-            "1225,17,short,medium,42,0.980000,1.000000,0.062500"
+            "1225,17,short,medium,42,0.980000,1.000000,0.062500,0.0500"
         );
         assert_eq!(
             r.csv_row().split(',').count(),
             FrameRecord::CSV_HEADER.split(',').count()
         );
-        r.input_ceiling = None;
-        assert!(r.csv_row().ends_with("1.000000,"), "{}", r.csv_row());
+        (r.input_ceiling, r.forearm_luma) = (None, None);
+        assert!(r.csv_row().ends_with("1.000000,,"), "{}", r.csv_row());
         // A camera named with a comma and a quote stays one field.
         r.camera = "left, \"high\" camera".into();
         assert!(
@@ -1091,6 +1175,33 @@ mod tests {
             "{}",
             r.csv_row()
         );
+    }
+
+    #[test]
+    fn the_forearm_luma_is_the_rec709_mean_of_its_pixels_only() {
+        // Four pixels, planar [3, 4]: pure red, green, blue (unmasked) and white.
+        let planar = [
+            1.0, 0.0, 0.0, 1.0, // red plane
+            0.0, 1.0, 0.0, 1.0, // green
+            0.0, 0.0, 1.0, 1.0, // blue
+        ];
+        let luma = |mask: [bool; 4]| masked_luma(&planar, &mask);
+        // The Rec. 709 weights of each primary; they sum to white's 1.
+        assert!((luma([true, false, false, false]).unwrap() - 0.2126).abs() < 1e-6);
+        assert!((luma([false, true, false, false]).unwrap() - 0.7152).abs() < 1e-6);
+        assert!((luma([false, false, false, true]).unwrap() - 1.0).abs() < 1e-6);
+        // Red and blue together: the mean of their lumas; the rest of the image counts not.
+        let red_blue = luma([true, false, true, false]).unwrap();
+        assert!((red_blue - (0.2126 + 0.0722) / 2.0).abs() < 1e-6);
+        assert_eq!(luma([false; 4]), None);
+        // An image shorter than its mask has no luma rather than a panic.
+        assert_eq!(masked_luma(&planar[..6], &[true; 4]), None);
+        // Red and blue alone are dark, green mid, white light.
+        assert_eq!(LumaBand::of(red_blue), LumaBand::Mid);
+        assert_eq!(LumaBand::of(0.0722), LumaBand::Dark);
+        assert_eq!(LumaBand::of(0.7152), LumaBand::Light);
+        assert_eq!(LumaBand::of(LumaBand::DARK_BELOW), LumaBand::Mid);
+        assert_eq!(LumaBand::of(LumaBand::LIGHT_FROM), LumaBand::Light);
     }
 
     #[test]
