@@ -476,7 +476,7 @@ impl FrameRecord {
             self.input_ceiling
                 .map_or(String::new(), |v| format!("{v:.6}")),
             self.forearm_luma
-                .map_or(String::new(), |v| format!("{v:.4}"))
+                .map_or(String::new(), |v| format!("{v:.6}"))
         )
     }
 }
@@ -1159,7 +1159,7 @@ mod tests {
         };
         assert_eq!(
             r.csv_row(),
-            "1225,17,short,medium,42,0.980000,1.000000,0.062500,0.0500"
+            "1225,17,short,medium,42,0.980000,1.000000,0.062500,0.050000"
         );
         assert_eq!(
             r.csv_row().split(',').count(),
