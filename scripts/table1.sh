@@ -11,7 +11,13 @@
 # WORKCELL_TABLE1_JOBS (default 2) variants train side by side at one thread each: on two
 # cores two one-thread runs of the 64x64 recipe make 1.14 times the steps of one two-thread
 # run (0.62 and 0.75 s a step for ProcNet and the baseline side by side, against 0.36 and 0.42
-# alone; docs/perception.md). WORKCELL_TABLE1_BASE picks another base recipe.
+# alone; docs/perception.md). WORKCELL_TABLE1_BASE picks another base recipe and
+# WORKCELL_TABLE1_OUT another folder (a run folder refuses a configuration other than its
+# own, so a changed base needs one), e.g. the shipped recipe's peak learning rate:
+#
+#   sed 's/^lr = .*/lr = 4e-3/' configs/train-64.toml > out/train-64-lr4e-3.toml
+#   WORKCELL_TABLE1_BASE=out/train-64-lr4e-3.toml WORKCELL_TABLE1_OUT=out/table1-lr4e-3 \
+#       scripts/table1.sh 3000
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BASE="${WORKCELL_TABLE1_BASE:-configs/train-64.toml}"
@@ -19,7 +25,7 @@ STEPS="${1:-$(sed -n 's/^steps = \([0-9]*\).*/\1/p' "$BASE")}"
 JOBS="${WORKCELL_TABLE1_JOBS:-2}"
 BIN="${WORKCELL_BIN:-target/release/workcell}"
 DATASET="${WORKCELL_DATASET:-out/dataset}"
-OUT=out/table1
+OUT="${WORKCELL_TABLE1_OUT:-out/table1}"
 SPLIT=test
 . scripts/lib/variants.sh
 variants_setup
