@@ -556,16 +556,16 @@ impl LumaBand {
     }
 }
 
-/// The mean luma of the pixels where `mask` is set, in a planar `[3, n]` sRGB image with
+/// The mean luma of the pixels where `mask` is not 0, in a planar `[3, n]` sRGB image with
 /// values in [0, 1]; `None` when the mask is empty.
 #[must_use]
-pub fn masked_luma(planar: &[f32], mask: &[bool]) -> Option<f64> {
+pub fn masked_luma(planar: &[f32], mask: &[u8]) -> Option<f64> {
     let n = mask.len();
     if planar.len() < 3 * n {
         return None;
     }
     let (mut sum, mut count) = (0.0, 0usize);
-    for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+    for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m != 0) {
         let [r, g, b] = [0, 1, 2].map(|ch| f64::from(planar[ch * n + p]));
         sum += 0.2126 * r + 0.7152 * g + 0.0722 * b;
         count += 1;
@@ -690,10 +690,7 @@ pub fn evaluate(
                 .iter()
                 .map(|&v| u8::from(v == Class::Forearm as u8))
                 .collect();
-            let forearm_luma = masked_luma(
-                seq.rgb_frame(t),
-                &forearm_mask.iter().map(|&v| v == 1).collect::<Vec<_>>(),
-            );
+            let forearm_luma = masked_luma(seq.rgb_frame(t), &forearm_mask);
             let scores = FrameScores {
                 dice: row(dice_per_class(p.clone(), y.clone())),
                 focal: row(focal_per_class(logits, y.clone(), 0.5, 2.0)),
@@ -1185,17 +1182,17 @@ mod tests {
             0.0, 1.0, 0.0, 1.0, // green
             0.0, 0.0, 1.0, 1.0, // blue
         ];
-        let luma = |mask: [bool; 4]| masked_luma(&planar, &mask);
+        let luma = |mask: [u8; 4]| masked_luma(&planar, &mask);
         // The Rec. 709 weights of each primary; they sum to white's 1.
-        assert!((luma([true, false, false, false]).unwrap() - 0.2126).abs() < 1e-6);
-        assert!((luma([false, true, false, false]).unwrap() - 0.7152).abs() < 1e-6);
-        assert!((luma([false, false, false, true]).unwrap() - 1.0).abs() < 1e-6);
+        assert!((luma([1, 0, 0, 0]).unwrap() - 0.2126).abs() < 1e-6);
+        assert!((luma([0, 1, 0, 0]).unwrap() - 0.7152).abs() < 1e-6);
+        assert!((luma([0, 0, 0, 1]).unwrap() - 1.0).abs() < 1e-6);
         // Red and blue together: the mean of their lumas; the rest of the image counts not.
-        let red_blue = luma([true, false, true, false]).unwrap();
+        let red_blue = luma([1, 0, 1, 0]).unwrap();
         assert!((red_blue - (0.2126 + 0.0722) / 2.0).abs() < 1e-6);
-        assert_eq!(luma([false; 4]), None);
+        assert_eq!(luma([0; 4]), None);
         // An image shorter than its mask has no luma rather than a panic.
-        assert_eq!(masked_luma(&planar[..6], &[true; 4]), None);
+        assert_eq!(masked_luma(&planar[..6], &[1; 4]), None);
         // Red and blue alone are dark, green mid, white light.
         assert_eq!(LumaBand::of(red_blue), LumaBand::Mid);
         assert_eq!(LumaBand::of(0.0722), LumaBand::Dark);
