@@ -42,6 +42,23 @@ def read(path: str) -> dict:
     return bands
 
 
+def rest_of(bands: dict) -> list:
+    """The frames outside the dark band, one group per sequence (a sequence whose forearm is
+    mid in some frames and light in others is still one unit of the resampling)."""
+    rest: dict = defaultdict(list)
+    for name in ("mid", "light"):
+        for sequence, frames in bands[name].items():
+            rest[sequence].extend(frames)
+    return list(rest.values())
+
+
+def at_least_one(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"at least 1, got {value}")
+    return value
+
+
 def frame_mean(groups: list) -> float:
     frames = [x for g in groups for x in g]
     return sum(frames) / len(frames)
@@ -50,7 +67,7 @@ def frame_mean(groups: list) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("frames_csv")
-    parser.add_argument("--resamples", type=int, default=4000)
+    parser.add_argument("--resamples", type=at_least_one, default=4000)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     bands = read(args.frames_csv)
@@ -60,7 +77,7 @@ def main() -> None:
         if seqs:
             print(f"| {name} | {len(seqs)} | {sum(map(len, seqs))} | {frame_mean(seqs):.4f} |")
     dark = list(bands["dark"].values())
-    rest = list(bands["mid"].values()) + list(bands["light"].values())
+    rest = rest_of(bands)
     if not dark or not rest:
         sys.exit("no gap to measure: a band is empty")
     rng = random.Random(args.seed)

@@ -65,6 +65,24 @@ class LumaGap(unittest.TestCase):
         self.assertIn("| light | 1 | 1 | 0.1000 |", text)
         self.assertIn("dark - rest: +0.2000, 95 % interval [+0.2000, +0.2000]", text)
 
+    def test_a_sequence_in_two_lighter_bands_is_one_unit_of_the_resampling(self):
+        # The rest is one sequence, mid in one frame (0.1) and light in another (0.3): every
+        # resample draws that sequence whole, so the interval collapses onto the gap.
+        path = frames_csv([(1, 0.5, 0.01), (2, 0.1, 0.2), (2, 0.3, 0.6)])
+        try:
+            text = run(path, "--resamples", "200")
+        finally:
+            os.unlink(path)
+        self.assertIn("dark - rest: +0.3000, 95 % interval [+0.3000, +0.3000]", text)
+
+    def test_no_resamples_is_refused(self):
+        path = frames_csv([(1, 0.5, 0.01), (2, 0.1, 0.2)])
+        try:
+            with contextlib.redirect_stderr(io.StringIO()), self.assertRaises(SystemExit):
+                run(path, "--resamples", "0")
+        finally:
+            os.unlink(path)
+
     def test_frames_weigh_by_number_not_by_sequence(self):
         # Sequence 1 has three frames at 0.4, sequence 2 one at 0.0: frame-weighted 0.3.
         groups = [[0.4, 0.4, 0.4], [0.0]]
