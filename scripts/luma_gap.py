@@ -1,11 +1,12 @@
 #!/usr/bin/env python3
-"""How much worse a dark forearm is segmented than a lighter one, with an interval.
+"""How much worse a dark or a light forearm is segmented than the others, with an interval.
 
 Reads the per-frame CSV of `workcell eval segmentation --frames FILE.csv` and prints, per luma
-band (the bands of `eval segmentation`: dark below 0.08, light from 0.35), the sequences,
-frames and mean forearm Dice loss, then the gap between the dark band and the rest with a 95 %
-bootstrap interval that resamples whole sequences (frames of one sequence are not
-independent). Standard library only.
+band (the bands of `eval segmentation`: dark below 0.2, light from 0.5, by the forearm's
+pixels in view), the sequences, frames and mean forearm Dice loss, then the gap between the
+dark band and the rest and between the light band and the rest, each with a 95 % bootstrap
+interval that resamples whole sequences (frames of one sequence are not independent).
+Standard library only.
 
     python3 scripts/luma_gap.py out/train/test_frames.csv [--resamples 4000] [--seed 0]
 """
@@ -16,8 +17,9 @@ import random
 import sys
 from collections import defaultdict
 
-DARK_BELOW = 0.08
-LIGHT_FROM = 0.35
+DARK_BELOW = 0.2
+LIGHT_FROM = 0.5
+BANDS = ("dark", "mid", "light")
 
 
 def band(luma: float) -> str:
@@ -42,11 +44,13 @@ def read(path: str) -> dict:
     return bands
 
 
-def rest_of(bands: dict) -> list:
-    """The frames outside the dark band, one group per sequence (a sequence whose forearm is
-    mid in some frames and light in others is still one unit of the resampling)."""
+def rest_of(bands: dict, band_name: str) -> list:
+    """The frames outside band `band_name`, one group per sequence (a sequence whose forearm
+    falls in both other bands is still one unit of the resampling)."""
     rest: dict = defaultdict(list)
-    for name in ("mid", "light"):
+    for name in BANDS:
+        if name == band_name:
+            continue
         for sequence, frames in bands[name].items():
             rest[sequence].extend(frames)
     return list(rest.values())
@@ -72,26 +76,32 @@ def main() -> None:
     args = parser.parse_args()
     bands = read(args.frames_csv)
     print("| forearm | sequences | frames | Dice loss |\n|---|---|---|---|")
-    for name in ("dark", "mid", "light"):
+    for name in BANDS:
         seqs = list(bands[name].values())
         if seqs:
             print(f"| {name} | {len(seqs)} | {sum(map(len, seqs))} | {frame_mean(seqs):.4f} |")
-    dark = list(bands["dark"].values())
-    rest = rest_of(bands)
-    if not dark or not rest:
-        sys.exit("no gap to measure: a band is empty")
     rng = random.Random(args.seed)
-    gaps = sorted(
-        frame_mean(rng.choices(dark, k=len(dark))) - frame_mean(rng.choices(rest, k=len(rest)))
-        for _ in range(args.resamples)
-    )
-    lo, hi = gaps[int(0.025 * len(gaps))], gaps[int(0.975 * len(gaps)) - 1]
-    gap = frame_mean(dark) - frame_mean(rest)
-    print(
-        f"\ndark - rest: {gap:+.4f}, 95 % interval [{lo:+.4f}, {hi:+.4f}] "
-        f"({args.resamples} resamples of whole sequences)"
-    )
-
+    measured = 0
+    for name in ("dark", "light"):
+        groups = list(bands[name].values())
+        rest = rest_of(bands, name)
+        if not groups or not rest:
+            print(f"\n{name} - rest: not measured, a side is empty")
+            continue
+        gaps = sorted(
+            frame_mean(rng.choices(groups, k=len(groups)))
+            - frame_mean(rng.choices(rest, k=len(rest)))
+            for _ in range(args.resamples)
+        )
+        lo, hi = gaps[int(0.025 * len(gaps))], gaps[int(0.975 * len(gaps)) - 1]
+        gap = frame_mean(groups) - frame_mean(rest)
+        print(
+            f"\n{name} - rest: {gap:+.4f}, 95 % interval [{lo:+.4f}, {hi:+.4f}] "
+            f"({args.resamples} resamples of whole sequences)"
+        )
+        measured += 1
+    if measured == 0:
+        sys.exit("no gap to measure: every band or its rest is empty")
 
 if __name__ == "__main__":
     main()

@@ -18,6 +18,10 @@
 #   sed 's/^lr = .*/lr = 4e-3/' configs/train-64.toml > out/train-64-lr4e-3.toml
 #   WORKCELL_TABLE1_BASE=out/train-64-lr4e-3.toml WORKCELL_TABLE1_OUT=out/table1-lr4e-3 \
 #       scripts/table1.sh 3000
+#
+# WORKCELL_TABLE1_VARIANTS (space-separated CELL:PREDICTION:DELAY, e.g. "conv:true:false
+# convlstm:true:false") trains only those rows, in that order; the table then lists every row
+# whose test-split score exists and names the rows still missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BASE="${WORKCELL_TABLE1_BASE:-configs/train-64.toml}"
@@ -31,7 +35,16 @@ SPLIT=test
 variants_setup
 VARIANTS=(hgru:true:false hgru:false:false hgru:true:true convlstm:true:false convlstm:false:false
           conv:true:false conv:false:false)
-for v in "${VARIANTS[@]}"; do
+if [ -n "${WORKCELL_TABLE1_VARIANTS:-}" ]; then
+    read -r -a TRAIN <<< "$WORKCELL_TABLE1_VARIANTS"
+    for v in "${TRAIN[@]}"; do
+        [[ " ${VARIANTS[*]} " == *" $v "* ]] ||
+            { echo "$0: unknown variant $v (one of: ${VARIANTS[*]})" >&2; exit 1; }
+    done
+else
+    TRAIN=("${VARIANTS[@]}")
+fi
+for v in "${TRAIN[@]}"; do
     IFS=: read -r cell pred delay <<< "$v"
     name="${cell}-pred-${pred}-delay-${delay}"
     base_config "$BASE" "$STEPS" "s/^cell = .*/cell = \"$cell\"/" \
@@ -46,6 +59,10 @@ variants_finish
     for v in "${VARIANTS[@]}"; do
         IFS=: read -r cell pred delay <<< "$v"
         f="$OUT/${cell}-pred-${pred}-delay-${delay}/test.md"
+        if [ ! -f "$f" ]; then
+            echo "$0: no score yet for $v ($f)" >&2
+            continue
+        fi
         mean=$(col "$f" all 10)
         scaled=$(python3 -c "print(f'{$mean * 29 / 50:.4f}')")
         echo "| $cell | $pred | $delay | $(col "$f" all 5) | $(col "$f" 'occlusion heavy' 5) |" \

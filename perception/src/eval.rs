@@ -16,7 +16,7 @@ use burn::tensor::activation::sigmoid;
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor, TensorData};
-use workcell_render::dataset::{Dataset, Split};
+use workcell_render::dataset::{Dataset, Sequence, Split};
 
 use crate::config::ProcNetConfig;
 use crate::data::{class_map, model_frames, one_hot, per_cell_subset, to_byte};
@@ -521,7 +521,8 @@ pub struct Evaluation {
 /// How light the visible forearm is in a frame: the mean luma of its pixels in the input
 /// image (Rec. 709 weights on the stored sRGB values, 0 black to 1 white). The bounds split
 /// the default dataset's test sequences roughly into the darkest quarter, the middle half and
-/// the lightest quarter (a sequence by the mean luma of its forearm in three frames).
+/// the lightest quarter (a sequence by the mean luma of its visible forearm over its frames:
+/// quartiles 0.19 and 0.49).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum LumaBand {
     /// Luma below [`LumaBand::DARK_BELOW`].
@@ -532,8 +533,8 @@ pub enum LumaBand {
 }
 
 impl LumaBand {
-    pub const DARK_BELOW: f64 = 0.08;
-    pub const LIGHT_FROM: f64 = 0.35;
+    pub const DARK_BELOW: f64 = 0.2;
+    pub const LIGHT_FROM: f64 = 0.5;
 
     #[must_use]
     pub fn of(luma: f64) -> Self {
@@ -571,6 +572,20 @@ pub fn masked_luma(planar: &[f32], mask: &[u8]) -> Option<f64> {
         count += 1;
     }
     (count > 0).then(|| sum / count as f64)
+}
+
+/// The mean luma ([`masked_luma`]) of the forearm as the camera sees it in frame `t`: the
+/// pixels its visible classes (`classes` names the dataset's class indices) call forearm;
+/// `None` when none shows. Not the class frame's forearm: under the occluder the input is
+/// black, and counting those pixels would file an occluded light arm as a dark one.
+#[must_use]
+pub fn visible_forearm_luma(seq: &Sequence, t: usize, classes: &[Class]) -> Option<f64> {
+    let mask: Vec<u8> = seq
+        .visible_frame(t)
+        .iter()
+        .map(|&v| u8::from(classes.get(usize::from(v)) == Some(&Class::Forearm)))
+        .collect();
+    masked_luma(seq.rgb_frame(t), &mask)
 }
 
 /// Order of the dataset's distance classes and occlusion levels in tables (others last).
@@ -690,7 +705,7 @@ pub fn evaluate(
                 .iter()
                 .map(|&v| u8::from(v == Class::Forearm as u8))
                 .collect();
-            let forearm_luma = masked_luma(seq.rgb_frame(t), &forearm_mask);
+            let forearm_luma = visible_forearm_luma(&seq, t, &dataset.manifest.classes);
             let scores = FrameScores {
                 dice: row(dice_per_class(p.clone(), y.clone())),
                 focal: row(focal_per_class(logits, y.clone(), 0.5, 2.0)),
@@ -1007,6 +1022,7 @@ const WORST_SEQUENCES: usize = 5;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use workcell_render::dataset::SequenceEntry;
 
     #[test]
     fn a_channel_predicted_black_everywhere_is_reported_dead() {
@@ -1193,12 +1209,54 @@ mod tests {
         assert_eq!(luma([0; 4]), None);
         // An image shorter than its mask has no luma rather than a panic.
         assert_eq!(masked_luma(&planar[..6], &[1; 4]), None);
-        // Red and blue alone are dark, green mid, white light.
-        assert_eq!(LumaBand::of(red_blue), LumaBand::Mid);
+        // Blue, and red with blue, are dark; red alone mid; green and white light.
+        assert_eq!(LumaBand::of(red_blue), LumaBand::Dark);
         assert_eq!(LumaBand::of(0.0722), LumaBand::Dark);
+        assert_eq!(LumaBand::of(0.2126), LumaBand::Mid);
         assert_eq!(LumaBand::of(0.7152), LumaBand::Light);
         assert_eq!(LumaBand::of(LumaBand::DARK_BELOW), LumaBand::Mid);
         assert_eq!(LumaBand::of(LumaBand::LIGHT_FROM), LumaBand::Light);
+    }
+
+    #[test]
+    fn the_forearm_luma_counts_only_what_the_occluder_leaves_in_view() {
+        // One 2x2 frame, forearm everywhere; the occluder hides the right column, whose input
+        // is black, and a grey arm of 0.8 shows in the left column.
+        let classes = [Class::Background, Class::Forearm];
+        let grey = 0.8f32;
+        let plane = [grey, 0.0, grey, 0.0];
+        let sequence = |visible: Vec<u8>| Sequence {
+            entry: SequenceEntry {
+                index: 0,
+                dir: "seq_00000".into(),
+                seed: 1,
+                attempts: 1,
+                distance_class: "short".into(),
+                occlusion_level: "heavy".into(),
+                source: "paper".into(),
+                split: Split::Test,
+                frames: 1,
+                mean_forearm_occlusion: Some(0.5),
+                frames_without_forearm: 0,
+            },
+            width: 2,
+            height: 2,
+            rgb: plane.repeat(3),
+            classes: vec![1; 4],
+            visible,
+            occluder: vec![0, 1, 0, 1],
+            amodal_forearm: vec![1; 4],
+            labels: Vec::new(),
+        };
+        // Rec. 709 weights sum to 1: a grey arm's luma is its grey, not half of it.
+        let half_hidden = sequence(vec![1, 0, 1, 0]);
+        let luma = visible_forearm_luma(&half_hidden, 0, &classes).expect("a forearm shows");
+        assert!((luma - f64::from(grey)).abs() < 1e-6, "{luma}");
+        // The class frame's forearm would have taken in the black: the mistake this guards.
+        let with_hidden = masked_luma(half_hidden.rgb_frame(0), &[1; 4]).expect("luma");
+        assert!((with_hidden - f64::from(grey) / 2.0).abs() < 1e-6, "{with_hidden}");
+        // A forearm wholly hidden has no luma, whatever its class frame says.
+        assert_eq!(visible_forearm_luma(&sequence(vec![0; 4]), 0, &classes), None);
     }
 
     #[test]

@@ -43,11 +43,11 @@ def run(path, *extra):
 
 class LumaGap(unittest.TestCase):
     def test_bands_match_eval_segmentations_bounds(self):
-        # The same bounds as LumaBand in perception/src/eval.rs: dark below 0.08, light from 0.35.
-        self.assertEqual(luma_gap.band(0.0799), "dark")
-        self.assertEqual(luma_gap.band(0.08), "mid")
-        self.assertEqual(luma_gap.band(0.3499), "mid")
-        self.assertEqual(luma_gap.band(0.35), "light")
+        # The same bounds as LumaBand in perception/src/eval.rs: dark below 0.2, light from 0.5.
+        self.assertEqual(luma_gap.band(0.1999), "dark")
+        self.assertEqual(luma_gap.band(0.2), "mid")
+        self.assertEqual(luma_gap.band(0.4999), "mid")
+        self.assertEqual(luma_gap.band(0.5), "light")
 
     def test_the_gap_of_uniform_sequences_is_exact_and_its_interval_collapses(self):
         # Two dark sequences at 0.3 a frame, a mid and a light one at 0.1; a frame without a
@@ -64,6 +64,9 @@ class LumaGap(unittest.TestCase):
         self.assertIn("| mid | 1 | 1 | 0.1000 |", text)
         self.assertIn("| light | 1 | 1 | 0.1000 |", text)
         self.assertIn("dark - rest: +0.2000, 95 % interval [+0.2000, +0.2000]", text)
+        # The light sequence (0.1) against the three dark frames and the mid one, frame by
+        # frame: 0.1 - (0.3 * 3 + 0.1) / 4.
+        self.assertIn("light - rest: -0.1500, 95 % interval", text)
 
     def test_a_sequence_in_two_lighter_bands_is_one_unit_of_the_resampling(self):
         # The rest is one sequence, mid in one frame (0.1) and light in another (0.3): every
@@ -74,6 +77,24 @@ class LumaGap(unittest.TestCase):
         finally:
             os.unlink(path)
         self.assertIn("dark - rest: +0.3000, 95 % interval [+0.3000, +0.3000]", text)
+
+    def test_a_band_with_no_rest_is_not_measured_and_all_of_them_is_an_error(self):
+        # Only dark and mid frames: the light gap has no side to measure, the dark one has.
+        path = frames_csv([(1, 0.5, 0.01), (2, 0.1, 0.3)])
+        try:
+            text = run(path, "--resamples", "50")
+        finally:
+            os.unlink(path)
+        self.assertIn("dark - rest: +0.4000", text)
+        self.assertIn("light - rest: not measured, a side is empty", text)
+        # Only mid frames: neither gap can be measured.
+        path = frames_csv([(1, 0.5, 0.3), (2, 0.1, 0.3)])
+        try:
+            with self.assertRaises(SystemExit) as stop:
+                run(path, "--resamples", "50")
+        finally:
+            os.unlink(path)
+        self.assertIn("no gap to measure", str(stop.exception))
 
     def test_no_resamples_is_refused(self):
         path = frames_csv([(1, 0.5, 0.01), (2, 0.1, 0.2)])

@@ -66,6 +66,13 @@ impl Sequence {
         let n = self.pixels();
         &self.classes[t * n..(t + 1) * n]
     }
+
+    /// The classes of frame `t` seen through the occluder (0 under it), `[height, width]`.
+    #[must_use]
+    pub fn visible_frame(&self, t: usize) -> &[u8] {
+        let n = self.pixels();
+        &self.visible[t * n..(t + 1) * n]
+    }
 }
 
 /// The most frames a sequence may have (the generator's limit too).
