@@ -1254,9 +1254,15 @@ mod tests {
         assert!((luma - f64::from(grey)).abs() < 1e-6, "{luma}");
         // The class frame's forearm would have taken in the black: the mistake this guards.
         let with_hidden = masked_luma(half_hidden.rgb_frame(0), &[1; 4]).expect("luma");
-        assert!((with_hidden - f64::from(grey) / 2.0).abs() < 1e-6, "{with_hidden}");
+        assert!(
+            (with_hidden - f64::from(grey) / 2.0).abs() < 1e-6,
+            "{with_hidden}"
+        );
         // A forearm wholly hidden has no luma, whatever its class frame says.
-        assert_eq!(visible_forearm_luma(&sequence(vec![0; 4]), 0, &classes), None);
+        assert_eq!(
+            visible_forearm_luma(&sequence(vec![0; 4]), 0, &classes),
+            None
+        );
     }
 
     #[test]
