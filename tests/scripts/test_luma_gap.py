@@ -41,6 +41,15 @@ def run(path, *extra):
     return out.getvalue()
 
 
+def run_rows(rows, *extra):
+    """`run` on a --frames CSV of `rows` (as `frames_csv`), removed afterwards."""
+    path = frames_csv(rows)
+    try:
+        return run(path, *extra)
+    finally:
+        os.unlink(path)
+
+
 class LumaGap(unittest.TestCase):
     def test_bands_match_eval_segmentations_bounds(self):
         # The same bounds as LumaBand in perception/src/eval.rs: dark below 0.2, light from 0.5.
@@ -52,14 +61,9 @@ class LumaGap(unittest.TestCase):
     def test_the_gap_of_uniform_sequences_is_exact_and_its_interval_collapses(self):
         # Two dark sequences at 0.3 a frame, a mid and a light one at 0.1; a frame without a
         # forearm (empty luma) counts in no band.
-        path = frames_csv(
-            [(1, 0.3, 0.05), (1, 0.3, 0.01), (2, 0.3, 0.07), (3, 0.1, 0.2), (4, 0.1, 0.5),
-             (4, 1.0, "")]
-        )
-        try:
-            text = run(path, "--resamples", "200")
-        finally:
-            os.unlink(path)
+        rows = [(1, 0.3, 0.05), (1, 0.3, 0.01), (2, 0.3, 0.07), (3, 0.1, 0.2), (4, 0.1, 0.5),
+                (4, 1.0, "")]
+        text = run_rows(rows, "--resamples", "200")
         self.assertIn("| dark | 2 | 3 | 0.3000 |", text)
         self.assertIn("| mid | 1 | 1 | 0.1000 |", text)
         self.assertIn("| light | 1 | 1 | 0.1000 |", text)
@@ -71,38 +75,22 @@ class LumaGap(unittest.TestCase):
     def test_a_sequence_in_two_lighter_bands_is_one_unit_of_the_resampling(self):
         # The rest is one sequence, mid in one frame (0.1) and light in another (0.3): every
         # resample draws that sequence whole, so the interval collapses onto the gap.
-        path = frames_csv([(1, 0.5, 0.01), (2, 0.1, 0.2), (2, 0.3, 0.6)])
-        try:
-            text = run(path, "--resamples", "200")
-        finally:
-            os.unlink(path)
+        text = run_rows([(1, 0.5, 0.01), (2, 0.1, 0.2), (2, 0.3, 0.6)], "--resamples", "200")
         self.assertIn("dark - rest: +0.3000, 95 % interval [+0.3000, +0.3000]", text)
 
     def test_a_band_with_no_rest_is_not_measured_and_all_of_them_is_an_error(self):
         # Only dark and mid frames: the light gap has no side to measure, the dark one has.
-        path = frames_csv([(1, 0.5, 0.01), (2, 0.1, 0.3)])
-        try:
-            text = run(path, "--resamples", "50")
-        finally:
-            os.unlink(path)
+        text = run_rows([(1, 0.5, 0.01), (2, 0.1, 0.3)], "--resamples", "50")
         self.assertIn("dark - rest: +0.4000", text)
         self.assertIn("light - rest: not measured, a side is empty", text)
         # Only mid frames: neither gap can be measured.
-        path = frames_csv([(1, 0.5, 0.3), (2, 0.1, 0.3)])
-        try:
-            with self.assertRaises(SystemExit) as stop:
-                run(path, "--resamples", "50")
-        finally:
-            os.unlink(path)
+        with self.assertRaises(SystemExit) as stop:
+            run_rows([(1, 0.5, 0.3), (2, 0.1, 0.3)], "--resamples", "50")
         self.assertIn("no gap to measure", str(stop.exception))
 
     def test_no_resamples_is_refused(self):
-        path = frames_csv([(1, 0.5, 0.01), (2, 0.1, 0.2)])
-        try:
-            with contextlib.redirect_stderr(io.StringIO()), self.assertRaises(SystemExit):
-                run(path, "--resamples", "0")
-        finally:
-            os.unlink(path)
+        with contextlib.redirect_stderr(io.StringIO()), self.assertRaises(SystemExit):
+            run_rows([(1, 0.5, 0.01), (2, 0.1, 0.2)], "--resamples", "0")
 
     def test_frames_weigh_by_number_not_by_sequence(self):
         # Sequence 1 has three frames at 0.4, sequence 2 one at 0.0: frame-weighted 0.3.
