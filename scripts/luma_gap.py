@@ -103,5 +103,6 @@ def main() -> None:
     if measured == 0:
         sys.exit("no gap to measure: every band or its rest is empty")
 
+
 if __name__ == "__main__":
     main()
