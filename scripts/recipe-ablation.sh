@@ -86,8 +86,9 @@ variants_finish
         f="$OUT/$variant-seed-$seed/$SPLIT.md"
         # The breakdown's first row: | all | frames | thresholded | elbow and wrist right | ...
         br() { grep -E "^\| all \|" "$f" | sed -n 2p | cut -d'|' -f"$1" | tr -d ' '; }
-        echo "| $variant | $seed | $(col "$f" all 5) | $(br 4) | $(br 5) | $(col "$f" 'distance short' 5) |" \
-             "$(col "$f" 'distance medium' 5) | $(col "$f" 'occlusion heavy' 5) | $(col "$f" all 10) |" \
+        dice() { col "$f" "$1" "Dice loss"; }
+        echo "| $variant | $seed | $(dice all) | $(br 4) | $(br 5) | $(dice 'distance short') |" \
+             "$(dice 'distance medium') | $(dice 'occlusion heavy') | $(col "$f" all "class mean Dice") |" \
              "$(sed -n 's/.*\*\*The \(.*\) channels\{0,1\} predicts\{0,1\} black everywhere.*/\1/p' "$f" | grep . || echo none) |"
     done
 } | tee "$OUT/ablation-seed-$SEED.md"

@@ -63,9 +63,11 @@ variants_finish
             echo "$0: no score yet for $v ($f)" >&2
             continue
         fi
-        mean=$(col "$f" all 10)
-        scaled=$(python3 -c "print(f'{$mean * 29 / 50:.4f}')")
-        echo "| $cell | $pred | $delay | $(col "$f" all 5) | $(col "$f" 'occlusion heavy' 5) |" \
-             "$(col "$f" 'occlusion medium' 5) | $(col "$f" 'occlusion light' 5) | $mean | $scaled |"
+        dice() { col "$f" "$1" "Dice loss"; }
+        mean=$(col "$f" all "class mean Dice")
+        scaled=$(python3 -c "import sys; print(f'{float(sys.argv[1]) * 29 / 50:.4f}')" "$mean" ||
+                 echo -)
+        echo "| $cell | $pred | $delay | $(dice all) | $(dice 'occlusion heavy') |" \
+             "$(dice 'occlusion medium') | $(dice 'occlusion light') | $mean | $scaled |"
     done
 } | tee "$OUT/table1.md"

@@ -43,7 +43,7 @@ run_variant() {
             --threads "$THREADS" --out "$OUT/$name/$SPLIT.md" >> "$log" 2>&1 ||
             { echo "$name: FAILED: $(tail -n 1 "$log")" >&2; return 1; }
     fi
-    echo "$name: forearm Dice loss $(col "$OUT/$name/$SPLIT.md" all 5) on the $SPLIT split"
+    echo "$name: forearm Dice loss $(col "$OUT/$name/$SPLIT.md" all "Dice loss") on the $SPLIT split"
 }
 
 queue_variant() {
@@ -63,7 +63,18 @@ variants_finish() {
     [ "$failed" -eq 0 ] || { echo "$0: a variant failed (its log is in $OUT); rerun to resume" >&2; exit 1; }
 }
 
-# A column of the first row of a group in `eval segmentation`'s forearm table:
-# | group | sequences | frames | Dice loss | batch Dice loss | IoU | focal loss | ceiling | class mean Dice |
-# (the loss breakdown below that table repeats the group names): col FILE GROUP FIELD.
-col() { grep -m1 -E "^\| $2 \|" "$1" | cut -d'|' -f"$3" | tr -d ' '; }
+# A cell of `eval segmentation`'s forearm table, the first table whose header starts
+# `| group |` (the loss breakdown below it repeats the group names), found by the group and the
+# column's header, so that a column added to the table moves nothing:
+# col FILE GROUP COLUMN, e.g. col test.md all "class mean Dice". Empty when either is missing.
+col() {
+    awk -F'|' -v group="$2" -v column="$3" '
+        function trim(x) { gsub(/^ +| +$/, "", x); return x }
+        !index_of && trim($2) == "group" {
+            for (i = 1; i <= NF; i++) if (trim($i) == column) index_of = i
+            if (!index_of) exit
+            next
+        }
+        index_of && trim($2) == group { print trim($index_of); exit }
+    ' "$1"
+}
