@@ -561,17 +561,7 @@ impl LumaBand {
 /// values in [0, 1]; `None` when the mask is empty.
 #[must_use]
 pub fn masked_luma(planar: &[f32], mask: &[u8]) -> Option<f64> {
-    let n = mask.len();
-    if planar.len() < 3 * n {
-        return None;
-    }
-    let (mut sum, mut count) = (0.0, 0usize);
-    for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m != 0) {
-        let [r, g, b] = [0, 1, 2].map(|ch| f64::from(planar[ch * n + p]));
-        sum += 0.2126 * r + 0.7152 * g + 0.0722 * b;
-        count += 1;
-    }
-    (count > 0).then(|| sum / count as f64)
+    luma_where(planar, mask.len(), |p| mask[p] != 0)
 }
 
 /// The mean luma ([`masked_luma`]) of the forearm as the camera sees it in frame `t`: the
@@ -580,12 +570,25 @@ pub fn masked_luma(planar: &[f32], mask: &[u8]) -> Option<f64> {
 /// black, and counting those pixels would file an occluded light arm as a dark one.
 #[must_use]
 pub fn visible_forearm_luma(seq: &Sequence, t: usize, classes: &[Class]) -> Option<f64> {
-    let mask: Vec<u8> = seq
-        .visible_frame(t)
-        .iter()
-        .map(|&v| u8::from(classes.get(usize::from(v)) == Some(&Class::Forearm)))
-        .collect();
-    masked_luma(seq.rgb_frame(t), &mask)
+    let forearm = classes.iter().position(|&c| c == Class::Forearm)?;
+    let visible = seq.visible_frame(t);
+    luma_where(seq.rgb_frame(t), visible.len(), |p| {
+        usize::from(visible[p]) == forearm
+    })
+}
+
+/// The mean luma of the pixels `p < n` of a planar `[3, n]` image for which `keep(p)`.
+fn luma_where(planar: &[f32], n: usize, keep: impl Fn(usize) -> bool) -> Option<f64> {
+    if planar.len() < 3 * n {
+        return None;
+    }
+    let (mut sum, mut count) = (0.0, 0usize);
+    for p in (0..n).filter(|&p| keep(p)) {
+        let [r, g, b] = [0, 1, 2].map(|ch| f64::from(planar[ch * n + p]));
+        sum += 0.2126 * r + 0.7152 * g + 0.0722 * b;
+        count += 1;
+    }
+    (count > 0).then(|| sum / count as f64)
 }
 
 /// Order of the dataset's distance classes and occlusion levels in tables (others last).
