@@ -89,8 +89,9 @@ pub struct EvalSegmentationArgs {
     #[arg(long, default_value_t = 24)]
     pub worst: usize,
     /// Write every scored frame's forearm to this CSV file: sequence, frame, camera,
-    /// occlusion, true forearm pixels, Dice loss (probabilities and thresholded) and the
-    /// ceiling at the model's input.
+    /// occlusion, true forearm pixels, Dice loss (probabilities and thresholded), the
+    /// ceiling at the model's input and the mean luma of the forearm's pixels in view
+    /// (`scripts/luma_gap.py` reads it).
     #[arg(long)]
     pub frames: Option<PathBuf>,
 }
