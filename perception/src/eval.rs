@@ -450,6 +450,9 @@ pub struct FrameRecord {
     pub forearm_dice: f64,
     /// The per-frame Dice loss of the thresholded mask ([`ForearmBreakdown::dice_loss`]).
     pub forearm_dice_thresholded: f64,
+    /// The same with the elbow and the wrist in the right place
+    /// ([`ForearmBreakdown::inner_dice_loss`]).
+    pub forearm_dice_parts_right: f64,
     /// A perfect network's Dice loss at the model's input (`None`: no true forearm).
     pub input_ceiling: Option<f64>,
     /// The visible forearm's mean luma in the input image ([`masked_luma`]; `None`: no true
@@ -459,13 +462,13 @@ pub struct FrameRecord {
 
 impl FrameRecord {
     /// The CSV header of [`FrameRecord::csv_row`].
-    pub const CSV_HEADER: &str = "sequence,frame,camera,occlusion,forearm_px,forearm_dice,forearm_dice_thresholded,input_ceiling,forearm_luma";
+    pub const CSV_HEADER: &str = "sequence,frame,camera,occlusion,forearm_px,forearm_dice,forearm_dice_thresholded,input_ceiling,forearm_luma,forearm_dice_parts_right";
 
     /// One CSV row (an empty field for a missing ceiling or luma).
     #[must_use]
     pub fn csv_row(&self) -> String {
         format!(
-            "{},{},{},{},{},{:.6},{:.6},{},{}",
+            "{},{},{},{},{},{:.6},{:.6},{},{},{:.6}",
             self.sequence,
             self.frame,
             csv_field(&self.camera),
@@ -476,7 +479,8 @@ impl FrameRecord {
             self.input_ceiling
                 .map_or(String::new(), |v| format!("{v:.6}")),
             self.forearm_luma
-                .map_or(String::new(), |v| format!("{v:.6}"))
+                .map_or(String::new(), |v| format!("{v:.6}")),
+            self.forearm_dice_parts_right
         )
     }
 }
@@ -733,6 +737,7 @@ pub fn evaluate(
                     forearm_px: scores.breakdown.found + scores.breakdown.missed_pixels,
                     forearm_dice: f64::from(scores.dice[f]),
                     forearm_dice_thresholded: scores.breakdown.dice_loss(),
+                    forearm_dice_parts_right: scores.breakdown.inner_dice_loss(),
                     input_ceiling: scores.input_ceiling,
                     forearm_luma,
                 });
@@ -1119,6 +1124,7 @@ mod tests {
             forearm_px: 10,
             forearm_dice,
             forearm_dice_thresholded: forearm_dice,
+            forearm_dice_parts_right: forearm_dice,
             input_ceiling: None,
             forearm_luma: None,
         };
@@ -1170,19 +1176,24 @@ mod tests {
             forearm_px: 42,
             forearm_dice: 0.98,
             forearm_dice_thresholded: 1.0,
+            forearm_dice_parts_right: 0.5,
             input_ceiling: Some(0.0625),
             forearm_luma: Some(0.05),
         };
         assert_eq!(
             r.csv_row(),
-            "1225,17,short,medium,42,0.980000,1.000000,0.062500,0.050000"
+            "1225,17,short,medium,42,0.980000,1.000000,0.062500,0.050000,0.500000"
         );
         assert_eq!(
             r.csv_row().split(',').count(),
             FrameRecord::CSV_HEADER.split(',').count()
         );
         (r.input_ceiling, r.forearm_luma) = (None, None);
-        assert!(r.csv_row().ends_with("1.000000,,"), "{}", r.csv_row());
+        assert!(
+            r.csv_row().ends_with("1.000000,,,0.500000"),
+            "{}",
+            r.csv_row()
+        );
         // A camera named with a comma and a quote stays one field.
         r.camera = "left, \"high\" camera".into();
         assert!(

@@ -90,8 +90,9 @@ pub struct EvalSegmentationArgs {
     pub worst: usize,
     /// Write every scored frame's forearm to this CSV file: sequence, frame, camera,
     /// occlusion, true forearm pixels, Dice loss (probabilities and thresholded), the
-    /// ceiling at the model's input and the mean luma of the forearm's pixels in view
-    /// (`scripts/luma_gap.py` reads it).
+    /// ceiling at the model's input, the mean luma of the forearm's pixels in view
+    /// (`scripts/luma_gap.py` reads it) and the thresholded Dice loss with the elbow and the
+    /// wrist in the right place (`scripts/part_boundaries.py` reads it).
     #[arg(long)]
     pub frames: Option<PathBuf>,
 }
