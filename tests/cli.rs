@@ -497,18 +497,23 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             && md.contains("The 2 sequences of highest mean forearm Dice loss"),
         "{md}"
     );
-    // One row per scored frame (frames 1 to 3 of each 4-frame sequence), nine fields each.
+    // One row per scored frame (frames 1 to 3 of each 4-frame sequence), ten fields each.
     let csv = std::fs::read_to_string(&frames_csv).expect("the frames are written");
     let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 1 + 6, "{csv}");
     assert_eq!(rows[0][..2], ["sequence", "frame"], "{csv}");
     assert_eq!(rows[0][8], "forearm_luma", "{csv}");
-    assert!(rows.iter().all(|r| r.len() == 9), "{csv}");
+    assert_eq!(rows[0][9], "forearm_dice_parts_right", "{csv}");
+    assert!(rows.iter().all(|r| r.len() == 10), "{csv}");
     let scored: Vec<&str> = rows[1..].iter().map(|r| r[1]).collect();
     assert_eq!(scored, ["1", "2", "3", "1", "2", "3"], "{csv}");
     for r in &rows[1..] {
         let dice: f64 = r[5].parse().expect("a loss");
         assert!((0.0..=1.0).contains(&dice), "{csv}");
+        // Giving arm pixels their true part only adds to the forearm's overlap.
+        let (thresholded, parts_right): (f64, f64) =
+            (r[6].parse().expect("a loss"), r[9].parse().expect("a loss"));
+        assert!((0.0..=thresholded).contains(&parts_right), "{csv}");
         // A luma needs a forearm in view, so no true forearm (no input ceiling) means none; a
         // forearm wholly under the occluder has a ceiling but no luma.
         assert!(r[8].is_empty() || !r[7].is_empty(), "{csv}");
