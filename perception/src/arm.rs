@@ -155,21 +155,8 @@ impl ArmModel {
     /// The manifest records no human (a dataset from before it did: regenerate it), the
     /// model does not load, or [`ArmModel::new`] fails.
     pub fn of_dataset(dataset: &Dataset) -> Result<Self> {
-        let human = dataset
-            .manifest
-            .human
-            .as_ref()
-            .ok_or_else(|| PerceptionError::Input {
-                message: format!(
-                    "{}: the manifest records no human model (written by an older \
-                     workcell); regenerate the dataset",
-                    dataset.root.join("manifest.json").display()
-                ),
-            })?;
-        let mut model = RobotModel::load(&human.model, &PackageMap::from_env())?;
-        let look = human.look;
-        model.retain_visuals(|g| look.shows(g.name.as_deref()));
-        Self::new(&model, &Pose::from(&human.X_WH))
+        let (model, X_WH) = dataset_human(dataset)?;
+        Self::new(&model, &X_WH)
     }
 
     /// The elbow-on-shoulder-sphere anchor for a camera at `X_WC`, if the shoulder is fixed.
@@ -223,6 +210,30 @@ impl ArmModel {
             })
             .collect()
     }
+}
+
+/// The human a dataset shows: its model in the dataset's look (the visuals it was rendered
+/// with) and its base pose, as the manifest records them.
+///
+/// # Errors
+/// The manifest records no human (a dataset from before it did: regenerate it), or the
+/// model does not load.
+pub fn dataset_human(dataset: &Dataset) -> Result<(RobotModel, Pose)> {
+    let human = dataset
+        .manifest
+        .human
+        .as_ref()
+        .ok_or_else(|| PerceptionError::Input {
+            message: format!(
+                "{}: the manifest records no human model (written by an older \
+                 workcell); regenerate the dataset",
+                dataset.root.join("manifest.json").display()
+            ),
+        })?;
+    let mut model = RobotModel::load(&human.model, &PackageMap::from_env())?;
+    let look = human.look;
+    model.retain_visuals(|g| look.shows(g.name.as_deref()));
+    Ok((model, Pose::from(&human.X_WH)))
 }
 
 /// Whether `link` is `base` or hangs from it by fixed joints only.

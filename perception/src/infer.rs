@@ -111,6 +111,26 @@ impl ProcNet {
         Ok(resample(forearm, 1, s, s, width, height))
     }
 
+    /// Every class's probabilities of a planar RGB frame of any size, as
+    /// [`ProcNet::forearm`] gives the forearm's: one `width x height` plane per class.
+    ///
+    /// # Errors
+    /// Network failures.
+    pub fn planes(
+        &mut self,
+        planar: &[f32],
+        width: usize,
+        height: usize,
+    ) -> Result<Vec<(Class, Vec<f32>)>> {
+        let s = self.config.input_size;
+        let masks = self.segment(&resample(planar, 3, width, height, s, s))?;
+        Ok(masks
+            .classes
+            .iter()
+            .filter_map(|&c| Some((c, resample(masks.class(c)?, 1, s, s, width, height))))
+            .collect())
+    }
+
     /// Forgets the stream (a new camera, a cut): the next frame starts from a zero state.
     pub fn reset(&mut self) {
         self.state = None;

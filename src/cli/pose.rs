@@ -5,11 +5,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use workcell::perception::pose::PoseConfig;
 use workcell::perception::pose::eval::{
-    GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, VisibleMasks, compare_markdown,
-    evaluate_pose,
+    GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, PoseMethod, VisibleMasks,
+    compare_markdown, evaluate_pose,
 };
+use workcell::perception::pose::{ArmFitConfig, PoseConfig};
 use workcell::perception::{Backend, ProcNet, backend};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
 use workcell::sim::dataset::Dataset;
@@ -39,10 +39,17 @@ pub struct EvalPoseArgs {
     /// CPU threads (1 to 256).
     #[arg(long, default_value_t = 2, value_parser = super::count_in::<1, { super::MAX_THREADS }>)]
     pub threads: usize,
-    /// Search over the whole image instead of a region of interest around the mask.
+    /// `articulated`: the human model's joints fitted to the upper arm's, the forearm's
+    /// and the hand's masks at once; `paper`: the forearm's 6-DoF pose from its mask alone,
+    /// by the paper's method. Both report the forearm's pose in the camera frame.
+    #[arg(long, default_value = "articulated")]
+    pub method: String,
+    /// With --method paper: search over the whole image instead of a region of interest
+    /// around the mask.
     #[arg(long)]
     pub no_roi: bool,
-    /// The mask alone, as in the paper: do not anchor the elbow to the cell's shoulder.
+    /// With --method paper: the mask alone, as in the paper; do not anchor the elbow to the
+    /// cell's shoulder.
     #[arg(long)]
     pub no_anchor: bool,
     /// Folder for pose_eval.md, pose_frames.csv and pose_error_vs_distance.{svg,png}.
@@ -108,9 +115,24 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         .collect::<Result<Vec<_>>>()?;
     let dataset = Dataset::open(&args.dataset)?;
     let n = dataset.entries(Some(split)).count();
-    let config = PoseConfig {
-        roi: !args.no_roi,
-        ..PoseConfig::default()
+    let method = match args.method.as_str() {
+        "articulated" => {
+            if args.no_roi || args.no_anchor {
+                anyhow::bail!(
+                    "--no-roi and --no-anchor are settings of --method paper; the articulated \
+                     fit renders the region the dataset stores and hangs the arm from its shoulder"
+                );
+            }
+            PoseMethod::Articulated(ArmFitConfig::default())
+        }
+        "paper" => PoseMethod::Paper {
+            anchored: !args.no_anchor,
+            config: PoseConfig {
+                roi: !args.no_roi,
+                ..PoseConfig::default()
+            },
+        },
+        other => anyhow::bail!("unknown --method {other:?} (articulated, paper)"),
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
@@ -126,16 +148,9 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             n as u64,
             &format!("{kind}: {{bar:40}} {{pos}}/{{len}} sequences, {{elapsed}} (eta {{eta}})"),
         );
-        let ev = evaluate_pose(
-            &dataset,
-            split,
-            source.as_mut(),
-            &config,
-            !args.no_anchor,
-            &mut |done, _| {
-                progress.set_position(done as u64);
-            },
-        )?;
+        let ev = evaluate_pose(&dataset, split, source.as_mut(), &method, &mut |done, _| {
+            progress.set_position(done as u64);
+        })?;
         progress.finish_and_clear();
         let md = format!(
             "# Forearm pose: {}, {kind} masks\n\nDataset `{}`.\n\n{}",

@@ -1,4 +1,9 @@
-//! The forearm's 6-DoF pose from its mask, by render-and-compare.
+//! The forearm's pose by render-and-compare, two ways:
+//!
+//! - **Articulated** ([`ArmFitter`], the default of `workcell eval pose`): the human model's
+//!   joints fitted to the upper arm's, the forearm's and the hand's masks at once; the
+//!   forearm's pose follows from the fitted arm. See its module docs.
+//! - **The paper's**, [`PoseEstimator`] (below): the forearm's 6-DoF pose from its mask alone.
 //!
 //! A candidate pose is scored by the paper's agreement between the observed mask `m` (values
 //! in [0, 1], ProcNet's probabilities or a binary mask) and the mask `mhat` the renderer draws
@@ -50,12 +55,16 @@
 //! Spin about the forearm's axis is weakly observable (two thin bones side by side); it is
 //! reported, and evaluated, on its own.
 
+mod articulated;
 mod config;
 pub mod eval;
 mod image;
 mod model;
 mod search;
 
+pub use articulated::{
+    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmMasks, ArticulatedArm, FITTED_PARTS,
+};
 pub use config::PoseConfig;
 pub use image::f_m;
 pub use model::{Anchor, RigidModel};

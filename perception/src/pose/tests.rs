@@ -418,6 +418,7 @@ fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
                 axis_deg: 0.0,
                 spin_deg: 0.0,
                 flipped: false,
+                ends_cm: position_cm,
             })
             .ok_or(NoPose::Empty);
         frame_result(i, "heavy", outcome)
@@ -426,8 +427,7 @@ fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
         masks: String::new(),
         split: "test".into(),
         sequences: 1,
-        roi: true,
-        anchored: true,
+        method: String::new(),
         frames,
     };
     let a = eval(vec![
@@ -467,8 +467,7 @@ fn a_group_without_a_pose_shows_no_angles() {
         masks: String::new(),
         split: "test".into(),
         sequences: 1,
-        roi: true,
-        anchored: true,
+        method: String::new(),
         frames: vec![frame(1, "medium"), frame(2, "medium")],
     };
     let s = eval.summary(Some("short"), Some("medium"));

@@ -66,6 +66,17 @@ impl Class {
         }
     }
 
+    /// The class that shows `part`.
+    #[must_use]
+    pub fn of_part(part: HumanPart) -> Class {
+        match part {
+            HumanPart::Torso => Class::Torso,
+            HumanPart::UpperArm => Class::UpperArm,
+            HumanPart::Forearm => Class::Forearm,
+            HumanPart::Hand => Class::Hand,
+        }
+    }
+
     /// A colour to draw the class with (sRGB).
     #[must_use]
     pub fn color(self) -> [u8; 3] {

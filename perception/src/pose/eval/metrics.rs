@@ -19,16 +19,28 @@ pub struct PoseError {
     pub spin_deg: f64,
     /// The end-for-end twin was the nearer.
     pub flipped: bool,
+    /// The larger error of the forearm axis's two ends, cm: the estimate covers the true
+    /// forearm when this is within its uncertainty.
+    pub ends_cm: f64,
 }
 
-/// The errors of `estimate` against `truth` (see the module docs).
+/// The errors of `estimate` against `truth` (see the module docs), of the estimate or its
+/// end-for-end twin, whichever is nearer: a forearm's mask alone cannot tell them apart.
 #[must_use]
 pub fn pose_error(model: &RigidModel, estimate: &Pose, truth: &Pose) -> PoseError {
-    let twin = model.twin(estimate);
+    pose_error_with(model, estimate, truth, true)
+}
+
+/// The errors of `estimate` against `truth`; with `twin` false, of the estimate itself
+/// (when the hand tells the wrist from the elbow), and [`PoseError::flipped`] says whether
+/// its ends are swapped.
+#[must_use]
+pub fn pose_error_with(model: &RigidModel, estimate: &Pose, truth: &Pose, twin: bool) -> PoseError {
+    let other = model.twin(estimate);
     // The twin whose axis points the truth's way (spin is weakly seen; the axis is not).
     let along = |X: &Pose| (X.rotation * model.axis_O).dot(truth.rotation * model.axis_O);
-    let flipped = along(&twin) > along(estimate);
-    let X = if flipped { twin } else { *estimate };
+    let flipped = along(&other) > along(estimate);
+    let X = if flipped && twin { other } else { *estimate };
     let (_, e) = pose_to_xyz_rpy(&X);
     let (_, t) = pose_to_xyz_rpy(truth);
     let wrap = |a: f64| (a.sin().atan2(a.cos())).abs().to_degrees();
@@ -38,8 +50,17 @@ pub fn pose_error(model: &RigidModel, estimate: &Pose, truth: &Pose) -> PoseErro
     let a = model.axis_O;
     let p = Vector::new(rel.x, rel.y, rel.z).dot(a);
     let spin = 2.0 * p.atan2(rel.w);
+    let half = 0.5 * model.length_m * model.axis_O;
+    let ends_cm = [half, -half]
+        .iter()
+        .map(|&h| {
+            let end = |P: &Pose| P.transform_point(model.centre_O + h);
+            100.0 * (end(&X) - end(truth)).length()
+        })
+        .fold(0.0, f64::max);
     PoseError {
         position_cm: 100.0 * (model.centre(&X) - model.centre(truth)).length(),
+        ends_cm,
         yaw_deg: wrap(e[2] - t[2]),
         pitch_deg: wrap(e[1] - t[1]),
         roll_deg: wrap(e[0] - t[0]),
@@ -95,6 +116,8 @@ pub struct Summary {
     pub axis_deg: f64,
     pub spin_deg: f64,
     pub flipped: usize,
+    /// Frames with a pose whose uncertainty covers both ends of the true forearm.
+    pub within_bound: usize,
 }
 
 impl Summary {
@@ -112,6 +135,7 @@ impl Summary {
                     s.axis_deg += e.axis_deg;
                     s.spin_deg += e.spin_deg;
                     s.flipped += usize::from(e.flipped);
+                    s.within_bound += usize::from(e.ends_cm <= 100.0 * f.uncertainty_m);
                 }
                 Err(_) => s.no_pose += 1,
             }

@@ -1,13 +1,15 @@
-//! Pose evaluation on a dataset split, in the layout of the paper's Table 2.
+//! Pose evaluation on a dataset split, in the layout of the paper's Table 2, by either method
+//! ([`PoseMethod`]).
 //!
 //! Every sequence is tracked from its first frame: the estimator searches globally on frame 0
 //! and whenever the track is lost, and climbs from the previous pose otherwise. Frame 0 is
 //! left out of the statistics (as in the segmentation evaluation: ProcNet has not yet seen
 //! any motion), and so are frames whose forearm is out of view.
 //!
-//! Errors are taken at the forearm's centre, after choosing of the estimate and its
-//! end-for-end twin ([`RigidModel::twin`]) the one nearer the truth in rotation: the mask
-//! cannot tell them apart. Yaw, pitch and roll are the URDF angles of the forearm link frame
+//! Errors are taken at the forearm's centre. With the paper's method they are of the estimate
+//! or its end-for-end twin ([`RigidModel::twin`]), whichever is nearer the truth in rotation:
+//! the forearm's mask cannot tell them apart. The articulated fit's hand tells the wrist from
+//! the elbow, so its errors are of the estimate itself. Yaw, pitch and roll are the URDF angles of the forearm link frame
 //! in the camera frame (as the dataset's labels give them); besides them, the error of the
 //! forearm's axis direction and its *spin* (rotation about its own axis, which two thin bones
 //! barely show) are reported on their own.
@@ -16,7 +18,7 @@ mod metrics;
 mod report;
 mod sources;
 
-pub use metrics::{FrameResult, PoseError, Summary, pose_error};
+pub use metrics::{FrameResult, PoseError, Summary, pose_error, pose_error_with};
 pub use report::{PAPER_AVERAGE, PAPER_TABLE2, compare_markdown};
 pub use sources::{GroundTruthMasks, MaskSource, NetworkMasks, VisibleMasks};
 
@@ -26,9 +28,45 @@ use workcell_render::dataset::{Dataset, Split};
 use workcell_render::{Camera, Class, CpuRenderer};
 use workcell_robots::math::Pose;
 
-use super::{PoseConfig, PoseEstimator};
+use super::{ArmFitConfig, ArmFitter, ArticulatedArm, PoseConfig, PoseEstimator};
 use crate::arm::ArmModel;
 use crate::error::{PerceptionError, Result};
+
+/// How the forearm's pose is found.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PoseMethod {
+    /// The paper's: the forearm's 6-DoF pose from its mask alone ([`PoseEstimator`]), the
+    /// elbow anchored to the shoulder when `anchored`.
+    Paper { anchored: bool, config: PoseConfig },
+    /// The human model's joints fitted to every arm part's mask ([`ArmFitter`]).
+    Articulated(ArmFitConfig),
+}
+
+impl PoseMethod {
+    /// How reports name it.
+    #[must_use]
+    pub fn describe(&self) -> String {
+        match self {
+            PoseMethod::Paper { anchored, config } => format!(
+                "the paper's method (the forearm's mask alone), {}, {}",
+                if config.roi {
+                    "in a region of interest"
+                } else {
+                    "over the whole image"
+                },
+                if *anchored {
+                    "elbow anchored to the shoulder"
+                } else {
+                    "no anchor"
+                }
+            ),
+            PoseMethod::Articulated(_) => {
+                "articulated: the arm's joints fitted to the upper arm, forearm and hand masks"
+                    .into()
+            }
+        }
+    }
+}
 
 /// A split's pose evaluation.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,14 +74,23 @@ pub struct PoseEvaluation {
     pub masks: String,
     pub split: String,
     pub sequences: usize,
-    pub roi: bool,
-    /// The elbow was anchored to the shoulder.
-    pub anchored: bool,
+    /// [`PoseMethod::describe`].
+    pub method: String,
     pub frames: Vec<FrameResult>,
 }
 
-/// Tracks the forearm through every sequence of `split` with masks from `source`.
-/// `progress` gets (sequences done, total).
+/// What either method found in a frame, in the evaluation's terms.
+struct Found {
+    X_CO: Pose,
+    reacquired: bool,
+    f_m: f64,
+    gain: f64,
+    uncertainty_m: f64,
+    renders: usize,
+}
+
+/// Tracks the forearm through every sequence of `split` with masks from `source`, by
+/// `method`. `progress` gets (sequences done, total).
 ///
 /// # Errors
 /// The dataset, the mask source or the renderer fails; the split is empty.
@@ -51,8 +98,7 @@ pub fn evaluate_pose(
     dataset: &Dataset,
     split: Split,
     source: &mut dyn MaskSource,
-    config: &PoseConfig,
-    anchored: bool,
+    method: &PoseMethod,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<PoseEvaluation> {
     let setup = ArmModel::of_dataset(dataset)?;
@@ -67,26 +113,78 @@ pub fn evaluate_pose(
             ),
         });
     }
-    let mut estimator = PoseEstimator::new(CpuRenderer::new(), model.clone(), config.clone());
+    let (mut estimator, mut fitter, anchored) = match method {
+        PoseMethod::Paper { anchored, config } => (
+            Some(PoseEstimator::new(
+                CpuRenderer::new(),
+                model.clone(),
+                config.clone(),
+            )),
+            None,
+            *anchored && setup.shoulder_W.is_some(),
+        ),
+        PoseMethod::Articulated(config) => (
+            None,
+            Some(ArmFitter::new(
+                CpuRenderer::new(),
+                ArticulatedArm::of_dataset(dataset)?,
+                config.clone(),
+            )),
+            false,
+        ),
+    };
     let mut frames = Vec::new();
     for (k, entry) in entries.iter().enumerate() {
         let seq = dataset.load(entry)?;
         source.start();
-        estimator.reset();
+        if let Some(e) = &mut estimator {
+            e.reset();
+        }
+        if let Some(f) = &mut fitter {
+            f.reset();
+        }
         for t in 0..seq.len() {
             let labels = &seq.labels[t];
-            let t0 = Instant::now();
-            let mask = source.forearm(&seq, t)?;
-            let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
             let camera = Camera::from(&labels.camera);
-            estimator.set_anchor(if anchored {
-                setup.anchor(&camera.X_WC)
+            let t0 = Instant::now();
+            let (found, mask_ms, pose_ms) = if let Some(fitter) = &mut fitter {
+                let masks = source.arm(&seq, t)?;
+                let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
+                let t1 = Instant::now();
+                let outcome = fitter.fit(&camera, &masks)?;
+                let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
+                let found = outcome.map(|fit| Found {
+                    X_CO: fit.X_CO(),
+                    reacquired: fit.reacquired,
+                    f_m: fit.f_m,
+                    gain: fit.gain,
+                    uncertainty_m: fit.uncertainty_m,
+                    renders: fit.renders,
+                });
+                (found, mask_ms, pose_ms)
+            } else if let Some(estimator) = &mut estimator {
+                let mask = source.forearm(&seq, t)?;
+                let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
+                estimator.set_anchor(if anchored {
+                    setup.anchor(&camera.X_WC)
+                } else {
+                    None
+                });
+                let t1 = Instant::now();
+                let outcome = estimator.estimate(&camera, &mask)?;
+                let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
+                let found = outcome.map(|e| Found {
+                    X_CO: e.X_CO,
+                    reacquired: e.reacquired,
+                    f_m: e.f_m,
+                    gain: e.gain,
+                    uncertainty_m: e.uncertainty_m,
+                    renders: e.renders,
+                });
+                (found, mask_ms, pose_ms)
             } else {
-                None
-            });
-            let t1 = Instant::now();
-            let outcome = estimator.estimate(&camera, &mask)?;
-            let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
+                continue;
+            };
             let Some(part) = labels.part(Class::Forearm) else {
                 continue;
             };
@@ -97,12 +195,13 @@ pub fn evaluate_pose(
                 continue;
             }
             let truth = Pose::from(&part.X_CP);
-            let (mut reacquired, mut f_m, mut gain, mut unc, mut renders) =
+            let (mut reacquired, mut fm, mut gain, mut unc, mut renders) =
                 (false, 0.0, 0.0, 0.0, 0);
-            let outcome = outcome.map(|e| {
-                (reacquired, f_m, gain, unc, renders) =
+            let outcome = found.map(|e| {
+                (reacquired, fm, gain, unc, renders) =
                     (e.reacquired, e.f_m, e.gain, e.uncertainty_m, e.renders);
-                pose_error(&model, &e.X_CO, &truth)
+                // The hand tells the articulated fit's wrist from its elbow: no twin.
+                pose_error_with(&model, &e.X_CO, &truth, fitter.is_none())
             });
             frames.push(FrameResult {
                 sequence: entry.index,
@@ -113,7 +212,7 @@ pub fn evaluate_pose(
                 occlusion,
                 outcome,
                 reacquired,
-                f_m,
+                f_m: fm,
                 gain,
                 uncertainty_m: unc,
                 pose_ms,
@@ -127,8 +226,14 @@ pub fn evaluate_pose(
         masks: source.name(),
         split: split.name().to_string(),
         sequences: entries.len(),
-        roi: config.roi,
-        anchored: anchored && setup.shoulder_W.is_some(),
+        method: match method {
+            PoseMethod::Paper { config, .. } => PoseMethod::Paper {
+                anchored,
+                config: config.clone(),
+            }
+            .describe(),
+            PoseMethod::Articulated(_) => method.describe(),
+        },
         frames,
     })
 }

@@ -148,6 +148,16 @@ fn fmt_deg(v: f64) -> String {
     }
 }
 
+/// The share of a group's posed frames within their uncertainty, as a percentage.
+fn within(s: &Summary) -> String {
+    let posed = s.frames - s.no_pose;
+    if posed == 0 {
+        "-".into()
+    } else {
+        format!("{:.1} %", 100.0 * s.within_bound as f64 / posed as f64)
+    }
+}
+
 fn finite(v: f64) -> Option<f64> {
     v.is_finite().then_some(v)
 }
@@ -192,32 +202,23 @@ impl PoseEvaluation {
         let mut md = String::new();
         let _ = writeln!(
             md,
-            "Pose error on the {} split ({} sequences, {} frames), masks: {}; search {}, {}.\n",
+            "Pose error on the {} split ({} sequences, {} frames), masks: {}; {}.\n",
             self.split,
             self.sequences,
             self.frames.len(),
             self.masks,
-            if self.roi {
-                "in a region of interest"
-            } else {
-                "over the whole image"
-            },
-            if self.anchored {
-                "elbow anchored to the shoulder"
-            } else {
-                "from the mask alone (no anchor)"
-            }
+            self.method
         );
         let _ = writeln!(
             md,
-            "| distance | occlusion | frames | no pose | position (cm) | paper ProcNet (cm) | paper PoseCNN (cm) | re-acquired |"
+            "| distance | occlusion | frames | no pose | position (cm) | paper ProcNet (cm) | paper PoseCNN (cm) | re-acquired | within the bound |"
         );
-        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
         for (d, l, ours, theirs) in PAPER_TABLE2 {
             let s = self.summary(Some(d), Some(l));
             let _ = writeln!(
                 md,
-                "| {d} | {l} | {} | {} | {} | {} | {} | {} |",
+                "| {d} | {l} | {} | {} | {} | {} | {} | {} | {} |",
                 s.frames,
                 s.no_pose,
                 if s.frames > s.no_pose {
@@ -227,14 +228,25 @@ impl PoseEvaluation {
                 },
                 fmt_cm(ours),
                 fmt_cm(theirs),
-                s.reacquired
+                s.reacquired,
+                within(&s)
             );
         }
         let s = self.summary(None, None);
         let _ = writeln!(
             md,
-            "| average | | {} | {} | {:.2} | {:.2} | {:.2} | {} |\n",
-            s.frames, s.no_pose, s.position_cm, PAPER_AVERAGE.0, PAPER_AVERAGE.1, s.reacquired
+            "| average | | {} | {} | {:.2} | {:.2} | {:.2} | {} | {} |\n",
+            s.frames,
+            s.no_pose,
+            s.position_cm,
+            PAPER_AVERAGE.0,
+            PAPER_AVERAGE.1,
+            s.reacquired,
+            within(&s)
+        );
+        let _ = writeln!(
+            md,
+            "Within the bound: of the frames with a pose, those whose reported uncertainty covers both ends of the true forearm (the radius the safety filter inflates the forearm by).\n"
         );
         let _ = writeln!(
             md,
@@ -331,7 +343,7 @@ impl PoseEvaluation {
     #[must_use]
     pub fn to_csv(&self) -> String {
         let mut csv = String::from(
-            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders\n",
+            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm\n",
         );
         for f in &self.frames {
             let (no_pose, e) = match &f.outcome {
@@ -341,7 +353,7 @@ impl PoseEvaluation {
             let v = |g: fn(&PoseError) -> f64| e.map_or(String::new(), |e| format!("{:.4}", g(e)));
             let _ = writeln!(
                 csv,
-                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{}",
+                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{}",
                 f.sequence,
                 f.frame,
                 f.distance_class,
@@ -362,7 +374,8 @@ impl PoseEvaluation {
                 f.uncertainty_m,
                 f.mask_ms,
                 f.pose_ms,
-                f.renders
+                f.renders,
+                v(|e| e.ends_cm)
             );
         }
         csv

@@ -5,6 +5,7 @@ use workcell_render::dataset::Sequence;
 
 use crate::error::Result;
 use crate::infer::ProcNet;
+use crate::pose::ArmMasks;
 
 /// Where the forearm masks come from.
 pub trait MaskSource {
@@ -17,6 +18,11 @@ pub trait MaskSource {
     /// # Errors
     /// The network's failure.
     fn forearm(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>>;
+    /// Every arm part's mask of frame `t` (for the articulated fit).
+    ///
+    /// # Errors
+    /// The network's failure.
+    fn arm(&mut self, sequence: &Sequence, t: usize) -> Result<ArmMasks>;
 }
 
 /// The dataset's forearm class without the artificial occluder: what ProcNet is trained to
@@ -31,6 +37,10 @@ impl MaskSource for GroundTruthMasks {
     fn start(&mut self) {}
     fn forearm(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
         Ok(forearm_of(sequence.class_frame(t)))
+    }
+    fn arm(&mut self, sequence: &Sequence, t: usize) -> Result<ArmMasks> {
+        let (w, h) = (sequence.width as usize, sequence.height as usize);
+        ArmMasks::from_classes(sequence.class_frame(t), w, h)
     }
 }
 
@@ -47,6 +57,22 @@ impl MaskSource for VisibleMasks {
     fn forearm(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
         let n = sequence.pixels();
         Ok(forearm_of(&sequence.visible[t * n..(t + 1) * n]))
+    }
+    /// The occluder's pixels may hide any part: they are not background.
+    fn arm(&mut self, sequence: &Sequence, t: usize) -> Result<ArmMasks> {
+        let (w, h) = (sequence.width as usize, sequence.height as usize);
+        let n = sequence.pixels();
+        let mut masks = ArmMasks::from_classes(sequence.visible_frame(t), w, h)?;
+        for (b, &o) in masks
+            .background
+            .iter_mut()
+            .zip(&sequence.occluder[t * n..(t + 1) * n])
+        {
+            if o != 0 {
+                *b = 0.0;
+            }
+        }
+        Ok(masks)
     }
 }
 
@@ -74,5 +100,11 @@ impl MaskSource for NetworkMasks {
     fn forearm(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
         let (w, h) = (sequence.width as usize, sequence.height as usize);
         self.net.forearm(sequence.rgb_frame(t), w, h)
+    }
+    fn arm(&mut self, sequence: &Sequence, t: usize) -> Result<ArmMasks> {
+        let (w, h) = (sequence.width as usize, sequence.height as usize);
+        let planes = self.net.planes(sequence.rgb_frame(t), w, h)?;
+        let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
+        ArmMasks::from_planes(w, h, &refs)
     }
 }

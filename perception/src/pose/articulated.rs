@@ -1,0 +1,1035 @@
+//! The arm's pose from every part it shows: articulated render-and-compare.
+//!
+//! The forearm's mask alone leaves its depth along two rays open and, with the elbow hung
+//! from the shoulder, a two-fold mirror ([`crate::pose`]). The arm shows more than its
+//! forearm: this fit moves the human model's joints (both shoulder angles and the elbow, and
+//! whatever else the model has) and compares every arm part's render with that part's mask
+//! at once. The shoulder stays where the human model and its base pose put it, the upper
+//! arm's mask fixes where the elbow is, the hand's mask which end of the forearm is the
+//! wrist.
+//!
+//! **The score** of a configuration `q` is, summed over the parts `p` (upper arm, forearm,
+//! hand) and the pixels their renders cover (the covered fraction `c` of each pixel, from
+//! [`ArmFitConfig::supersample`]^2 samples):
+//!
+//! ```text
+//! score(q) = sum_p sum_px c (s_p - alpha min(d_p, cap)) / M  -  prior(q)
+//! s_p = m_p - m_background
+//! ```
+//!
+//! - `s_p` is +1 on the part's own pixels and -1 on the background; on pixels of something
+//!   that may hide the part (the robot, the torso, another arm part) it is 0: a part behind
+//!   the robot is neither rewarded nor punished. With binary masks `sum c s_p / M` is the
+//!   paper's `f_m` gain over rendering nothing, `(true positives - false positives) / mask
+//!   pixels`, summed over the parts: 1 for a perfect fit ([`ArmFit::gain`]).
+//! - `d_p` is the distance in pixels to the part's mask (a distance transform): a render
+//!   beside its mask still has a slope towards it, where the overlap alone is flat.
+//! - `M` is the mask's mass, all parts together.
+//! - `prior(q)`: tracking, a constant-velocity prediction from the last two fits,
+//!   `w sum ((q - q_pred) / sigma)^2 / dof`.
+//!
+//! **The search.** Tracking, a climb from the prediction: each iteration renders the
+//! configurations one step along each joint either way (a central-difference gradient and
+//! each joint's curvature), then three points along the gradient and a few random probes;
+//! the best one is taken and the step grows by 1.5, or halves when none is better, down to
+//! [`ArmFitConfig::min_step_rad`]. Without a track, or when the climb's gain ends below
+//! [`ArmFitConfig::min_gain`], a global search renders a grid over the joints' ranges,
+//! climbs the best few distinct cells and keeps the best climb ([`ArmFit::reacquired`]).
+//!
+//! **Uncertainty.** Per joint, the displacement over which the score's curvature costs two
+//! mask pixels; mapped through the forearm's kinematics to metres at its centre and its far
+//! end; and the spread of the global search's climbs that end within 0.05 of the best gain.
+//! [`ArmFit::uncertainty_m`] is the larger, scaled by [`ArmFitConfig::uncertainty_scale`].
+
+use std::sync::Arc;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use workcell_render::{Camera, Class, MaskBatch, RenderMesh, Renderer};
+use workcell_robots::math::{Pose, Vector};
+use workcell_robots::{HumanPart, LinkId, RobotModel};
+
+use super::{NoPose, RigidModel, f_m};
+use crate::arm::POSE_MESH_SEGMENTS;
+use crate::error::{PerceptionError, Result};
+
+/// The parts fitted, in the order of [`ArmMasks::parts`] and [`ArmFit::X_CL`].
+pub const FITTED_PARTS: [HumanPart; 3] = HumanPart::ARM;
+
+/// Settings of the articulated fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmFitConfig {
+    /// A fit whose gain is below this is no pose (and ends a track). Default 0.3.
+    pub min_gain: f64,
+    /// Grid points per joint in the global search. Default 8.
+    pub grid: usize,
+    /// Grid cells climbed by the global search. Default 4.
+    pub refine: usize,
+    /// Climb iterations at most. Default 40.
+    pub max_iterations: usize,
+    /// First step of the climb, rad. Default 0.05.
+    pub initial_step_rad: f64,
+    /// The climb stops when its step falls below this, rad. Default 0.002.
+    pub min_step_rad: f64,
+    /// Random probes per climb iteration. Default 2.
+    pub random_probes: usize,
+    /// `alpha`: the cost of a rendered pixel per pixel of distance to its part's mask.
+    /// Default 0.05.
+    pub distance_weight: f64,
+    /// Distances are capped at this many pixels. Default 16.
+    pub distance_cap_px: f32,
+    /// The constant-velocity prior's spread per joint, rad. Default 0.15.
+    pub prior_sigma_rad: f64,
+    /// `w`: the prior's weight, in gain per sigma squared. Default 0.01.
+    pub prior_weight: f64,
+    /// Samples per pixel side of the renders. Default 2.
+    pub supersample: u32,
+    /// Mask values above this are a part's support. Default 0.5.
+    pub threshold: f32,
+    /// The reported uncertainty is the measured one times this. Default 1.
+    pub uncertainty_scale: f64,
+}
+
+impl Default for ArmFitConfig {
+    fn default() -> Self {
+        Self {
+            min_gain: 0.3,
+            grid: 8,
+            refine: 4,
+            max_iterations: 40,
+            initial_step_rad: 0.05,
+            min_step_rad: 0.002,
+            random_probes: 2,
+            distance_weight: 0.05,
+            distance_cap_px: 16.0,
+            prior_sigma_rad: 0.15,
+            prior_weight: 0.01,
+            supersample: 2,
+            threshold: 0.5,
+            uncertainty_scale: 1.0,
+        }
+    }
+}
+
+/// The human model as the fit moves it: its joints, its arm parts' meshes, its base pose.
+#[derive(Debug, Clone)]
+pub struct ArticulatedArm {
+    human: RobotModel,
+    X_WH: Pose,
+    links: [LinkId; 3],
+    meshes: [Option<Arc<RenderMesh>>; 3],
+    limits: Vec<[f64; 2]>,
+    forearm: RigidModel,
+}
+
+impl ArticulatedArm {
+    /// The arm of `human` (in the look it is seen in: its visuals are what is rendered)
+    /// standing with its base at `X_WH`.
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when the model has no joints, an arm part has no link of
+    /// its name, or the forearm has no visual geometry.
+    pub fn new(human: &RobotModel, X_WH: &Pose) -> Result<Self> {
+        let missing = |message: String| PerceptionError::Input {
+            message: format!("human model {}: {message}", human.name()),
+        };
+        if human.dof() == 0 {
+            return Err(missing("no joints to fit".into()));
+        }
+        let mut links = [0; 3];
+        let mut meshes: [Option<Arc<RenderMesh>>; 3] = [None, None, None];
+        for (i, part) in FITTED_PARTS.into_iter().enumerate() {
+            let link = human
+                .link_id(part.link_name())
+                .ok_or_else(|| missing(format!("no link named {part}")))?;
+            let mut mesh = RenderMesh::default();
+            for g in &human.links()[link].visuals {
+                mesh.append(
+                    &RenderMesh::from_geometry_with(g, [0.85, 0.72, 0.62], POSE_MESH_SEGMENTS),
+                    &Pose::IDENTITY,
+                );
+            }
+            links[i] = link;
+            meshes[i] = (!mesh.is_empty()).then(|| Arc::new(mesh));
+        }
+        let forearm = meshes[1]
+            .clone()
+            .ok_or_else(|| missing("the forearm link has no visual geometry".into()))?;
+        let limits = human
+            .position_limits()
+            .into_iter()
+            .map(|[lo, hi]| {
+                let (lo, hi) = (lo.max(-std::f64::consts::PI), hi.min(std::f64::consts::PI));
+                if lo <= hi { [lo, hi] } else { [0.0, 0.0] }
+            })
+            .collect();
+        Ok(Self {
+            human: human.clone(),
+            X_WH: *X_WH,
+            links,
+            meshes,
+            limits,
+            forearm: RigidModel::new(forearm)?,
+        })
+    }
+
+    /// The arm of the human a dataset shows.
+    ///
+    /// # Errors
+    /// As [`crate::arm::dataset_human`] and [`ArticulatedArm::new`].
+    pub fn of_dataset(dataset: &workcell_render::dataset::Dataset) -> Result<Self> {
+        let (human, X_WH) = crate::arm::dataset_human(dataset)?;
+        Self::new(&human, &X_WH)
+    }
+
+    /// Joints fitted.
+    #[must_use]
+    pub fn dof(&self) -> usize {
+        self.limits.len()
+    }
+
+    /// Each joint's range, rad (clamped to +-pi).
+    #[must_use]
+    pub fn limits(&self) -> &[[f64; 2]] {
+        &self.limits
+    }
+
+    /// The forearm as the paper's pose search and its error metric see it.
+    #[must_use]
+    pub fn forearm(&self) -> &RigidModel {
+        &self.forearm
+    }
+
+    /// The link frames of the upper arm, the forearm and the hand in the camera frame (the
+    /// camera at `X_WC`) at configuration `q`.
+    ///
+    /// # Errors
+    /// `q` has the wrong length or a value that is not finite.
+    pub fn part_poses(&self, q: &[f64], X_WC: &Pose) -> Result<[Pose; 3]> {
+        let k = self.human.fk(self.X_WH, q)?;
+        let X_CW = X_WC.inverse();
+        Ok(self.links.map(|l| X_CW * *k.link_pose(l)))
+    }
+
+    fn clamp(&self, q: &mut [f64]) {
+        for (v, [lo, hi]) in q.iter_mut().zip(&self.limits) {
+            *v = v.clamp(*lo, *hi);
+        }
+    }
+}
+
+/// What a frame shows of the arm: a probability plane per part and one for the background.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmMasks {
+    pub width: usize,
+    pub height: usize,
+    /// Upper arm, forearm, hand ([`FITTED_PARTS`]), row-major, values in [0, 1].
+    pub parts: [Vec<f32>; 3],
+    /// That a pixel shows nothing that could hide the arm.
+    pub background: Vec<f32>,
+}
+
+impl ArmMasks {
+    /// From a class image ([`Class`] ids, as the dataset stores them).
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when `classes` is not `width x height`.
+    pub fn from_classes(classes: &[u8], width: usize, height: usize) -> Result<Self> {
+        check_len(classes.len(), width, height)?;
+        let plane = |c: Class| -> Vec<f32> {
+            classes
+                .iter()
+                .map(|&v| f32::from(u8::from(v == c as u8)))
+                .collect()
+        };
+        Ok(Self {
+            width,
+            height,
+            parts: FITTED_PARTS.map(|p| plane(Class::of_part(p))),
+            background: plane(Class::Background),
+        })
+    }
+
+    /// From a network's per-class probabilities (independent sigmoids): the background is
+    /// one less the largest class's probability. A part the network has no class for is
+    /// empty.
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when a plane is not `width x height`.
+    pub fn from_planes(width: usize, height: usize, planes: &[(Class, &[f32])]) -> Result<Self> {
+        let n = width * height;
+        for (_, p) in planes {
+            check_len(p.len(), width, height)?;
+        }
+        let mut background = vec![1.0f32; n];
+        for (_, p) in planes {
+            for (b, &v) in background.iter_mut().zip(*p) {
+                *b = b.min(1.0 - v);
+            }
+        }
+        let part = |part: HumanPart| {
+            planes
+                .iter()
+                .find(|(c, _)| c.human_part() == Some(part))
+                .map_or_else(|| vec![0.0; n], |(_, p)| p.to_vec())
+        };
+        Ok(Self {
+            width,
+            height,
+            parts: FITTED_PARTS.map(part),
+            background,
+        })
+    }
+
+    /// The forearm's plane.
+    #[must_use]
+    pub fn forearm(&self) -> &[f32] {
+        &self.parts[1]
+    }
+}
+
+fn check_len(len: usize, width: usize, height: usize) -> Result<()> {
+    if len == width * height {
+        Ok(())
+    } else {
+        Err(PerceptionError::Input {
+            message: format!(
+                "a mask of {len} values for a {width}x{height} image ({} pixels)",
+                width * height
+            ),
+        })
+    }
+}
+
+/// The arm found in one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmFit {
+    /// The human model's joint positions, rad.
+    pub q: Vec<f64>,
+    /// The link frames of the upper arm, the forearm and the hand in the camera frame.
+    pub X_CL: [Pose; 3],
+    /// The paper's `f_m` of the forearm's mask and its render at the fit, whole image.
+    pub f_m: f64,
+    /// The gain over rendering nothing, all parts together (1: a perfect fit).
+    pub gain: f64,
+    /// Each part's share of [`ArmFit::gain`].
+    pub part_gain: [f64; 3],
+    /// Per joint, the displacement that costs two mask pixels, rad.
+    pub sigma_q: Vec<f64>,
+    /// Spread of the global search's surviving climbs at the forearm, m (0 when tracking).
+    pub spread_m: f64,
+    /// The radius to inflate the forearm by, m.
+    pub uncertainty_m: f64,
+    /// Found by the global search (first frame, or the track was lost).
+    pub reacquired: bool,
+    /// Part masks rendered for this frame.
+    pub renders: usize,
+}
+
+impl ArmFit {
+    /// The forearm link's frame in the camera frame (the paper's Table 2 quantity).
+    #[must_use]
+    pub fn X_CO(&self) -> Pose {
+        self.X_CL[1]
+    }
+}
+
+/// The result of one frame.
+pub type ArmFitOutcome = std::result::Result<ArmFit, NoPose>;
+
+/// The observed masks prepared for scoring.
+struct Target {
+    /// The camera at `supersample` times its resolution.
+    fine: Camera,
+    X_WC: Pose,
+    width: usize,
+    ss: usize,
+    /// Per part: `s_p - alpha min(d_p, cap)` and `s_p`, both divided by the mass.
+    value: [Vec<f32>; 3],
+    signed: [Vec<f32>; 3],
+    /// Mask pixels: the mass, all parts together.
+    mass: f64,
+}
+
+/// A configuration's score.
+#[derive(Debug, Clone, Copy, Default)]
+struct Score {
+    objective: f64,
+    gain: f64,
+    part_gain: [f64; 3],
+}
+
+/// A climb's end.
+struct Climb {
+    q: Vec<f64>,
+    score: Score,
+    /// The score's second derivative along each joint at the end.
+    curvature: Vec<f64>,
+}
+
+/// Articulated render-and-compare of the human's arm, tracking it frame to frame.
+pub struct ArmFitter<R: Renderer> {
+    renderer: R,
+    arm: ArticulatedArm,
+    config: ArmFitConfig,
+    /// The last fits, oldest first (at most two).
+    history: Vec<Vec<f64>>,
+    batch: MaskBatch,
+    poses: Vec<Pose>,
+    renders: usize,
+    rng: ChaCha8Rng,
+}
+
+impl<R: Renderer> ArmFitter<R> {
+    /// A fitter of `arm` that renders with `renderer`.
+    pub fn new(renderer: R, arm: ArticulatedArm, config: ArmFitConfig) -> Self {
+        Self {
+            renderer,
+            arm,
+            config,
+            history: Vec::new(),
+            batch: MaskBatch::new(),
+            poses: Vec::new(),
+            renders: 0,
+            rng: ChaCha8Rng::seed_from_u64(0),
+        }
+    }
+
+    /// The arm fitted.
+    pub fn arm(&self) -> &ArticulatedArm {
+        &self.arm
+    }
+
+    /// Forgets the track: the next frame searches globally.
+    pub fn reset(&mut self) {
+        self.history.clear();
+    }
+
+    /// Tracks from `q` on the next frame (as if it had been the last fit).
+    pub fn set_prior(&mut self, q: &[f64]) {
+        self.history = vec![q.to_vec()];
+    }
+
+    /// The arm in `masks`, seen by `camera` (the masks' size; its pose in the world is
+    /// used). Tracks from the previous frames' fits when there are some.
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when the masks are not the camera's size; a renderer
+    /// failure. Masks the fit cannot use are [`NoPose`], not errors.
+    pub fn fit(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmFitOutcome> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        if masks.width != w || masks.height != h {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "masks of {}x{} for a {w}x{h} camera",
+                    masks.width, masks.height
+                ),
+            });
+        }
+        for plane in masks.parts.iter().chain([&masks.background]) {
+            check_len(plane.len(), w, h)?;
+        }
+        self.renders = 0;
+        self.rng = ChaCha8Rng::seed_from_u64(0x4152_4d46); // "ARMF"
+        let outcome = self.fit_inner(camera, masks);
+        match &outcome {
+            Ok(Ok(fit)) => {
+                self.history.push(fit.q.clone());
+                if self.history.len() > 2 {
+                    self.history.remove(0);
+                }
+            }
+            _ => self.history.clear(),
+        }
+        outcome
+    }
+
+    fn fit_inner(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmFitOutcome> {
+        let planes = masks.parts.iter().chain([&masks.background]);
+        if planes.flatten().any(|v| !(0.0..=1.0).contains(v)) {
+            return Ok(Err(NoPose::NotAProbability));
+        }
+        let Some(target) = self.target(camera, masks)? else {
+            return Ok(Err(NoPose::Empty));
+        };
+        let c = self.config.clone();
+        let mut found = None;
+        if let Some(last) = self.history.last().cloned() {
+            let mut predicted = last.clone();
+            if let [before, _] = self.history.as_slice() {
+                for ((p, l), b) in predicted.iter_mut().zip(&last).zip(before) {
+                    *p = 2.0 * l - b;
+                }
+            }
+            self.arm.clamp(&mut predicted);
+            let climb = self.climb(&target, predicted.clone(), Some(&predicted))?;
+            if climb.score.gain >= c.min_gain {
+                found = Some((climb, 0.0, false));
+            }
+        }
+        if found.is_none() {
+            let climbs = self.search(&target)?;
+            let Some(best) = climbs
+                .iter()
+                .max_by(|a, b| a.score.objective.total_cmp(&b.score.objective))
+            else {
+                return Ok(Err(NoPose::PoorFit));
+            };
+            if best.score.gain < c.min_gain {
+                return Ok(Err(NoPose::PoorFit));
+            }
+            let at = |q: &[f64]| self.forearm_points(q, &target.X_WC);
+            let best_points = at(&best.q)?;
+            let mut spread = 0.0f64;
+            for other in climbs
+                .iter()
+                .filter(|o| o.score.gain >= best.score.gain - 0.05)
+            {
+                let points = at(&other.q)?;
+                for (a, b) in points.iter().zip(&best_points) {
+                    spread = spread.max((*a - *b).length());
+                }
+            }
+            let best = climbs
+                .into_iter()
+                .max_by(|a, b| a.score.objective.total_cmp(&b.score.objective))
+                .ok_or(PerceptionError::Input {
+                    message: "no climb".into(),
+                })?;
+            found = Some((best, spread, true));
+        }
+        let Some((climb, spread_m, reacquired)) = found else {
+            return Ok(Err(NoPose::PoorFit));
+        };
+        // Two mask pixels' worth of score, over the curvature along each joint.
+        let tol = 2.0 / target.mass.max(1.0);
+        let sigma_q: Vec<f64> = climb
+            .curvature
+            .iter()
+            .map(|&k| (2.0 * tol / (-k).max(1e-9)).sqrt().min(0.5))
+            .collect();
+        let sigma_m = self.position_sigma(&climb.q, &sigma_q, &target.X_WC)?;
+        let X_CL = self.arm.part_poses(&climb.q, &target.X_WC)?;
+        let forearm = self.arm.forearm.mesh.clone();
+        self.renderer
+            .render_masks(&forearm, camera, &[X_CL[1]], &mut self.batch)?;
+        self.renders += 1;
+        Ok(Ok(ArmFit {
+            f_m: f_m(masks.forearm(), self.batch.mask(0)),
+            X_CL,
+            q: climb.q,
+            gain: climb.score.gain,
+            part_gain: climb.score.part_gain,
+            sigma_q,
+            spread_m,
+            uncertainty_m: c.uncertainty_scale * sigma_m.max(spread_m),
+            reacquired,
+            renders: self.renders,
+        }))
+    }
+
+    /// The forearm's centre and far end (the wrist) in the camera frame at `q`.
+    fn forearm_points(&self, q: &[f64], X_WC: &Pose) -> Result<[Vector; 2]> {
+        let X = self.arm.part_poses(q, X_WC)?[1];
+        let m = &self.arm.forearm;
+        let far = m.centre_O + 0.5 * m.length_m * m.axis_O;
+        let near = m.centre_O - 0.5 * m.length_m * m.axis_O;
+        // The far end is the one away from the link's origin (the elbow).
+        let end = if far.length() >= near.length() {
+            far
+        } else {
+            near
+        };
+        Ok([X.transform_point(m.centre_O), X.transform_point(end)])
+    }
+
+    /// The position uncertainty of the forearm's centre and wrist, m: each joint's `sigma`
+    /// through the kinematics, combined in quadrature, the larger of the two points.
+    fn position_sigma(&self, q: &[f64], sigma_q: &[f64], X_WC: &Pose) -> Result<f64> {
+        let base = self.forearm_points(q, X_WC)?;
+        let mut var = [0.0f64; 2];
+        for (i, s) in sigma_q.iter().enumerate() {
+            let mut moved = q.to_vec();
+            moved[i] += s;
+            let p = self.forearm_points(&moved, X_WC)?;
+            for k in 0..2 {
+                var[k] += (p[k] - base[k]).length_squared();
+            }
+        }
+        Ok(var[0].max(var[1]).sqrt())
+    }
+
+    /// The masks prepared for scoring, cropped to the parts' support grown by half its size
+    /// (at least 12 px a side): pixels farther out are taken as background and left
+    /// unscored. `None` when no part has support.
+    fn target(&self, camera: &Camera, masks: &ArmMasks) -> Result<Option<Target>> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let c = &self.config;
+        let (mut lo, mut hi) = ([usize::MAX; 2], [0usize; 2]);
+        for plane in &masks.parts {
+            for (i, _) in plane.iter().enumerate().filter(|(_, v)| **v > c.threshold) {
+                let (x, y) = (i % w, i / w);
+                lo = [lo[0].min(x), lo[1].min(y)];
+                hi = [hi[0].max(x + 1), hi[1].max(y + 1)];
+            }
+        }
+        if lo[0] == usize::MAX {
+            return Ok(None);
+        }
+        let grow = |a: usize, b: usize| ((b - a) / 2).max(12);
+        let (gx, gy) = (grow(lo[0], hi[0]), grow(lo[1], hi[1]));
+        let (x0, y0) = (lo[0].saturating_sub(gx), lo[1].saturating_sub(gy));
+        let (x1, y1) = ((hi[0] + gx).min(w), (hi[1] + gy).min(h));
+        let (rw, rh) = (x1 - x0, y1 - y0);
+        let crop = |plane: &[f32]| -> Vec<f32> {
+            (y0..y1)
+                .flat_map(|y| plane[y * w + x0..y * w + x1].iter().copied())
+                .collect()
+        };
+        let parts = masks.parts.each_ref().map(|p| crop(p));
+        let background = crop(&masks.background);
+        let mass: f64 = parts.iter().flatten().map(|&v| f64::from(v)).sum();
+        let inv = (1.0 / mass.max(1.0)) as f32;
+        let alpha = c.distance_weight as f32;
+        let signed: [Vec<f32>; 3] = std::array::from_fn(|p| {
+            parts[p]
+                .iter()
+                .zip(&background)
+                .map(|(&m, &b)| (m - b) * inv)
+                .collect()
+        });
+        let value: [Vec<f32>; 3] = std::array::from_fn(|p| {
+            let inside: Vec<bool> = parts[p].iter().map(|&v| v > c.threshold).collect();
+            let d = distance_transform(&inside, rw, rh, c.distance_cap_px);
+            signed[p]
+                .iter()
+                .zip(&d)
+                .map(|(&s, &d)| s - alpha * d * inv)
+                .collect()
+        });
+        let roi = Camera {
+            width: rw as u32,
+            height: rh as u32,
+            cx: camera.cx - x0 as f64,
+            cy: camera.cy - y0 as f64,
+            ..*camera
+        };
+        let ss = c.supersample.max(1);
+        Ok(Some(Target {
+            fine: roi.resized(roi.width * ss, roi.height * ss)?,
+            X_WC: camera.X_WC,
+            width: rw,
+            ss: ss as usize,
+            value,
+            signed,
+            mass,
+        }))
+    }
+
+    /// The scores of the configurations `qs`, each part rendered in one batch; the prior
+    /// (its centre) subtracted when given.
+    fn score(
+        &mut self,
+        target: &Target,
+        qs: &[Vec<f64>],
+        prior: Option<&[f64]>,
+    ) -> Result<Vec<Score>> {
+        let mut scores = vec![Score::default(); qs.len()];
+        let all: Vec<[Pose; 3]> = qs
+            .iter()
+            .map(|q| self.arm.part_poses(q, &target.X_WC))
+            .collect::<Result<_>>()?;
+        let (w, ss) = (target.width, target.ss);
+        let per_sample = 1.0 / (ss * ss) as f32;
+        for p in 0..3 {
+            let Some(mesh) = self.arm.meshes[p].clone() else {
+                continue;
+            };
+            self.poses.clear();
+            self.poses.extend(all.iter().map(|x| x[p]));
+            self.renderer
+                .render_masks(&mesh, &target.fine, &self.poses, &mut self.batch)?;
+            self.renders += qs.len();
+            for (k, score) in scores.iter_mut().enumerate() {
+                let fine = self.batch.mask(k);
+                let (mut value, mut signed) = (0.0f32, 0.0f32);
+                for (fy, row) in fine.chunks_exact(w * ss).enumerate() {
+                    let base = (fy / ss) * w;
+                    let (vrow, srow) = (
+                        &target.value[p][base..base + w],
+                        &target.signed[p][base..base + w],
+                    );
+                    for (fx, &v) in row.iter().enumerate() {
+                        if v != 0 {
+                            value += vrow[fx / ss];
+                            signed += srow[fx / ss];
+                        }
+                    }
+                }
+                let (value, signed) = (
+                    f64::from(value * per_sample),
+                    f64::from(signed * per_sample),
+                );
+                score.objective += value;
+                score.gain += signed;
+                score.part_gain[p] = signed;
+            }
+        }
+        if let Some(centre) = prior {
+            let c = &self.config;
+            let dof = centre.len().max(1) as f64;
+            for (score, q) in scores.iter_mut().zip(qs) {
+                let d2: f64 = q
+                    .iter()
+                    .zip(centre)
+                    .map(|(a, b)| ((a - b) / c.prior_sigma_rad).powi(2))
+                    .sum();
+                score.objective -= c.prior_weight * d2 / dof;
+            }
+        }
+        Ok(scores)
+    }
+
+    /// Gradient ascent from `start` (see the module docs).
+    fn climb(&mut self, target: &Target, start: Vec<f64>, prior: Option<&[f64]>) -> Result<Climb> {
+        let c = self.config.clone();
+        let dof = self.arm.dof();
+        let mut q = start;
+        let mut here = self.score(target, std::slice::from_ref(&q), prior)?[0];
+        let mut step = c.initial_step_rad;
+        let mut curvature = vec![0.0; dof];
+        for _ in 0..c.max_iterations {
+            let mut candidates = Vec::with_capacity(2 * dof);
+            for i in 0..dof {
+                for sign in [1.0, -1.0] {
+                    let mut v = q.clone();
+                    v[i] += sign * step;
+                    candidates.push(v);
+                }
+            }
+            let compass = self.score(target, &candidates, prior)?;
+            let mut gradient = vec![0.0; dof];
+            for i in 0..dof {
+                let (plus, minus) = (compass[2 * i].objective, compass[2 * i + 1].objective);
+                gradient[i] = (plus - minus) / (2.0 * step);
+                curvature[i] = (plus - 2.0 * here.objective + minus) / (step * step);
+            }
+            let norm = gradient.iter().map(|g| g * g).sum::<f64>().sqrt();
+            let mut more = Vec::new();
+            if norm > 0.0 {
+                for t in [1.0, 2.0, 4.0] {
+                    let mut v = q.clone();
+                    for (x, g) in v.iter_mut().zip(&gradient) {
+                        *x += t * step * g / norm;
+                    }
+                    self.arm.clamp(&mut v);
+                    more.push(v);
+                }
+            }
+            for _ in 0..c.random_probes {
+                let mut v = q.clone();
+                for x in &mut v {
+                    *x += step * (2.0 * self.rng.random::<f64>() - 1.0);
+                }
+                self.arm.clamp(&mut v);
+                more.push(v);
+            }
+            let extra = self.score(target, &more, prior)?;
+            let mut best: Option<(Vec<f64>, Score)> = None;
+            for (v, s) in candidates
+                .into_iter()
+                .zip(compass)
+                .chain(more.into_iter().zip(extra))
+            {
+                let inside = v
+                    .iter()
+                    .zip(self.arm.limits())
+                    .all(|(x, [lo, hi])| (*lo..=*hi).contains(x));
+                if inside && s.objective > best.as_ref().map_or(here.objective, |b| b.1.objective) {
+                    best = Some((v, s));
+                }
+            }
+            match best {
+                Some((v, s)) if s.objective > here.objective + 1e-12 => {
+                    q = v;
+                    here = s;
+                    step = (1.5 * step).min(4.0 * c.initial_step_rad);
+                }
+                _ => {
+                    step *= 0.5;
+                    if step < c.min_step_rad {
+                        break;
+                    }
+                }
+            }
+        }
+        // The reported gain is without the prior.
+        let plain = self.score(target, std::slice::from_ref(&q), None)?[0];
+        Ok(Climb {
+            q,
+            score: Score {
+                objective: here.objective,
+                ..plain
+            },
+            curvature,
+        })
+    }
+
+    /// The global search: a grid over the joints' ranges, the best distinct cells climbed.
+    fn search(&mut self, target: &Target) -> Result<Vec<Climb>> {
+        let c = self.config.clone();
+        let n = c.grid.max(1);
+        let limits = self.arm.limits().to_vec();
+        let mut grid: Vec<Vec<f64>> = vec![Vec::new()];
+        for [lo, hi] in &limits {
+            grid = grid
+                .into_iter()
+                .flat_map(|q| {
+                    (0..n).map(move |k| {
+                        let mut v = q.clone();
+                        v.push(lo + (k as f64 + 0.5) * (hi - lo) / n as f64);
+                        v
+                    })
+                })
+                .collect();
+        }
+        let scores = self.score(target, &grid, None)?;
+        let mut order: Vec<usize> = (0..grid.len()).collect();
+        order.sort_by(|&a, &b| scores[b].objective.total_cmp(&scores[a].objective));
+        // Cells at least 1.5 cells apart in some joint.
+        let cell: Vec<f64> = limits.iter().map(|[lo, hi]| (hi - lo) / n as f64).collect();
+        let mut starts: Vec<Vec<f64>> = Vec::new();
+        for i in order {
+            if starts.len() >= c.refine.max(1) {
+                break;
+            }
+            let q = &grid[i];
+            let distinct = starts.iter().all(|s| {
+                s.iter()
+                    .zip(q)
+                    .zip(&cell)
+                    .any(|((a, b), w)| (a - b).abs() > 1.5 * w)
+            });
+            if distinct {
+                starts.push(q.clone());
+            }
+        }
+        starts
+            .into_iter()
+            .map(|s| self.climb(target, s, None))
+            .collect()
+    }
+}
+
+/// Distances in pixels from each pixel to the nearest `inside` one, capped at `cap`
+/// (two passes of the 3-4 chamfer metric, within 8 % of the Euclidean distance). All `cap`
+/// when nothing is inside.
+fn distance_transform(inside: &[bool], w: usize, h: usize, cap: f32) -> Vec<f32> {
+    let big = cap.max(0.0);
+    let mut d: Vec<f32> = inside.iter().map(|&b| if b { 0.0 } else { big }).collect();
+    if !inside.iter().any(|&b| b) {
+        return d;
+    }
+    let (a, b) = (1.0f32, std::f32::consts::SQRT_2);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x > 0 {
+                v = v.min(d[i - 1] + a);
+            }
+            if y > 0 {
+                v = v.min(d[i - w] + a);
+                if x > 0 {
+                    v = v.min(d[i - w - 1] + b);
+                }
+                if x + 1 < w {
+                    v = v.min(d[i - w + 1] + b);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x + 1 < w {
+                v = v.min(d[i + 1] + a);
+            }
+            if y + 1 < h {
+                v = v.min(d[i + w] + a);
+                if x + 1 < w {
+                    v = v.min(d[i + w + 1] + b);
+                }
+                if x > 0 {
+                    v = v.min(d[i + w - 1] + b);
+                }
+            }
+            d[i] = v.min(big);
+        }
+    }
+    d
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use workcell_render::CpuRenderer;
+
+    /// The catalogue's human at the origin, seen from about 2.5 m in front, 128x128, through
+    /// a 25-degree lens pointed near the arm.
+    fn setup() -> (ArticulatedArm, Camera) {
+        let human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+        let arm = ArticulatedArm::new(&human, &Pose::IDENTITY).expect("arm");
+        let camera = Camera::look_at(
+            [2.5, -0.9, 0.7],
+            [0.1, -0.2, 0.3],
+            [0.0, 0.0, 1.0],
+            128,
+            128,
+            25.0,
+        )
+        .expect("camera");
+        (arm, camera)
+    }
+
+    /// The class image of the arm at `q`: each part's render, nearer parts over farther
+    /// ones by the order of their centres' depth.
+    fn classes(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> Vec<u8> {
+        let poses = arm.part_poses(q, &camera.X_WC).expect("poses");
+        let mut order: Vec<usize> = (0..3).collect();
+        order.sort_by(|&a, &b| poses[b].translation.z.total_cmp(&poses[a].translation.z));
+        let mut out = vec![Class::Background as u8; (camera.width * camera.height) as usize];
+        let mut renderer = CpuRenderer::new();
+        let mut batch = MaskBatch::new();
+        for p in order {
+            let Some(mesh) = &arm.meshes[p] else { continue };
+            renderer
+                .render_masks(mesh, camera, &[poses[p]], &mut batch)
+                .expect("render");
+            for (o, &m) in out.iter_mut().zip(batch.mask(0)) {
+                if m != 0 {
+                    *o = Class::of_part(FITTED_PARTS[p]) as u8;
+                }
+            }
+        }
+        out
+    }
+
+    fn distance_cm(arm: &ArticulatedArm, camera: &Camera, a: &[f64], b: &[f64]) -> f64 {
+        let pa = arm.part_poses(a, &camera.X_WC).expect("a")[1];
+        let pb = arm.part_poses(b, &camera.X_WC).expect("b")[1];
+        let m = arm.forearm();
+        100.0 * (m.centre(&pa) - m.centre(&pb)).length()
+    }
+
+    #[test]
+    fn distance_transform_of_one_pixel_is_the_chamfer_distance() {
+        let (w, h) = (9, 7);
+        let mut inside = vec![false; w * h];
+        inside[3 * w + 4] = true;
+        let d = distance_transform(&inside, w, h, 100.0);
+        assert_eq!(d[3 * w + 4], 0.0);
+        assert_eq!(d[3 * w + 7], 3.0); // three pixels right
+        assert!((d[0] - (3.0 * std::f32::consts::SQRT_2 + 1.0)).abs() < 1e-5); // (0,0): 4 left, 3 up
+        let capped = distance_transform(&inside, w, h, 2.0);
+        assert_eq!(capped[0], 2.0);
+        assert!(
+            distance_transform(&vec![false; w * h], w, h, 5.0)
+                .iter()
+                .all(|&v| v == 5.0)
+        );
+    }
+
+    #[test]
+    fn masks_from_classes_and_from_probabilities_agree() {
+        let classes = [0u8, 3, 4, 5, 1, 2];
+        let m = ArmMasks::from_classes(&classes, 3, 2).expect("masks");
+        assert_eq!(m.parts[0], vec![0.0, 1.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(m.forearm(), &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]);
+        // The robot and the torso are not background: they may hide the arm.
+        assert_eq!(m.background, vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let planes: Vec<(Class, Vec<f32>)> = [
+            Class::Robot,
+            Class::Torso,
+            Class::UpperArm,
+            Class::Forearm,
+            Class::Hand,
+        ]
+        .into_iter()
+        .map(|c| {
+            (
+                c,
+                classes
+                    .iter()
+                    .map(|&v| f32::from(u8::from(v == c as u8)))
+                    .collect(),
+            )
+        })
+        .collect();
+        let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
+        assert_eq!(ArmMasks::from_planes(3, 2, &refs).expect("planes"), m);
+        assert!(ArmMasks::from_classes(&classes, 4, 2).is_err());
+    }
+
+    /// The fit from the masks of a known configuration finds it again: globally on the
+    /// first frame, then tracking a moving arm.
+    #[test]
+    fn fits_the_arm_it_rendered() {
+        let (arm, camera) = setup();
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+        let path = |t: f64| vec![0.5 + 0.1 * t, 0.9 - 0.1 * t, 1.0 + 0.2 * t];
+        for k in 0..4 {
+            let truth = path(f64::from(k) * 0.3);
+            let masks =
+                ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
+            let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+            assert_eq!(fit.reacquired, k == 0);
+            let err = distance_cm(&arm, &camera, &fit.q, &truth);
+            assert!(
+                err < 1.5,
+                "frame {k}: {err:.2} cm, q {:?} vs {truth:?}",
+                fit.q
+            );
+            assert!(fit.gain > 0.9, "frame {k}: gain {}", fit.gain);
+        }
+    }
+
+    #[test]
+    fn bad_masks_are_no_pose_not_errors() {
+        let (arm, camera) = setup();
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm, ArmFitConfig::default());
+        let n = 128 * 128;
+        let empty = ArmMasks {
+            width: 128,
+            height: 128,
+            parts: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            background: vec![1.0; n],
+        };
+        assert_eq!(
+            fitter.fit(&camera, &empty).expect("runs"),
+            Err(NoPose::Empty)
+        );
+        let mut nan = empty.clone();
+        nan.parts[1][77] = f32::NAN;
+        assert_eq!(
+            fitter.fit(&camera, &nan).expect("runs"),
+            Err(NoPose::NotAProbability)
+        );
+        // A blob far from anything the arm can reach: no configuration explains it.
+        let mut far = empty.clone();
+        for y in 0..6 {
+            for x in 0..6 {
+                far.parts[1][y * 128 + x] = 1.0;
+                far.background[y * 128 + x] = 0.0;
+            }
+        }
+        assert_eq!(
+            fitter.fit(&camera, &far).expect("runs"),
+            Err(NoPose::PoorFit)
+        );
+        let small = ArmMasks { width: 64, ..empty };
+        assert!(fitter.fit(&camera, &small).is_err());
+    }
+}
