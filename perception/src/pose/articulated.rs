@@ -32,14 +32,24 @@
 //! configurations one step along each joint either way (a central-difference gradient and
 //! each joint's curvature), then three points along the gradient and a few random probes;
 //! the best one is taken and the step grows by 1.5, or halves when none is better, down to
-//! [`ArmFitConfig::min_step_rad`]. Without a track, or when the climb's gain ends below
-//! [`ArmFitConfig::min_gain`], a global search renders a grid over the joints' ranges,
-//! climbs the best few distinct cells and keeps the best climb ([`ArmFit::reacquired`]).
+//! [`ArmFitConfig::min_step_rad`]. Without a track, or when every tracked hypothesis ends
+//! below [`ArmFitConfig::min_gain`], a global search renders a grid over the joints' ranges,
+//! climbs the best few distinct cells ([`ArmFit::reacquired`]).
 //!
-//! **Uncertainty.** Per joint, the displacement over which the score's curvature costs two
-//! mask pixels; mapped through the forearm's kinematics to metres at its centre and its far
-//! end; and the spread of the global search's climbs that end within 0.05 of the best gain.
-//! [`ArmFit::uncertainty_m`] is the larger, scaled by [`ArmFitConfig::uncertainty_scale`].
+//! **Hypotheses.** Far from the camera a silhouette is nearly an orthographic projection, and
+//! the arm mirrored through the plane across the line of sight that holds the shoulder
+//! renders the same masks: the masks cannot tell the two apart. The fit keeps every climb
+//! within [`ArmFitConfig::ambiguity_gain`] of the best that puts the forearm elsewhere (up
+//! to [`ArmFitConfig::hypotheses`]) and tracks each on; a hypothesis that stops explaining
+//! the masks as well as the best is dropped.
+//!
+//! **Uncertainty.** The joints' covariance from the score's Hessian at the fit (the
+//! displacements that cost two mask pixels, correlated joints included: far away, moving the
+//! arm along the line of sight takes both shoulder angles), mapped through the forearm's
+//! kinematics to metres at its centre and its far end (scaled by
+//! [`ArmFitConfig::uncertainty_scale`]); and the farthest the surviving
+//! hypotheses put the forearm's centre or wrist from the best's. [`ArmFit::uncertainty_m`]
+//! is the larger.
 
 use std::sync::Arc;
 
@@ -61,9 +71,9 @@ pub const FITTED_PARTS: [HumanPart; 3] = HumanPart::ARM;
 pub struct ArmFitConfig {
     /// A fit whose gain is below this is no pose (and ends a track). Default 0.3.
     pub min_gain: f64,
-    /// Grid points per joint in the global search. Default 8.
+    /// Grid points per joint in the global search. Default 12.
     pub grid: usize,
-    /// Grid cells climbed by the global search. Default 4.
+    /// Grid cells climbed by the global search. Default 10.
     pub refine: usize,
     /// Climb iterations at most. Default 40.
     pub max_iterations: usize,
@@ -86,7 +96,17 @@ pub struct ArmFitConfig {
     pub supersample: u32,
     /// Mask values above this are a part's support. Default 0.5.
     pub threshold: f32,
-    /// The reported uncertainty is the measured one times this. Default 1.
+    /// Hypotheses tracked at most: the best fit and those within `ambiguity_gain` of its
+    /// gain that put the forearm elsewhere. Default 3.
+    pub hypotheses: usize,
+    /// A hypothesis this far below the best gain is dropped. Default 0.05.
+    pub ambiguity_gain: f64,
+    /// Hypotheses whose forearm centres and wrists are all within this are one, m.
+    /// Default 0.03.
+    pub distinct_m: f64,
+    /// Step of the central differences of the score's Hessian at the fit, rad. Default 0.02.
+    pub hessian_step_rad: f64,
+    /// The curvature part of the uncertainty is scaled by this. Default 1.
     pub uncertainty_scale: f64,
 }
 
@@ -94,8 +114,8 @@ impl Default for ArmFitConfig {
     fn default() -> Self {
         Self {
             min_gain: 0.3,
-            grid: 8,
-            refine: 4,
+            grid: 12,
+            refine: 10,
             max_iterations: 40,
             initial_step_rad: 0.05,
             min_step_rad: 0.002,
@@ -106,6 +126,10 @@ impl Default for ArmFitConfig {
             prior_weight: 0.01,
             supersample: 2,
             threshold: 0.5,
+            hypotheses: 3,
+            ambiguity_gain: 0.05,
+            distinct_m: 0.03,
+            hessian_step_rad: 0.02,
             uncertainty_scale: 1.0,
         }
     }
@@ -314,9 +338,9 @@ pub struct ArmFit {
     pub gain: f64,
     /// Each part's share of [`ArmFit::gain`].
     pub part_gain: [f64; 3],
-    /// Per joint, the displacement that costs two mask pixels, rad.
+    /// Per joint, the spread of its position (the covariance's diagonal), rad.
     pub sigma_q: Vec<f64>,
-    /// Spread of the global search's surviving climbs at the forearm, m (0 when tracking).
+    /// The farthest the other surviving hypotheses put the forearm's centre or wrist, m.
     pub spread_m: f64,
     /// The radius to inflate the forearm by, m.
     pub uncertainty_m: f64,
@@ -363,8 +387,6 @@ struct Score {
 struct Climb {
     q: Vec<f64>,
     score: Score,
-    /// The score's second derivative along each joint at the end.
-    curvature: Vec<f64>,
 }
 
 /// Articulated render-and-compare of the human's arm, tracking it frame to frame.
@@ -372,8 +394,8 @@ pub struct ArmFitter<R: Renderer> {
     renderer: R,
     arm: ArticulatedArm,
     config: ArmFitConfig,
-    /// The last fits, oldest first (at most two).
-    history: Vec<Vec<f64>>,
+    /// The hypotheses tracked, best first: each its last fits, oldest first (at most two).
+    tracks: Vec<Vec<Vec<f64>>>,
     batch: MaskBatch,
     poses: Vec<Pose>,
     renders: usize,
@@ -387,7 +409,7 @@ impl<R: Renderer> ArmFitter<R> {
             renderer,
             arm,
             config,
-            history: Vec::new(),
+            tracks: Vec::new(),
             batch: MaskBatch::new(),
             poses: Vec::new(),
             renders: 0,
@@ -402,12 +424,12 @@ impl<R: Renderer> ArmFitter<R> {
 
     /// Forgets the track: the next frame searches globally.
     pub fn reset(&mut self) {
-        self.history.clear();
+        self.tracks.clear();
     }
 
     /// Tracks from `q` on the next frame (as if it had been the last fit).
     pub fn set_prior(&mut self, q: &[f64]) {
-        self.history = vec![q.to_vec()];
+        self.tracks = vec![vec![q.to_vec()]];
     }
 
     /// The arm in `masks`, seen by `camera` (the masks' size; its pose in the world is
@@ -432,14 +454,8 @@ impl<R: Renderer> ArmFitter<R> {
         self.renders = 0;
         self.rng = ChaCha8Rng::seed_from_u64(0x4152_4d46); // "ARMF"
         let outcome = self.fit_inner(camera, masks);
-        match &outcome {
-            Ok(Ok(fit)) => {
-                self.history.push(fit.q.clone());
-                if self.history.len() > 2 {
-                    self.history.remove(0);
-                }
-            }
-            _ => self.history.clear(),
+        if !matches!(outcome, Ok(Ok(_))) {
+            self.tracks.clear();
         }
         outcome
     }
@@ -453,62 +469,80 @@ impl<R: Renderer> ArmFitter<R> {
             return Ok(Err(NoPose::Empty));
         };
         let c = self.config.clone();
-        let mut found = None;
-        if let Some(last) = self.history.last().cloned() {
+        let mut climbs: Vec<(Climb, Vec<Vec<f64>>)> = Vec::new();
+        for track in self.tracks.clone() {
+            let Some(last) = track.last() else { continue };
             let mut predicted = last.clone();
-            if let [before, _] = self.history.as_slice() {
-                for ((p, l), b) in predicted.iter_mut().zip(&last).zip(before) {
+            if let [before, _] = track.as_slice() {
+                for ((p, l), b) in predicted.iter_mut().zip(last).zip(before) {
                     *p = 2.0 * l - b;
                 }
             }
             self.arm.clamp(&mut predicted);
             let climb = self.climb(&target, predicted.clone(), Some(&predicted))?;
             if climb.score.gain >= c.min_gain {
-                found = Some((climb, 0.0, false));
+                climbs.push((climb, track));
             }
         }
-        if found.is_none() {
-            let climbs = self.search(&target)?;
-            let Some(best) = climbs
-                .iter()
-                .max_by(|a, b| a.score.objective.total_cmp(&b.score.objective))
-            else {
-                return Ok(Err(NoPose::PoorFit));
-            };
-            if best.score.gain < c.min_gain {
-                return Ok(Err(NoPose::PoorFit));
-            }
-            let at = |q: &[f64]| self.forearm_points(q, &target.X_WC);
-            let best_points = at(&best.q)?;
-            let mut spread = 0.0f64;
-            for other in climbs
-                .iter()
-                .filter(|o| o.score.gain >= best.score.gain - 0.05)
-            {
-                let points = at(&other.q)?;
-                for (a, b) in points.iter().zip(&best_points) {
-                    spread = spread.max((*a - *b).length());
-                }
-            }
-            let best = climbs
+        let reacquired = climbs.is_empty();
+        if reacquired {
+            climbs = self
+                .search(&target)?
                 .into_iter()
-                .max_by(|a, b| a.score.objective.total_cmp(&b.score.objective))
-                .ok_or(PerceptionError::Input {
-                    message: "no climb".into(),
-                })?;
-            found = Some((best, spread, true));
+                .filter(|climb| climb.score.gain >= c.min_gain)
+                .map(|climb| (climb, Vec::new()))
+                .collect();
         }
-        let Some((climb, spread_m, reacquired)) = found else {
+        climbs.sort_by(|a, b| b.0.score.objective.total_cmp(&a.0.score.objective));
+        let Some(best_gain) = climbs.first().map(|(climb, _)| climb.score.gain) else {
             return Ok(Err(NoPose::PoorFit));
         };
-        // Two mask pixels' worth of score, over the curvature along each joint.
-        let tol = 2.0 / target.mass.max(1.0);
-        let sigma_q: Vec<f64> = climb
-            .curvature
+        // The hypotheses that fit nearly as well and put the forearm elsewhere: tracked on,
+        // and their distance from the best is the ambiguity the masks leave.
+        let mut kept: Vec<(Climb, Vec<Vec<f64>>, [Vector; 2])> = Vec::new();
+        for (climb, track) in climbs {
+            if kept.len() >= c.hypotheses.max(1) || climb.score.gain < best_gain - c.ambiguity_gain
+            {
+                continue;
+            }
+            let points = self.forearm_points(&climb.q, &target.X_WC)?;
+            let distinct = kept.iter().all(|(_, _, p)| {
+                p.iter()
+                    .zip(&points)
+                    .any(|(a, b)| (*a - *b).length() > c.distinct_m)
+            });
+            if distinct {
+                kept.push((climb, track, points));
+            }
+        }
+        let spread_m = kept
             .iter()
-            .map(|&k| (2.0 * tol / (-k).max(1e-9)).sqrt().min(0.5))
+            .flat_map(|(_, _, p)| p.iter().zip(&kept[0].2).map(|(a, b)| (*a - *b).length()))
+            .fold(0.0, f64::max);
+        self.tracks = kept
+            .iter()
+            .map(|(climb, track, _)| {
+                let mut t = track.clone();
+                t.push(climb.q.clone());
+                if t.len() > 2 {
+                    t.remove(0);
+                }
+                t
+            })
             .collect();
-        let sigma_m = self.position_sigma(&climb.q, &sigma_q, &target.X_WC)?;
+        let Some((climb, _, _)) = kept.into_iter().next() else {
+            return Ok(Err(NoPose::PoorFit));
+        };
+        let (q, covariance) = self.refine(&target, climb.q.clone())?;
+        let plain = self.score(&target, std::slice::from_ref(&q), None)?[0];
+        if let Some(last) = self.tracks.first_mut().and_then(|t| t.last_mut()) {
+            last.clone_from(&q);
+        }
+        let climb = Climb { q, score: plain };
+        let sigma_q: Vec<f64> = (0..covariance.len())
+            .map(|i| covariance[i][i].max(0.0).sqrt())
+            .collect();
+        let sigma_m = self.position_sigma(&climb.q, &covariance, &target.X_WC)?;
         let X_CL = self.arm.part_poses(&climb.q, &target.X_WC)?;
         let forearm = self.arm.forearm.mesh.clone();
         self.renderer
@@ -522,10 +556,23 @@ impl<R: Renderer> ArmFitter<R> {
             part_gain: climb.score.part_gain,
             sigma_q,
             spread_m,
-            uncertainty_m: c.uncertainty_scale * sigma_m.max(spread_m),
+            uncertainty_m: (c.uncertainty_scale * sigma_m).max(spread_m),
             reacquired,
             renders: self.renders,
         }))
+    }
+
+    /// The gain of configuration `q` in `masks` (as [`ArmFit::gain`] scores a fit); `None`
+    /// when no part has support. What a perfect search would score: a fit below the truth's
+    /// gain is the search's failure, one above it the masks' ambiguity.
+    ///
+    /// # Errors
+    /// As [`ArmFitter::fit`]; `q` of the wrong length or not finite.
+    pub fn gain_at(&mut self, camera: &Camera, masks: &ArmMasks, q: &[f64]) -> Result<Option<f64>> {
+        let Some(target) = self.target(camera, masks)? else {
+            return Ok(None);
+        };
+        Ok(Some(self.score(&target, &[q.to_vec()], None)?[0].gain))
     }
 
     /// The forearm's centre and far end (the wrist) in the camera frame at `q`.
@@ -543,20 +590,138 @@ impl<R: Renderer> ArmFitter<R> {
         Ok([X.transform_point(m.centre_O), X.transform_point(end)])
     }
 
-    /// The position uncertainty of the forearm's centre and wrist, m: each joint's `sigma`
-    /// through the kinematics, combined in quadrature, the larger of the two points.
-    fn position_sigma(&self, q: &[f64], sigma_q: &[f64], X_WC: &Pose) -> Result<f64> {
-        let base = self.forearm_points(q, X_WC)?;
-        let mut var = [0.0f64; 2];
-        for (i, s) in sigma_q.iter().enumerate() {
-            let mut moved = q.to_vec();
-            moved[i] += s;
-            let p = self.forearm_points(&moved, X_WC)?;
-            for k in 0..2 {
-                var[k] += (p[k] - base[k]).length_squared();
+    /// The score near `q` as a quadratic: its value, gradient and negated Hessian from
+    /// central differences of [`ArmFitConfig::hessian_step_rad`] (the mixed terms from the
+    /// four diagonal neighbours), without the prior.
+    fn local_model(
+        &mut self,
+        target: &Target,
+        q: &[f64],
+    ) -> Result<(f64, Vec<f64>, Vec<Vec<f64>>)> {
+        let n = q.len();
+        let h = self.config.hessian_step_rad.max(1e-6);
+        let at = |d: &[(usize, f64)]| {
+            let mut v = q.to_vec();
+            for &(i, s) in d {
+                v[i] += s * h;
+            }
+            v
+        };
+        let mut qs = vec![q.to_vec()];
+        for i in 0..n {
+            qs.push(at(&[(i, 1.0)]));
+            qs.push(at(&[(i, -1.0)]));
+        }
+        for i in 0..n {
+            for j in i + 1..n {
+                for (a, b) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
+                    qs.push(at(&[(i, a), (j, b)]));
+                }
             }
         }
-        Ok(var[0].max(var[1]).sqrt())
+        let f: Vec<f64> = self
+            .score(target, &qs, None)?
+            .iter()
+            .map(|s| s.objective)
+            .collect();
+        let mut gradient = vec![0.0; n];
+        // -H: positive where the score falls away from q.
+        let mut neg = vec![vec![0.0; n]; n];
+        let mut k = 1 + 2 * n;
+        for i in 0..n {
+            gradient[i] = (f[1 + 2 * i] - f[2 + 2 * i]) / (2.0 * h);
+            neg[i][i] = -(f[1 + 2 * i] - 2.0 * f[0] + f[2 + 2 * i]) / (h * h);
+            for j in i + 1..n {
+                let v = -(f[k] - f[k + 1] - f[k + 2] + f[k + 3]) / (4.0 * h * h);
+                neg[i][j] = v;
+                neg[j][i] = v;
+                k += 4;
+            }
+        }
+        Ok((f[0], gradient, neg))
+    }
+
+    /// Newton steps on [`ArmFitter::local_model`] from `q` while they improve the score (at
+    /// most three): the climb's steps along the joints end early in a valley that runs
+    /// across them (far away, the shoulder's flexion and the elbow's trading places).
+    /// Returns the configuration and the joints' covariance there: two mask pixels' worth of
+    /// score over the Hessian, `2 tol (-H)^-1`, each principal direction's spread capped at
+    /// half a radian (a direction the masks do not constrain).
+    fn refine(&mut self, target: &Target, mut q: Vec<f64>) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+        let tol = 2.0 / target.mass.max(1.0);
+        let floor = 2.0 * tol / (0.5 * 0.5);
+        let n = q.len();
+        let inverse = |neg: Vec<Vec<f64>>| {
+            let (values, vectors) = symmetric_eigen(neg);
+            let mut inv = vec![vec![0.0; n]; n];
+            for (l, v) in values.iter().zip(&vectors) {
+                for i in 0..n {
+                    for j in 0..n {
+                        inv[i][j] += v[i] * v[j] / l.max(floor);
+                    }
+                }
+            }
+            inv
+        };
+        let (mut here, mut gradient, mut neg) = self.local_model(target, &q)?;
+        for _ in 0..3 {
+            let inv = inverse(neg.clone());
+            let step: Vec<f64> = (0..n)
+                .map(|i| (0..n).map(|j| inv[i][j] * gradient[j]).sum())
+                .collect();
+            let candidates: Vec<Vec<f64>> = [1.0, 0.5]
+                .iter()
+                .map(|t| {
+                    let mut v: Vec<f64> = q.iter().zip(&step).map(|(a, d)| a + t * d).collect();
+                    self.arm.clamp(&mut v);
+                    v
+                })
+                .collect();
+            let scores = self.score(target, &candidates, None)?;
+            let Some((k, best)) = scores
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.objective.total_cmp(&b.1.objective))
+            else {
+                break;
+            };
+            if best.objective <= here + 1e-12 {
+                break;
+            }
+            q = candidates[k].clone();
+            (here, gradient, neg) = self.local_model(target, &q)?;
+        }
+        let inv = inverse(neg);
+        Ok((
+            q,
+            inv.iter()
+                .map(|row| row.iter().map(|v| 2.0 * tol * v).collect())
+                .collect(),
+        ))
+    }
+
+    /// The position uncertainty of the forearm's centre and wrist, m: the joints'
+    /// covariance through the kinematics (the root of the trace of each point's covariance),
+    /// the larger of the two points.
+    fn position_sigma(&self, q: &[f64], cov: &[Vec<f64>], X_WC: &Pose) -> Result<f64> {
+        let base = self.forearm_points(q, X_WC)?;
+        let d = 1e-5;
+        let mut jac = Vec::with_capacity(q.len());
+        for i in 0..q.len() {
+            let mut moved = q.to_vec();
+            moved[i] += d;
+            let p = self.forearm_points(&moved, X_WC)?;
+            jac.push([(p[0] - base[0]) / d, (p[1] - base[1]) / d]);
+        }
+        let mut var = [0.0f64; 2];
+        for (i, ji) in jac.iter().enumerate() {
+            for (j, jj) in jac.iter().enumerate() {
+                for k in 0..2 {
+                    var[k] += cov[i][j] * ji[k].dot(jj[k]);
+                }
+            }
+        }
+        Ok(var[0].max(var[1]).max(0.0).sqrt())
     }
 
     /// The masks prepared for scoring, cropped to the parts' support grown by half its size
@@ -697,7 +862,6 @@ impl<R: Renderer> ArmFitter<R> {
         let mut q = start;
         let mut here = self.score(target, std::slice::from_ref(&q), prior)?[0];
         let mut step = c.initial_step_rad;
-        let mut curvature = vec![0.0; dof];
         for _ in 0..c.max_iterations {
             let mut candidates = Vec::with_capacity(2 * dof);
             for i in 0..dof {
@@ -712,7 +876,6 @@ impl<R: Renderer> ArmFitter<R> {
             for i in 0..dof {
                 let (plus, minus) = (compass[2 * i].objective, compass[2 * i + 1].objective);
                 gradient[i] = (plus - minus) / (2.0 * step);
-                curvature[i] = (plus - 2.0 * here.objective + minus) / (step * step);
             }
             let norm = gradient.iter().map(|g| g * g).sum::<f64>().sqrt();
             let mut more = Vec::new();
@@ -771,7 +934,6 @@ impl<R: Renderer> ArmFitter<R> {
                 objective: here.objective,
                 ..plain
             },
-            curvature,
         })
     }
 
@@ -819,6 +981,50 @@ impl<R: Renderer> ArmFitter<R> {
             .map(|s| self.climb(target, s, None))
             .collect()
     }
+}
+
+/// Eigenvalues and unit eigenvectors of a small symmetric matrix (cyclic Jacobi rotations).
+fn symmetric_eigen(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let n = a.len();
+    let mut v: Vec<Vec<f64>> = (0..n)
+        .map(|i| (0..n).map(|j| f64::from(u8::from(i == j))).collect())
+        .collect();
+    for _ in 0..50 {
+        let off: f64 = (0..n)
+            .flat_map(|i| (0..n).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| a[i][j] * a[i][j])
+            .sum();
+        if off < 1e-30 {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                if a[p][q].abs() < 1e-300 {
+                    continue;
+                }
+                let theta = 0.5 * (2.0 * a[p][q]).atan2(a[q][q] - a[p][p]);
+                let (s, c) = theta.sin_cos();
+                for k in 0..n {
+                    let (akp, akq) = (a[k][p], a[k][q]);
+                    a[k][p] = c * akp - s * akq;
+                    a[k][q] = s * akp + c * akq;
+                }
+                for k in 0..n {
+                    let (apk, aqk) = (a[p][k], a[q][k]);
+                    a[p][k] = c * apk - s * aqk;
+                    a[q][k] = s * apk + c * aqk;
+                }
+                for row in &mut v {
+                    let (vkp, vkq) = (row[p], row[q]);
+                    row[p] = c * vkp - s * vkq;
+                    row[q] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+    let values = (0..n).map(|i| a[i][i]).collect();
+    let vectors = (0..n).map(|j| (0..n).map(|i| v[i][j]).collect()).collect();
+    (values, vectors)
 }
 
 /// Distances in pixels from each pixel to the nearest `inside` one, capped at `cap`
@@ -942,6 +1148,38 @@ mod tests {
         );
     }
 
+    /// A v = lambda v for each pair, on a matrix with known eigenvalues (1, 2, 4: the
+    /// rotation of diag(1, 2, 4) by an orthonormal basis).
+    #[test]
+    fn eigenpairs_of_a_symmetric_matrix() {
+        let basis = [
+            [1.0 / 3f64.sqrt(); 3],
+            [1.0 / 2f64.sqrt(), -1.0 / 2f64.sqrt(), 0.0],
+            [1.0 / 6f64.sqrt(), 1.0 / 6f64.sqrt(), -2.0 / 6f64.sqrt()],
+        ];
+        let lambda = [1.0, 2.0, 4.0];
+        let a: Vec<Vec<f64>> = (0..3)
+            .map(|i| {
+                (0..3)
+                    .map(|j| (0..3).map(|k| lambda[k] * basis[k][i] * basis[k][j]).sum())
+                    .collect()
+            })
+            .collect();
+        let (values, vectors) = symmetric_eigen(a.clone());
+        let mut sorted = values.clone();
+        sorted.sort_by(f64::total_cmp);
+        for (v, l) in sorted.iter().zip(lambda) {
+            assert!((v - l).abs() < 1e-12, "{values:?}");
+        }
+        for (l, v) in values.iter().zip(&vectors) {
+            for i in 0..3 {
+                let av: f64 = (0..3).map(|j| a[i][j] * v[j]).sum();
+                assert!((av - l * v[i]).abs() < 1e-12);
+            }
+            assert!((v.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-12);
+        }
+    }
+
     #[test]
     fn masks_from_classes_and_from_probabilities_agree() {
         let classes = [0u8, 3, 4, 5, 1, 2];
@@ -993,6 +1231,42 @@ mod tests {
                 fit.q
             );
             assert!(fit.gain > 0.9, "frame {k}: gain {}", fit.gain);
+        }
+    }
+
+    /// Far away the masks of the arm and of its mirror image are nearly the same: whichever
+    /// the fit picks, its uncertainty reaches the truth.
+    #[test]
+    fn far_away_the_uncertainty_covers_the_mirror() {
+        let (arm, _) = setup();
+        let camera = Camera::look_at(
+            [8.0, -2.5, 1.5],
+            [0.1, -0.2, 0.3],
+            [0.0, 0.0, 1.0],
+            128,
+            128,
+            6.0,
+        )
+        .expect("camera");
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+        for truth in [
+            vec![0.4, 0.8, 1.2],
+            vec![1.0, 0.3, 0.6],
+            vec![0.2, 1.4, 0.4],
+        ] {
+            fitter.reset();
+            let masks =
+                ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
+            let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+            let err = distance_cm(&arm, &camera, &fit.q, &truth);
+            let truth_gain = fitter.gain_at(&camera, &masks, &truth).expect("gain");
+            assert!(
+                err < 2.0 || 100.0 * fit.uncertainty_m >= err,
+                "{truth:?}: {err:.1} cm off, uncertainty {:.1} cm; q {:?}, gain {:.4} (truth's {truth_gain:?})",
+                100.0 * fit.uncertainty_m,
+                fit.q,
+                fit.gain
+            );
         }
     }
 

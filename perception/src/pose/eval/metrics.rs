@@ -92,6 +92,8 @@ pub struct FrameResult {
     /// Time of the mask source (the network), ms.
     pub mask_ms: f64,
     pub renders: usize,
+    /// The articulated fit's gain at the true joint positions (NaN for the paper's method).
+    pub truth_gain: f64,
 }
 
 impl FrameResult {

@@ -147,12 +147,18 @@ pub fn evaluate_pose(
             let labels = &seq.labels[t];
             let camera = Camera::from(&labels.camera);
             let t0 = Instant::now();
+            let mut truth_gain = f64::NAN;
             let (found, mask_ms, pose_ms) = if let Some(fitter) = &mut fitter {
                 let masks = source.arm(&seq, t)?;
                 let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
                 let t1 = Instant::now();
                 let outcome = fitter.fit(&camera, &masks)?;
                 let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
+                if labels.human_q.len() == fitter.arm().dof() {
+                    truth_gain = fitter
+                        .gain_at(&camera, &masks, &labels.human_q)?
+                        .unwrap_or(f64::NAN);
+                }
                 let found = outcome.map(|fit| Found {
                     X_CO: fit.X_CO(),
                     reacquired: fit.reacquired,
@@ -218,6 +224,7 @@ pub fn evaluate_pose(
                 pose_ms,
                 mask_ms,
                 renders,
+                truth_gain,
             });
         }
         progress(k + 1, entries.len());

@@ -343,7 +343,7 @@ impl PoseEvaluation {
     #[must_use]
     pub fn to_csv(&self) -> String {
         let mut csv = String::from(
-            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm\n",
+            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm,truth_gain\n",
         );
         for f in &self.frames {
             let (no_pose, e) = match &f.outcome {
@@ -353,7 +353,7 @@ impl PoseEvaluation {
             let v = |g: fn(&PoseError) -> f64| e.map_or(String::new(), |e| format!("{:.4}", g(e)));
             let _ = writeln!(
                 csv,
-                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{}",
+                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{},{:.4}",
                 f.sequence,
                 f.frame,
                 f.distance_class,
@@ -375,7 +375,8 @@ impl PoseEvaluation {
                 f.mask_ms,
                 f.pose_ms,
                 f.renders,
-                v(|e| e.ends_cm)
+                v(|e| e.ends_cm),
+                f.truth_gain
             );
         }
         csv
