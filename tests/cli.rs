@@ -590,11 +590,18 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
 
     // The forearm's pose from the dataset's own masks and from the tiny network's: Table 2's
     // layout with the paper's numbers beside, the per-frame CSV and the distance plot.
-    for masks in ["gt", "procnet"] {
+    // The articulated fit (the default) on the true masks, the paper's method on the
+    // network's.
+    for (masks, method, says) in [
+        ("gt", "articulated", "articulated: the arm's joints fitted"),
+        ("procnet", "paper", "elbow anchored to the shoulder"),
+    ] {
         let pose_out = tmp.path().join(format!("pose-{masks}"));
         let pose = workcell(&[
             "eval",
             "pose",
+            "--method",
+            method,
             "--masks",
             masks,
             "--weights",
@@ -612,7 +619,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             md.contains("| short | light |") && md.contains("| 1.73 | 1.62 |"),
             "{md}"
         );
-        assert!(md.contains("elbow anchored to the shoulder"), "{md}");
+        assert!(md.contains(says) && md.contains("within the bound"), "{md}");
         for file in [
             "pose_eval.md",
             "pose_frames.csv",
@@ -622,8 +629,23 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             assert!(pose_out.join(file).exists(), "{masks}: {file} missing");
         }
         let csv = std::fs::read_to_string(pose_out.join("pose_frames.csv")).expect("csv");
-        assert!(csv.starts_with("sequence,frame,"), "{csv}");
+        assert!(
+            csv.starts_with("sequence,frame,")
+                && csv
+                    .lines()
+                    .next()
+                    .is_some_and(|h| h.ends_with(",ends_cm,truth_gain")),
+            "{csv}"
+        );
     }
+    refused(
+        &["eval", "pose", "--method", "pnp", "--dataset", data_s],
+        "articulated, paper",
+    );
+    refused(
+        &["eval", "pose", "--no-anchor", "--dataset", data_s],
+        "settings of --method paper",
+    );
     refused(
         &["eval", "pose", "--masks", "oracle", "--dataset", data_s],
         "gt, visible, procnet, baseline",
