@@ -627,16 +627,23 @@ impl<R: Renderer> ArmFitter<R> {
         let mut gradient = vec![0.0; n];
         // -H: positive where the score falls away from q.
         let mut neg = vec![vec![0.0; n]; n];
+        let mut mixed = Vec::new();
         let mut k = 1 + 2 * n;
         for i in 0..n {
             gradient[i] = (f[1 + 2 * i] - f[2 + 2 * i]) / (2.0 * h);
             neg[i][i] = -(f[1 + 2 * i] - 2.0 * f[0] + f[2 + 2 * i]) / (h * h);
             for j in i + 1..n {
-                let v = -(f[k] - f[k + 1] - f[k + 2] + f[k + 3]) / (4.0 * h * h);
-                neg[i][j] = v;
-                neg[j][i] = v;
+                mixed.push((
+                    i,
+                    j,
+                    -(f[k] - f[k + 1] - f[k + 2] + f[k + 3]) / (4.0 * h * h),
+                ));
                 k += 4;
             }
+        }
+        for (i, j, v) in mixed {
+            neg[i][j] = v;
+            neg[j][i] = v;
         }
         Ok((f[0], gradient, neg))
     }
@@ -1004,16 +1011,22 @@ fn symmetric_eigen(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
                 }
                 let theta = 0.5 * (2.0 * a[p][q]).atan2(a[q][q] - a[p][p]);
                 let (s, c) = theta.sin_cos();
-                for k in 0..n {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
+                for row in &mut a {
+                    let (akp, akq) = (row[p], row[q]);
+                    row[p] = c * akp - s * akq;
+                    row[q] = s * akp + c * akq;
                 }
-                for k in 0..n {
-                    let (apk, aqk) = (a[p][k], a[q][k]);
-                    a[p][k] = c * apk - s * aqk;
-                    a[q][k] = s * apk + c * aqk;
-                }
+                let (row_p, row_q) = (a[p].clone(), a[q].clone());
+                a[p] = row_p
+                    .iter()
+                    .zip(&row_q)
+                    .map(|(x, y)| c * x - s * y)
+                    .collect();
+                a[q] = row_p
+                    .iter()
+                    .zip(&row_q)
+                    .map(|(x, y)| s * x + c * y)
+                    .collect();
                 for row in &mut v {
                     let (vkp, vkq) = (row[p], row[q]);
                     row[p] = c * vkp - s * vkq;
