@@ -590,16 +590,27 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
 
     // The forearm's pose from the dataset's own masks and from the tiny network's: Table 2's
     // layout with the paper's numbers beside, the per-frame CSV and the distance plot.
-    // The articulated fit (the default) on the true masks, the paper's method on the
-    // network's.
-    for (masks, method, says) in [
-        ("gt", "articulated", "articulated: the arm's joints fitted"),
-        ("procnet", "paper", "elbow anchored to the shoulder"),
+    // The articulated fit with the depth images too (RGB-D), the paper's method on the
+    // network's masks.
+    for (masks, method, depth, says) in [
+        (
+            "gt",
+            "articulated",
+            "--depth",
+            "and the depth image (RGB-D)",
+        ),
+        (
+            "procnet",
+            "paper",
+            "--no-roi",
+            "elbow anchored to the shoulder",
+        ),
     ] {
         let pose_out = tmp.path().join(format!("pose-{masks}"));
         let pose = workcell(&[
             "eval",
             "pose",
+            depth,
             "--method",
             method,
             "--masks",
@@ -645,6 +656,18 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     refused(
         &["eval", "pose", "--no-anchor", "--dataset", data_s],
         "settings of --method paper",
+    );
+    refused(
+        &[
+            "eval",
+            "pose",
+            "--method",
+            "paper",
+            "--depth",
+            "--dataset",
+            data_s,
+        ],
+        "setting of --method articulated",
     );
     refused(
         &["eval", "pose", "--masks", "oracle", "--dataset", data_s],

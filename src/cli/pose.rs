@@ -44,6 +44,10 @@ pub struct EvalPoseArgs {
     /// by the paper's method. Both report the forearm's pose in the camera frame.
     #[arg(long, default_value = "articulated")]
     pub method: String,
+    /// With --method articulated: the dataset's depth images join the score (RGB-D; a camera
+    /// with a depth channel).
+    #[arg(long)]
+    pub depth: bool,
     /// With --method paper: search over the whole image instead of a region of interest
     /// around the mask.
     #[arg(long)]
@@ -123,7 +127,15 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                      fit renders the region the dataset stores and hangs the arm from its shoulder"
                 );
             }
-            PoseMethod::Articulated(ArmFitConfig::default())
+            PoseMethod::Articulated {
+                config: ArmFitConfig::default(),
+                depth: args.depth,
+            }
+        }
+        "paper" if args.depth => {
+            anyhow::bail!(
+                "--depth is a setting of --method articulated; the paper's method reads masks alone"
+            )
         }
         "paper" => PoseMethod::Paper {
             anchored: !args.no_anchor,

@@ -108,6 +108,13 @@ pub struct ArmFitConfig {
     pub hessian_step_rad: f64,
     /// The curvature part of the uncertainty is scaled by this. Default 1.
     pub uncertainty_scale: f64,
+    /// With a depth image: the spread of a part's seen surface about its model's, m.
+    /// Default 0.03.
+    pub depth_sigma_m: f64,
+    /// With a depth image: the score a part's axis points lose at one `depth_sigma_m` of
+    /// disagreement (mean over the points that land on their part's mask; at most 9 sigma
+    /// squared each). Default 0.05.
+    pub depth_weight: f64,
 }
 
 impl Default for ArmFitConfig {
@@ -131,6 +138,8 @@ impl Default for ArmFitConfig {
             distinct_m: 0.03,
             hessian_step_rad: 0.02,
             uncertainty_scale: 1.0,
+            depth_sigma_m: 0.03,
+            depth_weight: 0.05,
         }
     }
 }
@@ -142,6 +151,8 @@ pub struct ArticulatedArm {
     X_WH: Pose,
     links: [LinkId; 3],
     meshes: [Option<Arc<RenderMesh>>; 3],
+    /// Each part's box axis and size, for the depth term.
+    models: [Option<RigidModel>; 3],
     limits: Vec<[f64; 2]>,
     forearm: RigidModel,
 }
@@ -187,11 +198,17 @@ impl ArticulatedArm {
                 if lo <= hi { [lo, hi] } else { [0.0, 0.0] }
             })
             .collect();
+        let models = [0, 1, 2].map(|p| {
+            meshes[p]
+                .as_ref()
+                .and_then(|m| RigidModel::new(m.clone()).ok())
+        });
         Ok(Self {
             human: human.clone(),
             X_WH: *X_WH,
             links,
             meshes,
+            models,
             limits,
             forearm: RigidModel::new(forearm)?,
         })
@@ -251,6 +268,9 @@ pub struct ArmMasks {
     pub parts: [Vec<f32>; 3],
     /// That a pixel shows nothing that could hide the arm.
     pub background: Vec<f32>,
+    /// A depth camera's image: the camera-frame z of the surface each pixel shows, m (0 or
+    /// not finite where it has none). With it the depth agreement joins the score.
+    pub depth_m: Option<Vec<f32>>,
 }
 
 impl ArmMasks {
@@ -271,6 +291,7 @@ impl ArmMasks {
             height,
             parts: FITTED_PARTS.map(|p| plane(Class::of_part(p))),
             background: plane(Class::Background),
+            depth_m: None,
         })
     }
 
@@ -302,6 +323,7 @@ impl ArmMasks {
             height,
             parts: FITTED_PARTS.map(part),
             background,
+            depth_m: None,
         })
     }
 
@@ -373,6 +395,11 @@ struct Target {
     signed: [Vec<f32>; 3],
     /// Mask pixels: the mass, all parts together.
     mass: f64,
+    /// The crop's camera (not supersampled), and per part where its mask is; the depth in
+    /// the crop when there is one.
+    camera: Camera,
+    inside: [Vec<bool>; 3],
+    depth_m: Option<Vec<f32>>,
 }
 
 /// A configuration's score.
@@ -770,9 +797,10 @@ impl<R: Renderer> ArmFitter<R> {
                 .map(|(&m, &b)| (m - b) * inv)
                 .collect()
         });
+        let inside: [Vec<bool>; 3] =
+            std::array::from_fn(|p| parts[p].iter().map(|&v| v > c.threshold).collect());
         let value: [Vec<f32>; 3] = std::array::from_fn(|p| {
-            let inside: Vec<bool> = parts[p].iter().map(|&v| v > c.threshold).collect();
-            let d = distance_transform(&inside, rw, rh, c.distance_cap_px);
+            let d = distance_transform(&inside[p], rw, rh, c.distance_cap_px);
             signed[p]
                 .iter()
                 .zip(&d)
@@ -787,6 +815,11 @@ impl<R: Renderer> ArmFitter<R> {
             ..*camera
         };
         let ss = c.supersample.max(1);
+        let depth_m = masks
+            .depth_m
+            .as_ref()
+            .filter(|d| d.len() == w * h)
+            .map(|d| crop(d));
         Ok(Some(Target {
             fine: roi.resized(roi.width * ss, roi.height * ss)?,
             X_WC: camera.X_WC,
@@ -795,6 +828,9 @@ impl<R: Renderer> ArmFitter<R> {
             value,
             signed,
             mass,
+            camera: roi,
+            inside,
+            depth_m,
         }))
     }
 
@@ -847,6 +883,11 @@ impl<R: Renderer> ArmFitter<R> {
                 score.part_gain[p] = signed;
             }
         }
+        if let Some(depth) = &target.depth_m {
+            for (score, poses) in scores.iter_mut().zip(&all) {
+                score.objective -= self.depth_cost(target, depth, poses);
+            }
+        }
         if let Some(centre) = prior {
             let c = &self.config;
             let dof = centre.len().max(1) as f64;
@@ -860,6 +901,44 @@ impl<R: Renderer> ArmFitter<R> {
             }
         }
         Ok(scores)
+    }
+
+    /// The depth disagreement of the parts at `poses`: per part, five points along its axis,
+    /// each moved towards the camera by the part's half width (the surface it shows); those
+    /// that land on their part's mask compare their depth with the image's, as
+    /// `min((dz / sigma)^2, 9)`; the mean over them, times [`ArmFitConfig::depth_weight`],
+    /// summed over the parts.
+    fn depth_cost(&self, target: &Target, depth: &[f32], poses: &[Pose; 3]) -> f64 {
+        let c = &self.config;
+        let sigma = c.depth_sigma_m.max(1e-4);
+        let (w, h) = (target.camera.width as usize, target.camera.height as usize);
+        let mut cost = 0.0;
+        for (p, model) in self.arm.models.iter().enumerate() {
+            let Some(model) = model else { continue };
+            let (mut sum, mut n) = (0.0, 0usize);
+            for t in [-0.4, -0.2, 0.0, 0.2, 0.4] {
+                let p_C =
+                    poses[p].transform_point(model.centre_O + t * model.length_m * model.axis_O);
+                let Some([u, v]) = target.camera.project(p_C) else {
+                    continue;
+                };
+                if !(u >= 0.0 && v >= 0.0 && (u as usize) < w && (v as usize) < h) {
+                    continue;
+                }
+                let i = v as usize * w + u as usize;
+                let z = f64::from(depth[i]);
+                if !(target.inside[p][i] && z.is_finite() && z > 0.0) {
+                    continue;
+                }
+                let surface = p_C.z - model.half_width_m;
+                sum += ((z - surface) / sigma).powi(2).min(9.0);
+                n += 1;
+            }
+            if n > 0 {
+                cost += c.depth_weight * sum / n as f64;
+            }
+        }
+        cost
     }
 
     /// Gradient ascent from `start` (see the module docs).
@@ -1113,27 +1192,30 @@ mod tests {
         (arm, camera)
     }
 
-    /// The class image of the arm at `q`: each part's render, nearer parts over farther
-    /// ones by the order of their centres' depth.
-    fn classes(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> Vec<u8> {
+    /// The class image and the depth of the arm at `q`, its three parts rendered together
+    /// (z-buffered).
+    fn observe(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> (Vec<u8>, Vec<f32>) {
         let poses = arm.part_poses(q, &camera.X_WC).expect("poses");
-        let mut order: Vec<usize> = (0..3).collect();
-        order.sort_by(|&a, &b| poses[b].translation.z.total_cmp(&poses[a].translation.z));
-        let mut out = vec![Class::Background as u8; (camera.width * camera.height) as usize];
-        let mut renderer = CpuRenderer::new();
-        let mut batch = MaskBatch::new();
-        for p in order {
+        let mut scene = workcell_render::Scene::default();
+        for p in 0..3 {
             let Some(mesh) = &arm.meshes[p] else { continue };
-            renderer
-                .render_masks(mesh, camera, &[poses[p]], &mut batch)
-                .expect("render");
-            for (o, &m) in out.iter_mut().zip(batch.mask(0)) {
-                if m != 0 {
-                    *o = Class::of_part(FITTED_PARTS[p]) as u8;
-                }
-            }
+            scene.push(workcell_render::SceneObject {
+                name: FITTED_PARTS[p].name().into(),
+                class: Class::of_part(FITTED_PARTS[p]),
+                mesh: mesh.clone(),
+                texture: 0.0,
+                X_WO: camera.X_WC * poses[p],
+            });
         }
-        out
+        let mut frame = workcell_render::Frame::new();
+        CpuRenderer::new()
+            .render(&scene, camera, &mut frame)
+            .expect("render");
+        (frame.classes(&scene), frame.depth_m.clone())
+    }
+
+    fn classes(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> Vec<u8> {
+        observe(arm, camera, q).0
     }
 
     fn distance_cm(arm: &ArticulatedArm, camera: &Camera, a: &[f64], b: &[f64]) -> f64 {
@@ -1283,6 +1365,36 @@ mod tests {
         }
     }
 
+    /// Where the masks cannot tell the arm from its mirror, depth can: with the depth image
+    /// the fit finds the true arm itself.
+    #[test]
+    fn depth_tells_the_arm_from_its_mirror() {
+        let (arm, _) = setup();
+        let camera = Camera::look_at(
+            [8.0, -2.5, 1.5],
+            [0.1, -0.2, 0.3],
+            [0.0, 0.0, 1.0],
+            128,
+            128,
+            6.0,
+        )
+        .expect("camera");
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+        for truth in [
+            vec![0.4, 0.8, 1.2],
+            vec![1.0, 0.3, 0.6],
+            vec![0.2, 1.4, 0.4],
+        ] {
+            fitter.reset();
+            let (classes, depth) = observe(&arm, &camera, &truth);
+            let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
+            masks.depth_m = Some(depth);
+            let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+            let err = distance_cm(&arm, &camera, &fit.q, &truth);
+            assert!(err < 2.0, "{truth:?}: {err:.1} cm off, q {:?}", fit.q);
+        }
+    }
+
     #[test]
     fn bad_masks_are_no_pose_not_errors() {
         let (arm, camera) = setup();
@@ -1293,6 +1405,7 @@ mod tests {
             height: 128,
             parts: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
             background: vec![1.0; n],
+            depth_m: None,
         };
         assert_eq!(
             fitter.fit(&camera, &empty).expect("runs"),

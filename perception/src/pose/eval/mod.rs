@@ -9,10 +9,10 @@
 //! Errors are taken at the forearm's centre. With the paper's method they are of the estimate
 //! or its end-for-end twin ([`RigidModel::twin`]), whichever is nearer the truth in rotation:
 //! the forearm's mask cannot tell them apart. The articulated fit's hand tells the wrist from
-//! the elbow, so its errors are of the estimate itself. Yaw, pitch and roll are the URDF angles of the forearm link frame
-//! in the camera frame (as the dataset's labels give them); besides them, the error of the
-//! forearm's axis direction and its *spin* (rotation about its own axis, which two thin bones
-//! barely show) are reported on their own.
+//! the elbow, so its errors are of the estimate itself. Yaw, pitch and roll are the URDF
+//! angles of the forearm link frame in the camera frame (as the dataset's labels give them);
+//! besides them, the error of the forearm's axis direction and its *spin* (rotation about its
+//! own axis, which two thin bones barely show) are reported on their own.
 
 mod metrics;
 mod report;
@@ -38,8 +38,9 @@ pub enum PoseMethod {
     /// The paper's: the forearm's 6-DoF pose from its mask alone ([`PoseEstimator`]), the
     /// elbow anchored to the shoulder when `anchored`.
     Paper { anchored: bool, config: PoseConfig },
-    /// The human model's joints fitted to every arm part's mask ([`ArmFitter`]).
-    Articulated(ArmFitConfig),
+    /// The human model's joints fitted to every arm part's mask ([`ArmFitter`]); with
+    /// `depth`, the dataset's depth images join the score (RGB-D).
+    Articulated { config: ArmFitConfig, depth: bool },
 }
 
 impl PoseMethod {
@@ -60,10 +61,14 @@ impl PoseMethod {
                     "no anchor"
                 }
             ),
-            PoseMethod::Articulated(_) => {
-                "articulated: the arm's joints fitted to the upper arm, forearm and hand masks"
-                    .into()
-            }
+            PoseMethod::Articulated { depth, .. } => format!(
+                "articulated: the arm's joints fitted to the upper arm, forearm and hand masks{}",
+                if *depth {
+                    " and the depth image (RGB-D)"
+                } else {
+                    ""
+                }
+            ),
         }
     }
 }
@@ -77,6 +82,12 @@ pub struct PoseEvaluation {
     /// [`PoseMethod::describe`].
     pub method: String,
     pub frames: Vec<FrameResult>,
+}
+
+/// The estimator of either method.
+enum Estimator {
+    Paper(Box<PoseEstimator<CpuRenderer>>),
+    Articulated(Box<ArmFitter<CpuRenderer>>),
 }
 
 /// What either method found in a frame, in the evaluation's terms.
@@ -113,83 +124,79 @@ pub fn evaluate_pose(
             ),
         });
     }
-    let (mut estimator, mut fitter, anchored) = match method {
-        PoseMethod::Paper { anchored, config } => (
-            Some(PoseEstimator::new(
-                CpuRenderer::new(),
-                model.clone(),
-                config.clone(),
-            )),
-            None,
-            *anchored && setup.shoulder_W.is_some(),
-        ),
-        PoseMethod::Articulated(config) => (
-            None,
-            Some(ArmFitter::new(
-                CpuRenderer::new(),
-                ArticulatedArm::of_dataset(dataset)?,
-                config.clone(),
-            )),
-            false,
-        ),
+    let anchored =
+        matches!(method, PoseMethod::Paper { anchored: true, .. }) && setup.shoulder_W.is_some();
+    let mut estimator = match method {
+        PoseMethod::Paper { config, .. } => Estimator::Paper(Box::new(PoseEstimator::new(
+            CpuRenderer::new(),
+            model.clone(),
+            config.clone(),
+        ))),
+        PoseMethod::Articulated { config, .. } => Estimator::Articulated(Box::new(ArmFitter::new(
+            CpuRenderer::new(),
+            ArticulatedArm::of_dataset(dataset)?,
+            config.clone(),
+        ))),
     };
     let mut frames = Vec::new();
     for (k, entry) in entries.iter().enumerate() {
         let seq = dataset.load(entry)?;
         source.start();
-        if let Some(e) = &mut estimator {
-            e.reset();
-        }
-        if let Some(f) = &mut fitter {
-            f.reset();
+        match &mut estimator {
+            Estimator::Paper(e) => e.reset(),
+            Estimator::Articulated(f) => f.reset(),
         }
         for t in 0..seq.len() {
             let labels = &seq.labels[t];
             let camera = Camera::from(&labels.camera);
             let t0 = Instant::now();
             let mut truth_gain = f64::NAN;
-            let (found, mask_ms, pose_ms) = if let Some(fitter) = &mut fitter {
-                let masks = source.arm(&seq, t)?;
-                let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
-                let t1 = Instant::now();
-                let outcome = fitter.fit(&camera, &masks)?;
-                let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
-                if labels.human_q.len() == fitter.arm().dof() {
-                    truth_gain = fitter
-                        .gain_at(&camera, &masks, &labels.human_q)?
-                        .unwrap_or(f64::NAN);
+            let (found, mask_ms, pose_ms) = match &mut estimator {
+                Estimator::Articulated(fitter) => {
+                    let mut masks = source.arm(&seq, t)?;
+                    if matches!(method, PoseMethod::Articulated { depth: true, .. }) {
+                        masks.depth_m = Some(dataset.depth(entry, t)?);
+                    }
+                    let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
+                    let t1 = Instant::now();
+                    let outcome = fitter.fit(&camera, &masks)?;
+                    let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
+                    if labels.human_q.len() == fitter.arm().dof() {
+                        truth_gain = fitter
+                            .gain_at(&camera, &masks, &labels.human_q)?
+                            .unwrap_or(f64::NAN);
+                    }
+                    let found = outcome.map(|fit| Found {
+                        X_CO: fit.X_CO(),
+                        reacquired: fit.reacquired,
+                        f_m: fit.f_m,
+                        gain: fit.gain,
+                        uncertainty_m: fit.uncertainty_m,
+                        renders: fit.renders,
+                    });
+                    (found, mask_ms, pose_ms)
                 }
-                let found = outcome.map(|fit| Found {
-                    X_CO: fit.X_CO(),
-                    reacquired: fit.reacquired,
-                    f_m: fit.f_m,
-                    gain: fit.gain,
-                    uncertainty_m: fit.uncertainty_m,
-                    renders: fit.renders,
-                });
-                (found, mask_ms, pose_ms)
-            } else if let Some(estimator) = &mut estimator {
-                let mask = source.forearm(&seq, t)?;
-                let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
-                estimator.set_anchor(if anchored {
-                    setup.anchor(&camera.X_WC)
-                } else {
-                    None
-                });
-                let t1 = Instant::now();
-                let outcome = estimator.estimate(&camera, &mask)?;
-                let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
-                let found = outcome.map(|e| Found {
-                    X_CO: e.X_CO,
-                    reacquired: e.reacquired,
-                    f_m: e.f_m,
-                    gain: e.gain,
-                    uncertainty_m: e.uncertainty_m,
-                    renders: e.renders,
-                });
-                (found, mask_ms, pose_ms)
-            } else {
-                continue;
+                Estimator::Paper(estimator) => {
+                    let mask = source.forearm(&seq, t)?;
+                    let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
+                    estimator.set_anchor(if anchored {
+                        setup.anchor(&camera.X_WC)
+                    } else {
+                        None
+                    });
+                    let t1 = Instant::now();
+                    let outcome = estimator.estimate(&camera, &mask)?;
+                    let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
+                    let found = outcome.map(|e| Found {
+                        X_CO: e.X_CO,
+                        reacquired: e.reacquired,
+                        f_m: e.f_m,
+                        gain: e.gain,
+                        uncertainty_m: e.uncertainty_m,
+                        renders: e.renders,
+                    });
+                    (found, mask_ms, pose_ms)
+                }
             };
             let Some(part) = labels.part(Class::Forearm) else {
                 continue;
@@ -207,7 +214,12 @@ pub fn evaluate_pose(
                 (reacquired, fm, gain, unc, renders) =
                     (e.reacquired, e.f_m, e.gain, e.uncertainty_m, e.renders);
                 // The hand tells the articulated fit's wrist from its elbow: no twin.
-                pose_error_with(&model, &e.X_CO, &truth, fitter.is_none())
+                pose_error_with(
+                    &model,
+                    &e.X_CO,
+                    &truth,
+                    matches!(estimator, Estimator::Paper(_)),
+                )
             });
             frames.push(FrameResult {
                 sequence: entry.index,
@@ -239,7 +251,7 @@ pub fn evaluate_pose(
                 config: config.clone(),
             }
             .describe(),
-            PoseMethod::Articulated(_) => method.describe(),
+            PoseMethod::Articulated { .. } => method.describe(),
         },
         frames,
     })

@@ -213,6 +213,34 @@ impl Dataset {
         Ok(data.iter().map(|&v| u8::from(v >= 128)).collect())
     }
 
+    /// The depth of frame `f` of a sequence: the camera-frame z of the surface each pixel
+    /// shows, m (0 where nothing is). Format 2 datasets store it; it is read on demand, not
+    /// by [`Dataset::load`], whose frames a training run holds in memory.
+    ///
+    /// # Errors
+    /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file: missing (a format 1
+    /// dataset), corrupt, or not a 16-bit image of the manifest's size.
+    pub fn depth(&self, entry: &SequenceEntry, f: usize) -> Result<Vec<f32>> {
+        let path = self.sequence_dir(entry)?.join(&frame_files(f)[6]);
+        let (w, h, kind, data) = read_png(&path)?;
+        if (w, h, kind)
+            != (
+                self.manifest.width_px,
+                self.manifest.height_px,
+                PixelKind::Gray16,
+            )
+        {
+            return Err(invalid(
+                &path,
+                "not a 16-bit depth image of the manifest's size",
+            ));
+        }
+        Ok(data
+            .chunks_exact(2)
+            .map(|b| f32::from(u16::from_be_bytes([b[0], b[1]])) / 1000.0)
+            .collect())
+    }
+
     /// The folder of a sequence (refusing one that leaves the dataset).
     fn sequence_dir(&self, entry: &SequenceEntry) -> Result<PathBuf> {
         if entry.dir.contains("..") || Path::new(&entry.dir).is_absolute() {
