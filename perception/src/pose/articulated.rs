@@ -1192,6 +1192,19 @@ mod tests {
         (arm, camera)
     }
 
+    /// The same human from about 8.4 m through a 6-degree lens: nearly an orthographic view.
+    fn far_camera() -> Camera {
+        Camera::look_at(
+            [8.0, -2.5, 1.5],
+            [0.1, -0.2, 0.3],
+            [0.0, 0.0, 1.0],
+            128,
+            128,
+            6.0,
+        )
+        .expect("camera")
+    }
+
     /// The class image and the depth of the arm at `q`, its three parts rendered together
     /// (z-buffered).
     fn observe(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> (Vec<u8>, Vec<f32>) {
@@ -1334,15 +1347,7 @@ mod tests {
     #[test]
     fn far_away_the_uncertainty_covers_the_mirror() {
         let (arm, _) = setup();
-        let camera = Camera::look_at(
-            [8.0, -2.5, 1.5],
-            [0.1, -0.2, 0.3],
-            [0.0, 0.0, 1.0],
-            128,
-            128,
-            6.0,
-        )
-        .expect("camera");
+        let camera = far_camera();
         let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
         for truth in [
             vec![0.4, 0.8, 1.2],
@@ -1370,15 +1375,7 @@ mod tests {
     #[test]
     fn depth_tells_the_arm_from_its_mirror() {
         let (arm, _) = setup();
-        let camera = Camera::look_at(
-            [8.0, -2.5, 1.5],
-            [0.1, -0.2, 0.3],
-            [0.0, 0.0, 1.0],
-            128,
-            128,
-            6.0,
-        )
-        .expect("camera");
+        let camera = far_camera();
         let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
         for truth in [
             vec![0.4, 0.8, 1.2],
