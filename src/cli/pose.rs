@@ -1,5 +1,6 @@
-//! `workcell eval pose`: the forearm's pose by render-and-compare on a dataset split, in the
-//! layout of the paper's Table 2, with a plot of error against camera distance (Fig. 5).
+//! `workcell eval pose`: the forearm's pose by render-and-compare on a dataset split (the
+//! articulated fit of the whole arm, or the paper's forearm-only search), in the layout of the
+//! paper's Table 2, with a plot of error against camera distance (Fig. 5).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -22,8 +23,9 @@ pub struct EvalPoseArgs {
     /// Which split: train, validation or test.
     #[arg(long, default_value = "test")]
     pub split: String,
-    /// Where the forearm masks come from: `gt` (the dataset's forearm without the occluder:
-    /// the pose estimator's own error), `visible` (only the pixels the occluder leaves),
+    /// Where the masks come from (the forearm's for --method paper, every arm part's for
+    /// articulated): `gt` (the dataset's classes without the occluder: the pose search's own
+    /// error), `visible` (only the pixels the occluder leaves),
     /// `procnet` or `baseline` (the network of --weights; `baseline` is the feed-forward
     /// stand-in for the paper's PoseCNN). Several, comma-separated, are evaluated in turn
     /// and compared side by side (pose_compare.md).
