@@ -59,6 +59,7 @@ use workcell_render::{Camera, Class, MaskBatch, RenderMesh, Renderer};
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{HumanPart, LinkId, RobotModel};
 
+use super::image::crop_camera;
 use super::{NoPose, RigidModel, f_m};
 use crate::arm::POSE_MESH_SEGMENTS;
 use crate::error::{PerceptionError, Result};
@@ -807,13 +808,7 @@ impl<R: Renderer> ArmFitter<R> {
                 .map(|(&s, &d)| s - alpha * d * inv)
                 .collect()
         });
-        let roi = Camera {
-            width: rw as u32,
-            height: rh as u32,
-            cx: camera.cx - x0 as f64,
-            cy: camera.cy - y0 as f64,
-            ..*camera
-        };
+        let roi = crop_camera(camera, x0, y0, rw, rh);
         let ss = c.supersample.max(1);
         let depth_m = masks
             .depth_m
@@ -1192,6 +1187,9 @@ mod tests {
         (arm, camera)
     }
 
+    /// Configurations seen by [`far_camera`]: the arm raised, forward and to the side.
+    const FAR_CONFIGURATIONS: [[f64; 3]; 3] = [[0.4, 0.8, 1.2], [1.0, 0.3, 0.6], [0.2, 1.4, 0.4]];
+
     /// The same human from about 8.4 m through a 6-degree lens: nearly an orthographic view.
     fn far_camera() -> Camera {
         Camera::look_at(
@@ -1349,11 +1347,7 @@ mod tests {
         let (arm, _) = setup();
         let camera = far_camera();
         let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
-        for truth in [
-            vec![0.4, 0.8, 1.2],
-            vec![1.0, 0.3, 0.6],
-            vec![0.2, 1.4, 0.4],
-        ] {
+        for truth in FAR_CONFIGURATIONS.map(|q| q.to_vec()) {
             fitter.reset();
             let masks =
                 ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
@@ -1377,11 +1371,7 @@ mod tests {
         let (arm, _) = setup();
         let camera = far_camera();
         let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
-        for truth in [
-            vec![0.4, 0.8, 1.2],
-            vec![1.0, 0.3, 0.6],
-            vec![0.2, 1.4, 0.4],
-        ] {
+        for truth in FAR_CONFIGURATIONS.map(|q| q.to_vec()) {
             fitter.reset();
             let (classes, depth) = observe(&arm, &camera, &truth);
             let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");

@@ -1,5 +1,25 @@
 //! Mask operations of the search: the paper's `f_m`, dilation, support and blobs.
 
+use workcell_render::Camera;
+
+/// The camera that sees the `width x height` region of `camera`'s image whose top-left pixel
+/// is `(x0, y0)`.
+pub(super) fn crop_camera(
+    camera: &Camera,
+    x0: usize,
+    y0: usize,
+    width: usize,
+    height: usize,
+) -> Camera {
+    Camera {
+        width: width as u32,
+        height: height as u32,
+        cx: camera.cx - x0 as f64,
+        cy: camera.cy - y0 as f64,
+        ..*camera
+    }
+}
+
 /// The mask's support: pixel count, centroid and second moments, bounding box.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Support {

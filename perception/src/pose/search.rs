@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use workcell_render::{Camera, MaskBatch, Renderer};
 use workcell_robots::math::{Pose, Rotation, Vector};
 
-use super::image::{LEVELS, SUPERSAMPLE, Support, blobs, dilate, f_m, support};
+use super::image::{LEVELS, SUPERSAMPLE, Support, blobs, crop_camera, dilate, f_m, support};
 use super::{Anchor, NoPose, PoseConfig, PoseEstimate, PoseOutcome, RigidModel};
 use crate::error::{PerceptionError, Result};
 
@@ -311,13 +311,7 @@ impl<R: Renderer> PoseEstimator<R> {
             (0, 0, w, h)
         };
         let (rw, rh) = ((x1 - x0).max(1), (y1 - y0).max(1));
-        let roi = Camera {
-            width: rw as u32,
-            height: rh as u32,
-            cx: camera.cx - x0 as f64,
-            cy: camera.cy - y0 as f64,
-            ..*camera
-        };
+        let roi = crop_camera(camera, x0, y0, rw, rh);
         let mut crop = Vec::with_capacity(rw * rh);
         for y in y0..y0 + rh {
             crop.extend_from_slice(&mask[y * w + x0..y * w + x0 + rw]);
