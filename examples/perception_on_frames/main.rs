@@ -4,13 +4,13 @@
 //! same `ArmTracker` runs beside a real camera.
 //!
 //! `cargo run --release --example perception_on_frames -- out/dataset/seq_00000`
-//! (add `--true-masks` to feed the frames' ground-truth forearm pixels instead of ProcNet's).
+//! (add `--true-masks` to feed the frames' ground-truth class pixels instead of ProcNet's).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use workcell::perception::pose::PoseConfig;
-use workcell::perception::{ArmModel, ArmTracker, Backend, ProcNet};
+use workcell::perception::pose::{ArmFitConfig, ArmMasks};
+use workcell::perception::{ArmTracker, Backend, ProcNet};
 use workcell::render::dataset::{FrameLabels, Manifest};
 use workcell::render::image::{PixelKind, read_png};
 use workcell::render::{Camera, Class};
@@ -39,9 +39,7 @@ fn main() -> anyhow::Result<()> {
     // What the frames show of it: its flesh, or the paper's bones.
     model.retain_visuals(|g| human.look.shows(g.name.as_deref()));
     let X_WH = Pose::from(&human.X_WH);
-    let arm = ArmModel::new(&model, &X_WH)?;
-
-    let mut tracker = ArmTracker::new(arm, PoseConfig::default());
+    let mut tracker = ArmTracker::new(&model, &X_WH, ArmFitConfig::default())?;
     if !true_masks {
         let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("perception/weights/procnet-cpu.safetensors");
@@ -64,18 +62,15 @@ fn main() -> anyhow::Result<()> {
             serde_json::from_slice(&std::fs::read(dir.join(format!("frame_{t:03}.json")))?)?;
         let camera = Camera::from(&labels.camera);
         let outcome = if true_masks {
-            let (_, _, _, classes) = read_png(&dir.join(format!("frame_{t:03}_class.png")))?;
-            let mask: Vec<f32> = classes
-                .iter()
-                .map(|&c| f32::from(u8::from(c == Class::Forearm as u8)))
-                .collect();
-            tracker.track_mask(&camera, &mask)?
+            let (w, h, _, classes) = read_png(&dir.join(format!("frame_{t:03}_class.png")))?;
+            let masks = ArmMasks::from_classes(&classes, w as usize, h as usize)?;
+            tracker.track_masks(&camera, &masks)?
         } else {
             let (w, h, kind, rgb) = read_png(&image)?;
             if kind != PixelKind::Rgb || (w, h) != (camera.width, camera.height) {
                 bail!("{}: not an RGB frame of the camera's size", image.display());
             }
-            tracker.track(&camera, &rgb)?
+            tracker.track(&camera, &rgb, None)?
         };
         match outcome {
             Ok(estimate) => {

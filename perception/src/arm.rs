@@ -1,27 +1,31 @@
 //! The human's arm as perception models it, and the runtime that turns camera frames into
-//! arm estimates: [`ArmTracker`] takes a frame (or a forearm mask) and its camera and gives
-//! each part of the arm as a capsule in the world, with an uncertainty, or the reason why
-//! there is no estimate. It is what the closed loop calls and what a program beside a real
-//! camera calls, the same way.
+//! arm estimates: [`ArmTracker`] takes a frame (or masks) and its camera and gives each part
+//! of the arm as a capsule in the world, with an uncertainty, or the reason why there is no
+//! estimate. It is what the closed loop calls and what a program beside a real camera calls,
+//! the same way.
 //!
 //! The parts are sized from the human model (the bounding capsules of its links' collision
-//! geometry, as the safety layer sizes them), never from the true human: the forearm's pose
-//! comes from render-and-compare ([`crate::pose`]), the forearm and what is rigid with it
-//! follow that pose, and the upper arm spans the fixed shoulder to the estimated elbow.
+//! geometry, as the safety layer sizes them), never from the true human, and placed where
+//! the articulated fit ([`crate::pose::ArmFitter`]) puts the model's links. [`ArmModel`] is
+//! the forearm-only view of the same model that the paper's method ([`crate::pose`]) needs:
+//! the forearm's mesh, the fixed shoulder it hangs from, the reach that bounds the workspace.
 
 use std::sync::Arc;
 
 use workcell_render::dataset::Dataset;
 use workcell_render::roi::{self, Roi};
 use workcell_render::{Camera, Class, CpuRenderer, RenderMesh};
-use workcell_robots::collision::link_bounding_capsule;
+use workcell_robots::collision::{LinkCapsule, link_bounding_capsule};
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{HumanPart, JointKind, LinkId, PackageMap, RobotModel};
 
 use crate::error::{PerceptionError, Result};
 use crate::image::planar_rgb;
 use crate::infer::ProcNet;
-use crate::pose::{Anchor, NoPose, PoseConfig, PoseEstimate, PoseEstimator, RigidModel};
+use crate::pose::{
+    Anchor, ArmFit, ArmFitConfig, ArmFitter, ArmMasks, ArticulatedArm, FITTED_PARTS, NoPose,
+    RigidModel,
+};
 
 /// Segments around round shapes in the pose search's forearm mesh: the search renders the
 /// forearm thousands of times a second, and a hexagon of a 1-2 pixel bone is its circle to a
@@ -260,21 +264,26 @@ pub struct ArmEstimate {
     pub uncertainty_m: f64,
     /// The forearm link's frame in the world.
     pub X_WF: Pose,
-    /// The pose search's result behind it (camera frame, scores, timing).
-    pub pose: PoseEstimate,
+    /// The articulated fit behind it (joint angles, scores, renders), in the frame of the
+    /// region of interest's camera.
+    pub fit: ArmFit,
 }
 
 /// Why a frame gave no estimate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NoEstimate {
-    /// The forearm's mask gave no pose.
+    /// The masks gave no pose (nothing seen, values that are not probabilities, no
+    /// configuration of the arm that explains them).
     NoPose(NoPose),
+    /// The camera delivered no frame.
+    NoFrame,
 }
 
 impl std::fmt::Display for NoEstimate {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            NoEstimate::NoPose(reason) => write!(f, "no forearm pose: {reason}"),
+            NoEstimate::NoPose(reason) => write!(f, "no arm pose: {reason}"),
+            NoEstimate::NoFrame => write!(f, "the camera delivered no frame"),
         }
     }
 }
@@ -282,16 +291,19 @@ impl std::fmt::Display for NoEstimate {
 /// The result of one frame: an estimate, or why there is none.
 pub type ArmOutcome = std::result::Result<ArmEstimate, NoEstimate>;
 
-/// Frames of one camera in, arm estimates out: ProcNet's forearm mask, the anchored pose
-/// search tracking the forearm from frame to frame, and the arm rebuilt from the forearm.
+/// Frames of one camera in, arm estimates out: ProcNet's mask of every arm part in the
+/// frame's region of interest, the articulated fit ([`ArmFitter`]) tracking the human
+/// model's joints from frame to frame, and each part's collision capsule where the fitted
+/// joints put it. With a depth image the depth agreement joins the fit.
 ///
 /// ```no_run
-/// # use workcell_perception::{ArmModel, ArmTracker, Backend, ProcNet, pose::PoseConfig};
-/// # fn run(arm: ArmModel, camera: workcell_render::Camera, rgb: &[u8]) -> workcell_perception::Result<()> {
+/// # use workcell_perception::{ArmTracker, Backend, ProcNet, pose::ArmFitConfig};
+/// # fn run(human: workcell_robots::RobotModel, X_WH: workcell_robots::math::Pose,
+/// #        camera: workcell_render::Camera, rgb: &[u8]) -> workcell_perception::Result<()> {
 /// let weights = std::path::Path::new("perception/weights/procnet-cpu.safetensors");
 /// let net = ProcNet::load(weights, Backend::Flex)?;
-/// let mut tracker = ArmTracker::new(arm, PoseConfig::default()).with_network(net)?;
-/// match tracker.track(&camera, rgb)? {
+/// let mut tracker = ArmTracker::new(&human, &X_WH, ArmFitConfig::default())?.with_network(net)?;
+/// match tracker.track(&camera, rgb, None)? {
 ///     Ok(estimate) => println!("{} parts, +-{:.3} m", estimate.parts.len(), estimate.uncertainty_m),
 ///     Err(reason) => println!("no estimate: {reason}"),
 /// }
@@ -300,38 +312,48 @@ pub type ArmOutcome = std::result::Result<ArmEstimate, NoEstimate>;
 /// ```
 pub struct ArmTracker {
     arm: ArmModel,
-    estimator: PoseEstimator<CpuRenderer>,
+    fitter: ArmFitter<CpuRenderer>,
+    /// Each fitted part's collision capsule in its link's frame.
+    capsules: [Option<LinkCapsule>; 3],
     net: Option<ProcNet>,
     /// The last estimate's shoulder, elbow and wrist: the next region of interest follows
     /// them.
     joints_W: Option<[Vector; 3]>,
 }
 
-/// The side of the region of interest's image for a tracker without a network (the input of
-/// the networks this project trains).
+/// The side of the region of interest's image the fit reads (the networks' masks are
+/// resampled to it): the size of the datasets' stored regions.
 pub const DEFAULT_INPUT_PX: usize = 128;
 
-/// A frame's forearm as the tracker's network sees it: the region of interest, the camera
-/// that sees exactly that region at the network's input, and the mask there.
+/// A frame's arm as the tracker's network sees it: the region of interest, the camera that
+/// sees exactly that region at [`DEFAULT_INPUT_PX`], and the masks there.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RoiMask {
+pub struct RoiMasks {
     pub roi: Roi,
     pub camera: Camera,
-    /// Forearm probabilities, `camera.width x camera.height`.
-    pub mask: Vec<f32>,
+    pub masks: ArmMasks,
 }
 
 impl ArmTracker {
-    /// A tracker of `arm` without a network: give it forearm masks ([`ArmTracker::track_mask`]).
-    #[must_use]
-    pub fn new(arm: ArmModel, config: PoseConfig) -> Self {
-        let estimator = PoseEstimator::new(CpuRenderer::new(), arm.forearm.clone(), config);
-        Self {
+    /// A tracker of the arm of `human` (in the look it is seen in: its visuals are what the
+    /// fit renders) standing with its base at `X_WH`, without a network: give it masks
+    /// ([`ArmTracker::track_masks`]).
+    ///
+    /// # Errors
+    /// As [`ArmModel::new`] and [`ArticulatedArm::new`].
+    pub fn new(human: &RobotModel, X_WH: &Pose, config: ArmFitConfig) -> Result<Self> {
+        let arm = ArmModel::new(human, X_WH)?;
+        let articulated = ArticulatedArm::new(human, X_WH)?;
+        let capsules = articulated
+            .part_links()
+            .map(|l| link_bounding_capsule(human, l));
+        Ok(Self {
             arm,
-            estimator,
+            fitter: ArmFitter::new(CpuRenderer::new(), articulated, config),
+            capsules,
             net: None,
             joints_W: None,
-        }
+        })
     }
 
     /// The same tracker segmenting frames with `net` ([`ArmTracker::track`]).
@@ -357,6 +379,12 @@ impl ArmTracker {
         &self.arm
     }
 
+    /// The articulated arm it fits.
+    #[must_use]
+    pub fn articulated(&self) -> &ArticulatedArm {
+        self.fitter.arm()
+    }
+
     /// The network, if it has one.
     #[must_use]
     pub fn network(&self) -> Option<&ProcNet> {
@@ -365,20 +393,11 @@ impl ArmTracker {
 
     /// Forgets the track and the network's state (a new camera stream).
     pub fn reset(&mut self) {
-        self.estimator.reset();
+        self.fitter.reset();
         self.joints_W = None;
         if let Some(net) = &mut self.net {
             net.reset();
         }
-    }
-
-    /// The side of the region of interest's image: the network's input, or
-    /// [`DEFAULT_INPUT_PX`] without a network.
-    #[must_use]
-    pub fn input_px(&self) -> usize {
-        self.net
-            .as_ref()
-            .map_or(DEFAULT_INPUT_PX, |n| n.config().input_size)
     }
 
     /// The region of `camera`'s image the next frame is read through: around the last
@@ -397,79 +416,147 @@ impl ArmTracker {
             .unwrap_or(Roi::frame(camera.width, camera.height))
     }
 
-    /// The forearm's probability mask of a frame: the region of interest ([`ArmTracker::roi`])
-    /// resampled to the network's input and segmented.
+    /// The network's masks of a frame: the region of interest ([`ArmTracker::roi`])
+    /// resampled to [`DEFAULT_INPUT_PX`], segmented (at the network's input size), every
+    /// class's plane back at [`DEFAULT_INPUT_PX`].
     ///
     /// # Errors
     /// No network ([`ArmTracker::with_network`]), a frame of the wrong size, a network failure.
-    pub fn forearm_mask(&mut self, camera: &Camera, rgb: &[u8]) -> Result<RoiMask> {
+    pub fn segment(&mut self, camera: &Camera, rgb: &[u8]) -> Result<RoiMasks> {
         let (w, h) = (camera.width as usize, camera.height as usize);
         check_len("an sRGB frame", rgb.len(), 3 * w * h, camera)?;
         let roi = self.roi(camera);
         let net = self.net.as_mut().ok_or_else(|| PerceptionError::Input {
-            message: "this tracker has no network; give it masks with track_mask".into(),
+            message: "this tracker has no network; give it masks with track_masks".into(),
         })?;
-        let s = net.config().input_size;
+        let s = DEFAULT_INPUT_PX;
         let input = roi.resample(&planar_rgb(rgb, w, h), 3, w, h, s);
-        let mask = net.forearm(&input, s, s)?;
-        Ok(RoiMask {
+        let planes = net.planes(&input, s, s)?;
+        let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
+        Ok(RoiMasks {
             roi,
             camera: roi.camera(camera, s as u32)?,
-            mask,
+            masks: ArmMasks::from_planes(s, s, &refs)?,
         })
     }
 
     /// One frame: interleaved sRGB bytes (`width * height * 3`, row-major from the top left)
-    /// from `camera`, whose pose in the world is known. The network reads the frame's region
-    /// of interest and the pose search renders that region's camera.
+    /// from `camera`, whose pose in the world is known, and optionally the depth camera's
+    /// image registered to it (camera-frame z, m, `width * height`; 0 where it has none).
     ///
     /// # Errors
-    /// As [`ArmTracker::forearm_mask`] and [`ArmTracker::track_mask`].
-    pub fn track(&mut self, camera: &Camera, rgb: &[u8]) -> Result<ArmOutcome> {
-        let RoiMask { camera, mask, .. } = self.forearm_mask(camera, rgb)?;
-        self.track_mask(&camera, &mask)
-    }
-
-    /// One frame given as the forearm's mask at the camera's resolution (values in [0, 1]),
-    /// read through the region of interest as [`ArmTracker::track`] reads a frame: the
-    /// region resampled to [`ArmTracker::input_px`], then [`ArmTracker::track_mask`].
-    ///
-    /// # Errors
-    /// As [`ArmTracker::track_mask`].
-    pub fn track_frame_mask(&mut self, camera: &Camera, mask: &[f32]) -> Result<ArmOutcome> {
+    /// As [`ArmTracker::segment`]; a depth image of the wrong size.
+    pub fn track(
+        &mut self,
+        camera: &Camera,
+        rgb: &[u8],
+        depth_m: Option<&[f32]>,
+    ) -> Result<ArmOutcome> {
         let (w, h) = (camera.width as usize, camera.height as usize);
-        check_len("a mask", mask.len(), w * h, camera)?;
-        let roi = self.roi(camera);
-        let s = self.input_px();
-        let crop = roi.resample(mask, 1, w, h, s);
-        self.track_mask(&roi.camera(camera, s as u32)?, &crop)
+        if let Some(d) = depth_m {
+            check_len("a depth image", d.len(), w * h, camera)?;
+        }
+        let RoiMasks {
+            roi,
+            camera: roi_camera,
+            mut masks,
+        } = self.segment(camera, rgb)?;
+        masks.depth_m = depth_m.map(|d| roi.sample_nearest(d, w, h, DEFAULT_INPUT_PX));
+        self.fit(&roi_camera, &masks)
     }
 
-    /// One frame given as the forearm's mask (values in [0, 1], `width * height`).
+    /// One frame given as masks at the camera's resolution (a perfect segmenter's, or
+    /// another network's), read through the region of interest as [`ArmTracker::track`]
+    /// reads a frame: every plane resampled to [`DEFAULT_INPUT_PX`] (the depth sampled at
+    /// each pixel's centre, [`Roi::sample_nearest`]).
     ///
     /// # Errors
-    /// [`PerceptionError::Input`] for a mask or camera that does not fit; renderer failures.
-    pub fn track_mask(&mut self, camera: &Camera, mask: &[f32]) -> Result<ArmOutcome> {
-        self.estimator.set_anchor(self.arm.anchor(&camera.X_WC));
-        let pose = match self.estimator.estimate(camera, mask)? {
-            Ok(pose) => pose,
+    /// [`PerceptionError::Input`] for masks that are not the camera's size; renderer failures.
+    pub fn track_masks(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmOutcome> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        if (masks.width, masks.height) != (w, h) {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "masks of {}x{} for the {w}x{h} camera",
+                    masks.width, masks.height
+                ),
+            });
+        }
+        let roi = self.roi(camera);
+        let s = DEFAULT_INPUT_PX;
+        let crop = |plane: &[f32]| -> Result<Vec<f32>> {
+            check_len("a mask", plane.len(), w * h, camera)?;
+            Ok(roi.resample(plane, 1, w, h, s))
+        };
+        let cropped = ArmMasks {
+            width: s,
+            height: s,
+            parts: [
+                crop(&masks.parts[0])?,
+                crop(&masks.parts[1])?,
+                crop(&masks.parts[2])?,
+            ],
+            background: crop(&masks.background)?,
+            depth_m: match masks.depth_m.as_deref() {
+                Some(d) => {
+                    check_len("a depth image", d.len(), w * h, camera)?;
+                    Some(roi.sample_nearest(d, w, h, s))
+                }
+                None => None,
+            },
+        };
+        self.fit(&roi.camera(camera, s as u32)?, &cropped)
+    }
+
+    /// A frame the camera did not deliver: no estimate. The track is kept; the next frame
+    /// predicts from it.
+    pub fn no_frame(&mut self) -> ArmOutcome {
+        Err(NoEstimate::NoFrame)
+    }
+
+    /// The articulated fit of masks already in the region of interest's camera.
+    fn fit(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmOutcome> {
+        let fit = match self.fitter.fit(camera, masks)? {
+            Ok(fit) => fit,
             Err(reason) => {
                 self.joints_W = None;
                 return Ok(Err(NoEstimate::NoPose(reason)));
             }
         };
-        let X_WF = camera.X_WC * pose.X_CO;
-        let parts = self.arm.parts(&X_WF);
-        let end = |part: HumanPart| parts.iter().find(|p| p.part == part);
-        self.joints_W = match (end(HumanPart::UpperArm), end(HumanPart::Forearm)) {
-            (Some(upper), Some(forearm)) => Some([upper.a_W, X_WF.translation, forearm.b_W]),
-            _ => None,
-        };
+        let X_WL = self.fitter.arm().part_poses(&fit.q, &Pose::IDENTITY)?;
+        let parts: Vec<PartCapsule> = FITTED_PARTS
+            .iter()
+            .zip(&self.capsules)
+            .zip(&X_WL)
+            .filter_map(|((&part, capsule), X)| {
+                let c = capsule.as_ref()?;
+                let (a_W, b_W) = c.segment_in_world(X);
+                Some(PartCapsule {
+                    part,
+                    a_W,
+                    b_W,
+                    radius_m: c.radius_m,
+                })
+            })
+            .collect();
+        let wrist = parts
+            .iter()
+            .find(|p| p.part == HumanPart::Forearm)
+            .map_or(X_WL[2].translation, |p| {
+                // The capsule's end away from the elbow.
+                let e = X_WL[1].translation;
+                if (p.a_W - e).length() > (p.b_W - e).length() {
+                    p.a_W
+                } else {
+                    p.b_W
+                }
+            });
+        self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist]);
         Ok(Ok(ArmEstimate {
             parts,
-            uncertainty_m: pose.uncertainty_m,
-            X_WF,
-            pose,
+            uncertainty_m: fit.uncertainty_m,
+            X_WF: X_WL[1],
+            fit,
         }))
     }
 }
@@ -560,127 +647,189 @@ mod tests {
         assert!(err.to_string().contains("no link named forearm"), "{err}");
     }
 
-    #[test]
-    fn a_tracker_without_a_network_asks_for_masks_and_checks_frame_sizes() {
-        let arm = ArmModel::new(&human(), &Pose::IDENTITY).expect("arm");
-        let mut tracker = ArmTracker::new(arm, PoseConfig::default());
-        let camera = Camera::look_at(
-            [3.0, 0.0, 1.5],
+    /// A camera looking at the shoulder of a human at `X_WH` from `offset` away.
+    fn camera_at(arm: &ArmModel, offset: Vector, size: [u32; 2], fov_deg: f64) -> Camera {
+        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
+        Camera::look_at(
+            (shoulder + offset).to_array(),
+            (shoulder - Vector::new(0.0, 0.0, 0.2)).to_array(),
             [0.0, 0.0, 1.0],
-            [0.0, 0.0, 1.0],
-            64,
-            48,
-            50.0,
+            size[0],
+            size[1],
+            fov_deg,
         )
-        .expect("camera");
-        let err = tracker.track(&camera, &[0; 10]).unwrap_err();
+        .expect("camera")
+    }
+
+    /// What a perfect segmenter and a depth camera give of `human`'s arm at `q`: the three
+    /// parts rendered together (z-buffered) as masks, with the depth image.
+    fn observe(
+        human: &RobotModel,
+        tracker: &ArmTracker,
+        camera: &Camera,
+        q: &[f64],
+    ) -> ArmMasks {
+        let arm = tracker.articulated();
+        let poses = arm.part_poses(q, &Pose::IDENTITY).expect("poses");
+        let mut scene = workcell_render::Scene::default();
+        for (p, part) in FITTED_PARTS.into_iter().enumerate() {
+            let mut mesh = RenderMesh::default();
+            for g in &human.links()[arm.part_links()[p]].visuals {
+                mesh.append(&RenderMesh::from_geometry(g, [0.8, 0.7, 0.6]), &Pose::IDENTITY);
+            }
+            scene.push(workcell_render::SceneObject {
+                name: part.name().into(),
+                class: Class::of_part(part),
+                mesh: Arc::new(mesh),
+                texture: 0.0,
+                X_WO: poses[p],
+            });
+        }
+        let mut frame = workcell_render::Frame::new();
+        CpuRenderer::new()
+            .render(&scene, camera, &mut frame)
+            .expect("render");
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let mut masks = ArmMasks::from_classes(&frame.classes(&scene), w, h).expect("masks");
+        masks.depth_m = Some(frame.depth_m.clone());
+        masks
+    }
+
+    /// Bad input is an error (a frame or masks of the wrong size) or no estimate with its
+    /// reason (nothing seen, values that are not probabilities, no frame); never a panic.
+    #[test]
+    fn bad_input_is_an_error_or_no_estimate_with_its_reason() {
+        let human = human();
+        let mut tracker =
+            ArmTracker::new(&human, &Pose::IDENTITY, ArmFitConfig::default()).expect("tracker");
+        let camera = camera_at(tracker.arm(), Vector::new(3.0, 0.0, 0.0), [64, 48], 50.0);
+        let err = tracker.track(&camera, &[0; 10], None).unwrap_err();
         assert!(
             err.to_string().contains("9216 values for the 64x48"),
             "{err}"
         );
-        let err = tracker.track(&camera, &vec![0; 64 * 48 * 3]).unwrap_err();
+        let err = tracker
+            .track(&camera, &vec![0; 64 * 48 * 3], None)
+            .unwrap_err();
         assert!(err.to_string().contains("no network"), "{err}");
-        // An empty mask is no estimate, with its reason.
-        let outcome = tracker
-            .track_mask(&camera, &vec![0.0; 64 * 48])
-            .expect("no error");
+        let err = tracker
+            .track(&camera, &vec![0; 64 * 48 * 3], Some(&[1.0; 5]))
+            .unwrap_err();
+        assert!(err.to_string().contains("a depth image of 3072"), "{err}");
+        // A fully hidden arm: empty masks.
+        let empty = ArmMasks::from_classes(&vec![0; 64 * 48], 64, 48).expect("masks");
+        let outcome = tracker.track_masks(&camera, &empty).expect("no error");
         assert_eq!(outcome, Err(NoEstimate::NoPose(NoPose::Empty)));
-        let err = tracker.track_frame_mask(&camera, &[0.0; 7]).unwrap_err();
-        assert!(err.to_string().contains("3072 values"), "{err}");
+        // NaN from a network.
+        let mut nan = empty.clone();
+        nan.parts[1][64 * 24 + 32] = f32::NAN;
+        let outcome = tracker.track_masks(&camera, &nan).expect("no error");
+        assert_eq!(outcome, Err(NoEstimate::NoPose(NoPose::NotAProbability)));
+        // Masks of another size.
+        let small = ArmMasks::from_classes(&[0; 12], 4, 3).expect("masks");
+        let err = tracker.track_masks(&camera, &small).unwrap_err();
+        assert!(err.to_string().contains("4x3 for the 64x48"), "{err}");
+        assert_eq!(tracker.no_frame(), Err(NoEstimate::NoFrame));
     }
 
-    /// A network reads the frame's region of interest at its input size: the shipped
-    /// weights on a 640x480 frame see the reach sphere's square, resampled to their input, and
-    /// the mask comes back with that square's camera.
+    /// Blobs of every arm class scattered over the frame, where no arm could put its parts,
+    /// are no pose: the fit explains too little of them.
     #[test]
-    fn the_network_reads_the_region_of_interest_at_its_input() {
-        let arm = ArmModel::new(&human(), &Pose::IDENTITY).expect("arm");
-        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
-        let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("weights/procnet-cpu.safetensors");
-        let net = ProcNet::load(&weights, crate::Backend::Flex).expect("shipped weights");
-        let input = net.config().input_size;
-        let mut tracker = ArmTracker::new(arm, PoseConfig::default())
-            .with_network(net)
-            .expect("forearm class");
-        let camera = Camera::look_at(
-            (shoulder + Vector::new(2.5, 0.5, 0.2)).to_array(),
-            shoulder.to_array(),
-            [0.0, 0.0, 1.0],
-            640,
-            480,
-            45.0,
-        )
-        .expect("camera");
-        let roi = tracker.roi(&camera);
-        let out = tracker
-            .forearm_mask(&camera, &vec![90; 640 * 480 * 3])
-            .expect("segmented");
-        assert_eq!(out.roi, roi);
-        assert_eq!(
-            out.camera,
-            roi.camera(&camera, input as u32).expect("camera")
-        );
-        assert_eq!(out.mask.len(), input * input);
-        assert!(out.mask.iter().all(|v| (0.0..=1.0).contains(v)));
-    }
-
-    /// The region of interest: the reach sphere without an estimate, the arm's joints with
-    /// one, the reach sphere again after a lost track.
-    #[test]
-    fn the_region_follows_the_estimate_and_falls_back_to_the_workspace() {
+    fn scattered_blobs_no_arm_explains_are_no_estimate() {
         let human = human();
-        let arm = ArmModel::new(&human, &Pose::IDENTITY).expect("arm");
-        let (shoulder, upper) = arm.shoulder_W.expect("fixed shoulder");
-        // Upper arm 0.3255 m and forearm 0.2555 m in the built-in model (generate.py).
+        let mut tracker =
+            ArmTracker::new(&human, &Pose::IDENTITY, ArmFitConfig::default()).expect("tracker");
+        let camera = camera_at(tracker.arm(), Vector::new(3.0, 0.0, 0.0), [160, 120], 50.0);
+        let (w, h) = (160, 120);
+        let mut classes = vec![0u8; w * h];
+        let parts = [Class::UpperArm, Class::Forearm, Class::Hand];
+        for k in 0..12 {
+            let (cx, cy) = ((k * 53) % w, (k * 37 + 11) % h);
+            for y in cy.saturating_sub(2)..(cy + 2).min(h) {
+                for x in cx.saturating_sub(2)..(cx + 2).min(w) {
+                    classes[y * w + x] = parts[k % 3] as u8;
+                }
+            }
+        }
+        let masks = ArmMasks::from_classes(&classes, w, h).expect("masks");
+        let outcome = tracker.track_masks(&camera, &masks).expect("no error");
+        assert_eq!(outcome, Err(NoEstimate::NoPose(NoPose::PoorFit)));
+    }
+
+    /// The loop's conventions end to end: masks and depth of the arm at a configuration,
+    /// through the region of interest, back as each part's collision capsule in the world
+    /// where the model puts it at that configuration; the region then follows the arm and a
+    /// lost track falls back to the workspace.
+    #[test]
+    fn the_tracker_finds_each_part_where_the_model_puts_it() {
+        let human = human();
+        let X_WH = pose_from_xyz_rpy([0.9, -0.3, 0.0], [0.0, 0.0, 0.7]);
+        let mut tracker = ArmTracker::new(&human, &X_WH, ArmFitConfig::default()).expect("tracker");
+        let arm = tracker.arm().clone();
+        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
         let reach = arm.reach_m().expect("reach");
-        assert!(
-            (upper - 0.3255).abs() < 1e-9 && (reach - 0.581).abs() < 1e-9,
-            "{reach}"
-        );
-        let camera = Camera::look_at(
-            (shoulder + Vector::new(3.0, 0.0, 0.0)).to_array(),
-            shoulder.to_array(),
-            [0.0, 0.0, 1.0],
-            640,
-            480,
-            40.0,
-        )
-        .expect("camera");
-        let mut tracker = ArmTracker::new(arm.clone(), PoseConfig::default());
-        assert_eq!(
-            tracker.roi(&camera),
-            Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).expect("in view")
-        );
-        // The forearm's true mask: the tracker finds it and then crops around the arm.
-        let X_WF = Pose::from_translation(shoulder - Vector::new(0.0, 0.0, upper));
-        let X_CF = camera.X_WC.inverse() * X_WF;
-        let mut batch = workcell_render::MaskBatch::new();
-        CpuRenderer::new()
-            .render_masks(&arm.forearm.mesh, &camera, &[X_CF], &mut batch)
-            .expect("render");
-        let mask: Vec<f32> = batch.mask(0).iter().map(|&v| f32::from(v)).collect();
+        let camera = camera_at(&arm, Vector::new(1.6, 1.7, 0.3), [640, 480], 55.0);
+        let workspace = Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).unwrap();
+        assert_eq!(tracker.roi(&camera), workspace);
+        let q = [0.5, 0.9, 1.1];
+        let masks = observe(&human, &tracker, &camera, &q);
         let estimate = tracker
-            .track_frame_mask(&camera, &mask)
+            .track_masks(&camera, &masks)
             .expect("track")
             .expect("an estimate");
+        let k = human.fk(X_WH, &q).expect("fk");
+        let order: Vec<HumanPart> = estimate.parts.iter().map(|p| p.part).collect();
+        assert_eq!(order, HumanPart::ARM);
+        for p in &estimate.parts {
+            let link = human.link_id(p.part.link_name()).expect("link");
+            let c = link_bounding_capsule(&human, link).expect("capsule");
+            assert!((p.radius_m - c.radius_m).abs() < 1e-15, "{p:?}");
+            let (a, b) = c.segment_in_world(k.link_pose(link));
+            // 2.4 m away, RGB-D through a 128x128 region: within 3 cm.
+            for (x, y) in [(p.a_W, a), (p.b_W, b)] {
+                assert!((x - y).length() < 0.03, "{p:?}: {x} vs {y}");
+            }
+        }
+        assert!(estimate.uncertainty_m > 0.0 && estimate.uncertainty_m.is_finite());
+        // The region now holds the arm's joints and is smaller than the workspace's.
         let tracked = tracker.roi(&camera);
-        let workspace = Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).unwrap();
-        assert!(
-            tracked.size < workspace.size,
-            "{tracked:?} vs {workspace:?}"
-        );
-        // The crop holds the estimated elbow.
+        assert!(tracked.size < workspace.size, "{tracked:?}");
         let [u, v] = camera
             .project(camera.X_WC.inverse() * estimate.X_WF.translation)
             .expect("in front");
         let inside = |x: f64, x0: i64| x >= x0 as f64 && x <= (x0 + i64::from(tracked.size)) as f64;
         assert!(inside(u, tracked.x0) && inside(v, tracked.y0));
         // A lost track falls back to the workspace.
-        let outcome = tracker
-            .track_mask(&camera, &vec![0.0; 640 * 480])
-            .expect("no error");
-        assert!(outcome.is_err());
+        let empty = ArmMasks::from_classes(&vec![0; 640 * 480], 640, 480).expect("masks");
+        assert!(tracker.track_masks(&camera, &empty).expect("no error").is_err());
         assert_eq!(tracker.roi(&camera), workspace);
+    }
+
+    /// A network reads the frame's region of interest at [`DEFAULT_INPUT_PX`]: the shipped
+    /// weights on a 640x480 frame see the reach sphere's square, and its masks come back with
+    /// that square's camera.
+    #[test]
+    fn the_network_reads_the_region_of_interest() {
+        let human = human();
+        let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("weights/procnet-cpu.safetensors");
+        let net = ProcNet::load(&weights, crate::Backend::Flex).expect("shipped weights");
+        let mut tracker = ArmTracker::new(&human, &Pose::IDENTITY, ArmFitConfig::default())
+            .expect("tracker")
+            .with_network(net)
+            .expect("forearm class");
+        let camera = camera_at(tracker.arm(), Vector::new(2.5, 0.5, 0.2), [640, 480], 45.0);
+        let roi = tracker.roi(&camera);
+        let out = tracker
+            .segment(&camera, &vec![90; 640 * 480 * 3])
+            .expect("segmented");
+        assert_eq!(out.roi, roi);
+        let s = DEFAULT_INPUT_PX;
+        assert_eq!(out.camera, roi.camera(&camera, s as u32).expect("camera"));
+        assert_eq!((out.masks.width, out.masks.height), (s, s));
+        for plane in out.masks.parts.iter().chain([&out.masks.background]) {
+            assert_eq!(plane.len(), s * s);
+            assert!(plane.iter().all(|v| (0.0..=1.0).contains(v)));
+        }
     }
 }

@@ -25,7 +25,7 @@ pub mod weights;
 
 pub use arm::{
     ArmEstimate, ArmModel, ArmOutcome, ArmTracker, DEFAULT_INPUT_PX, NoEstimate, PartCapsule,
-    RoiMask,
+    RoiMasks,
 };
 pub use backend::Backend;
 pub use config::{Activation, CellKind, ProcNetConfig};

@@ -41,9 +41,23 @@ pub struct PerceptionConfig {
     pub weights: std::path::PathBuf,
     /// For `procnet`: the cell's camera by name; empty for the first. Default empty.
     pub camera: String,
-    /// For `procnet`: `network` (ProcNet's forearm mask) or `ground_truth` (the forearm's
-    /// pixels in the rendered frame: the pose search alone). Default `network`.
+    /// For `procnet`: `network` (ProcNet's masks of the arm's parts) or `ground_truth` (each
+    /// part's pixels in the rendered frame: the articulated fit alone). Default `network`.
     pub masks: MaskKind,
+    /// For `procnet`: the camera also measures depth (RGB-D), and the fit uses it. Default
+    /// false.
+    pub depth: bool,
+    /// For `procnet`: the fraction of the forearm's pixels that a black disc hides in every
+    /// frame (the paper's artificial occluders, in the loop; 0.66 and above is its heavy
+    /// occlusion). Default 0.
+    pub occlusion: f64,
+    /// For `procnet`: the factor on the fit's curvature uncertainty
+    /// (`ArmFitConfig::uncertainty_scale`); 0 takes the factor measured for the masks and
+    /// depth chosen (`workcell_perception::pose::calibrated_uncertainty_scale`). Default 0.
+    pub uncertainty_scale: f64,
+    /// For `procnet`: the camera delivers no frame from this time on, s (a failed camera);
+    /// negative for never. Default -1.
+    pub camera_fails_at_s: f64,
     /// Camera frame rate, Hz. Default 30.
     pub rate_hz: f64,
     /// Standard deviation of the position error of each part end point, per axis, m.
@@ -97,6 +111,10 @@ impl Default for PerceptionConfig {
             .into(),
             camera: String::new(),
             masks: MaskKind::Network,
+            depth: false,
+            occlusion: 0.0,
+            uncertainty_scale: 0.0,
+            camera_fails_at_s: -1.0,
             rate_hz: 30.0,
             position_noise_m: 0.01,
             velocity_noise_m_s: 0.05,
@@ -183,6 +201,21 @@ impl PerceptionConfig {
             self.confidence_sigmas >= 0.0,
         )?;
         check("foresight_s", self.foresight_s, self.foresight_s >= 0.0)?;
+        check(
+            "occlusion",
+            self.occlusion,
+            (0.0..1.0).contains(&self.occlusion),
+        )?;
+        check(
+            "uncertainty_scale",
+            self.uncertainty_scale,
+            self.uncertainty_scale >= 0.0,
+        )?;
+        check(
+            "camera_fails_at_s",
+            self.camera_fails_at_s,
+            self.camera_fails_at_s.is_finite(),
+        )?;
         if self.foresight_s > 0.0 && self.kind != PerceptionKind::GroundTruth {
             return Err(crate::Error::config(
                 "perception.foresight_s",
@@ -232,7 +265,7 @@ impl PerceptionConfig {
             PerceptionKind::GroundTruth => GroundTruth.name(),
             PerceptionKind::Noisy => NoisyCamera::new(self.clone(), 0).name(),
             PerceptionKind::Procnet => format!(
-                "{} + render-and-compare, latency {:.0} ms",
+                "{} + articulated render-and-compare{}{}, latency {:.0} ms",
                 match self.masks {
                     // The weights' own header says which network they hold (ProcNet or the
                     // feed-forward baseline); an unreadable file fails when it is loaded.
@@ -242,7 +275,13 @@ impl PerceptionConfig {
                             .map_or("ProcNet", |c| c.model_name()),
                         self.weights.display()
                     ),
-                    MaskKind::GroundTruth => "ground-truth forearm masks".to_string(),
+                    MaskKind::GroundTruth => "ground-truth arm masks".to_string(),
+                },
+                if self.depth { " with depth (RGB-D)" } else { "" },
+                if self.occlusion > 0.0 {
+                    format!(", {:.0} % of the forearm hidden", 100.0 * self.occlusion)
+                } else {
+                    String::new()
                 },
                 self.latency_s * 1e3
             ),

