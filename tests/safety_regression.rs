@@ -463,3 +463,49 @@ fn the_reported_human_acceleration_is_the_second_derivative_of_its_motion() {
         metrics.peak_human_acceleration_m_s2
     );
 }
+
+/// Perception switched off mid-episode (`perception.camera_fails_at_s`): from then on the
+/// filter sees no human and brakes: every joint decelerates at its acceleration bound, so the
+/// command's norm never grows again and is zero within half a second; the task is left
+/// unfinished, and no episode comes within d_min.
+#[test]
+fn a_camera_that_fails_mid_episode_stops_the_robot_without_a_violation() {
+    let mut evaluation = Evaluation::from_file(&scenarios().join("shared_space_noisy.toml"))
+        .expect("scenario loads");
+    let fails_at = 4.0;
+    evaluation.config.perception.camera_fails_at_s = fails_at;
+    for seed in 1..=3 {
+        let (metrics, trace) = run_qp(&evaluation, seed);
+        assert_eq!(metrics.violations, 0, "seed {seed}: {metrics:?}");
+        assert!(metrics.task_time_s.is_none(), "seed {seed} finished its task");
+        let after: Vec<f64> = trace
+            .t_s
+            .iter()
+            .zip(&trace.command_rad_s)
+            .filter(|(t, _)| **t >= fails_at)
+            .map(|(_, c)| *c)
+            .collect();
+        assert!(!after.is_empty());
+        for (k, pair) in after.windows(2).enumerate() {
+            assert!(
+                pair[1] <= pair[0] + 1e-12,
+                "seed {seed}: the command grew {k} ticks after the failure: {pair:?}"
+            );
+        }
+        let period = evaluation.config.control_period_s;
+        let moving = after.iter().filter(|c| **c > 0.0).count();
+        assert!(
+            moving as f64 * period <= 0.5,
+            "seed {seed}: still commanding motion {} s after the failure",
+            moving as f64 * period
+        );
+        // Before the failure the robot was working.
+        let before = trace
+            .t_s
+            .iter()
+            .zip(&trace.command_rad_s)
+            .filter(|(t, c)| **t < fails_at && **c > 0.01)
+            .count();
+        assert!(before > 100, "seed {seed}: the robot hardly moved before the failure");
+    }
+}

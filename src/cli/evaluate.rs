@@ -54,10 +54,10 @@ pub enum PerceptionArg {
     GroundTruth,
     /// A 30 Hz camera with noise, dropouts and latency (settings in the file).
     Noisy,
-    /// The cell's camera rendered, ProcNet's forearm mask, render-and-compare
-    /// (`perception.weights`, `perception.camera` in the file).
+    /// The cell's camera rendered, ProcNet's mask of every arm part, the articulated fit
+    /// (`perception.weights`, `.camera`, `.depth`, `.occlusion` in the file).
     Procnet,
-    /// As `procnet` with the forearm's true pixels for its mask: the pose search alone.
+    /// As `procnet` with every arm part's true pixels for its masks: the fit alone.
     PoseGtMasks,
 }
 

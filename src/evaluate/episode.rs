@@ -595,6 +595,7 @@ impl<'a> Run<'a> {
         self.trace.t_s.push(t);
         self.trace.perception_error_m.push(tick_error);
         self.trace.task_speed.push(self.speed);
+        self.trace.command_rad_s.push(command_norm);
         self.trace.speed_scale.push(if nominal_norm > 1e-6 {
             (command_norm / nominal_norm).min(2.0)
         } else {

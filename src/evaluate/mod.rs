@@ -452,6 +452,9 @@ pub struct EpisodeTrace {
     /// The task's speed against its plan (`catch_up_speed`'s re-timing; 1 when on plan).
     #[serde(with = "lossless::vec", default)]
     pub task_speed: Vec<f64>,
+    /// The norm of the filtered joint velocity command, rad/s.
+    #[serde(with = "lossless::vec", default)]
+    pub command_rad_s: Vec<f64>,
     /// Mean distance of the estimated parts' end points from the true ones, m (`None` when
     /// perception delivers no human).
     #[serde(with = "lossless::vec_option")]

@@ -52,11 +52,16 @@ pub struct PerceptionConfig {
     /// occlusion). Default 0.
     pub occlusion: f64,
     /// For `procnet`: the factor on the fit's curvature uncertainty
-    /// (`ArmFitConfig::uncertainty_scale`); 0 takes the factor measured for the masks and
-    /// depth chosen (`workcell_perception::pose::calibrated_uncertainty_scale`). Default 0.
+    /// (`ArmFitConfig::uncertainty_scale`); negative takes the one calibrated for the masks
+    /// and depth chosen (`workcell_perception::pose::Calibration::measured`). Default -1.
     pub uncertainty_scale: f64,
-    /// For `procnet`: the camera delivers no frame from this time on, s (a failed camera);
-    /// negative for never. Default -1.
+    /// For `procnet`: the uncertainty's floor, m (`ArmFitConfig::uncertainty_floor_m`);
+    /// negative takes the calibrated one. Default -1.
+    pub uncertainty_floor_m: f64,
+    /// The camera delivers nothing from this time on, s (a failed camera; perception
+    /// switched off mid-episode); negative for never. `procnet` ages its last estimate out
+    /// ([`super::procnet::MAX_AGE_S`]); the others report no human at once. Either way the
+    /// filter then brakes. Default -1.
     pub camera_fails_at_s: f64,
     /// Camera frame rate, Hz. Default 30.
     pub rate_hz: f64,
@@ -113,7 +118,8 @@ impl Default for PerceptionConfig {
             masks: MaskKind::Network,
             depth: false,
             occlusion: 0.0,
-            uncertainty_scale: 0.0,
+            uncertainty_scale: -1.0,
+            uncertainty_floor_m: -1.0,
             camera_fails_at_s: -1.0,
             rate_hz: 30.0,
             position_noise_m: 0.01,
@@ -209,7 +215,12 @@ impl PerceptionConfig {
         check(
             "uncertainty_scale",
             self.uncertainty_scale,
-            self.uncertainty_scale >= 0.0,
+            self.uncertainty_scale.is_finite(),
+        )?;
+        check(
+            "uncertainty_floor_m",
+            self.uncertainty_floor_m,
+            self.uncertainty_floor_m.is_finite(),
         )?;
         check(
             "camera_fails_at_s",
@@ -243,22 +254,32 @@ impl PerceptionConfig {
         scenario: &workcell_sim::Scenario,
         model: &CellModel,
     ) -> crate::error::Result<Box<dyn HumanPerception>> {
-        Ok(match self.kind {
+        let inner: Box<dyn HumanPerception> = match self.kind {
             PerceptionKind::GroundTruth if self.foresight_s > 0.0 => {
                 Box::new(Foresight::new(self.foresight_s, model)?)
             }
             PerceptionKind::GroundTruth => Box::new(GroundTruth),
             PerceptionKind::Noisy => Box::new(NoisyCamera::new(self.clone(), seed)),
             PerceptionKind::Procnet => {
-                Box::new(super::procnet::ProcNetCamera::new(self, scenario, model)?)
+                return Ok(Box::new(super::procnet::ProcNetCamera::new(
+                    self, scenario, model,
+                )?));
             }
+        };
+        Ok(if self.camera_fails_at_s >= 0.0 {
+            Box::new(CameraFailure {
+                inner,
+                at_s: self.camera_fails_at_s,
+            })
+        } else {
+            inner
         })
     }
 
     /// A short description for reports, without building anything.
     #[must_use]
     pub fn describe(&self) -> String {
-        match self.kind {
+        let base = match self.kind {
             PerceptionKind::GroundTruth if self.foresight_s > 0.0 => {
                 foresight_name(self.foresight_s)
             }
@@ -285,6 +306,33 @@ impl PerceptionConfig {
                 },
                 self.latency_s * 1e3
             ),
+        };
+        if self.camera_fails_at_s >= 0.0 {
+            format!("{base}, failing at {} s", self.camera_fails_at_s)
+        } else {
+            base
+        }
+    }
+}
+
+/// A perception that reports no human from `at_s` on (`perception.camera_fails_at_s`).
+struct CameraFailure {
+    inner: Box<dyn HumanPerception>,
+    at_s: f64,
+}
+
+impl HumanPerception for CameraFailure {
+    fn name(&self) -> String {
+        format!("{}, failing at {} s", self.inner.name(), self.at_s)
+    }
+
+    fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
+        if input.t_s < self.at_s {
+            self.inner.estimate(input, out);
+        } else {
+            out.parts.clear();
+            out.uncertainty_m = 0.0;
+            out.uncertainty_rate_m_s = 0.0;
         }
     }
 }

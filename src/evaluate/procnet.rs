@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 
-use workcell_perception::pose::{ArmFitConfig, ArmMasks, calibrated_uncertainty_scale};
+use workcell_perception::pose::{ArmFitConfig, ArmMasks, Calibration};
 use workcell_perception::{ArmTracker, Backend, NoEstimate, ProcNet};
 use workcell_safety::{HumanEstimate, HumanGeometry};
 use workcell_sim::render::occlusion::{Occluder, OccluderKind, fit_occluder};
@@ -87,14 +87,20 @@ impl ProcNetCamera {
             .camera()
             .map_err(workcell_sim::SimError::from)?;
         let network = config.masks == MaskKind::Network;
-        let fit = ArmFitConfig {
-            uncertainty_scale: if config.uncertainty_scale > 0.0 {
+        let measured = Calibration::measured(network, config.depth);
+        let fit = Calibration {
+            scale: if config.uncertainty_scale >= 0.0 {
                 config.uncertainty_scale
             } else {
-                calibrated_uncertainty_scale(network, config.depth)
+                measured.scale
             },
-            ..ArmFitConfig::default()
-        };
+            floor_m: if config.uncertainty_floor_m >= 0.0 {
+                config.uncertainty_floor_m
+            } else {
+                measured.floor_m
+            },
+        }
+        .apply(ArmFitConfig::default());
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
         if network {
             let net = ProcNet::load(&config.weights, Backend::Flex).map_err(|e| Error::At {

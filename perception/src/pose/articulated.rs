@@ -47,9 +47,10 @@
 //! displacements that cost two mask pixels, correlated joints included: far away, moving the
 //! arm along the line of sight takes both shoulder angles), mapped through the forearm's
 //! kinematics to metres at its centre and its far end (scaled by
-//! [`ArmFitConfig::uncertainty_scale`]); and the farthest the surviving
-//! hypotheses put the forearm's centre or wrist from the best's. [`ArmFit::uncertainty_m`]
-//! is the larger.
+//! [`ArmFitConfig::uncertainty_scale`], plus [`ArmFitConfig::uncertainty_floor_m`]); and the
+//! farthest the surviving hypotheses put the forearm's centre or wrist from the best's.
+//! [`ArmFit::uncertainty_m`] is the larger. Calibrated ([`Calibration`]), 99 % of a split's
+//! frames have their forearm's centre and wrist within it.
 
 use std::sync::Arc;
 
@@ -109,6 +110,9 @@ pub struct ArmFitConfig {
     pub hessian_step_rad: f64,
     /// The curvature part of the uncertainty is scaled by this. Default 1.
     pub uncertainty_scale: f64,
+    /// Added to the scaled curvature part, m: the error that no curvature shows (masks
+    /// that put the arm a little off everywhere). Default 0.
+    pub uncertainty_floor_m: f64,
     /// With a depth image: the spread of a part's seen surface about its model's, m.
     /// Default 0.03.
     pub depth_sigma_m: f64,
@@ -139,23 +143,45 @@ impl Default for ArmFitConfig {
             distinct_m: 0.03,
             hessian_step_rad: 0.02,
             uncertainty_scale: 1.0,
+            uncertainty_floor_m: 0.0,
             depth_sigma_m: 0.03,
             depth_weight: 0.05,
         }
     }
 }
 
-/// The factor on the fit's curvature uncertainty ([`ArmFitConfig::uncertainty_scale`])
-/// that put 99 % of the validation split's frames within the reported bound, for masks from
-/// a network (the shipped ProcNet) or from the renderer (true masks), with or without depth
-/// (`workcell eval pose --split validation`, docs/perception.md).
-#[must_use]
-pub fn calibrated_uncertainty_scale(network: bool, depth: bool) -> f64 {
-    match (network, depth) {
-        (false, true) => 9.66,
-        (false, false) => 9.66,
-        (true, true) => 9.66,
-        (true, false) => 9.66,
+/// The uncertainty's calibration for one source of masks: `scale` and `floor_m` of
+/// [`ArmFitConfig`], fitted on the validation split so that 99 % of its frames have the
+/// forearm's centre and wrist within the bound (`scripts/calibrate_uncertainty.py`, on the
+/// per-frame CSV of `workcell eval pose --split validation`; docs/perception.md).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Calibration {
+    pub scale: f64,
+    pub floor_m: f64,
+}
+
+impl Calibration {
+    /// The calibration measured for masks from the shipped ProcNet (`network`) or from the
+    /// renderer (true masks), with or without depth.
+    #[must_use]
+    pub fn measured(network: bool, depth: bool) -> Self {
+        let (scale, floor_m) = match (network, depth) {
+            (false, true) => (0.0, 0.0196),
+            (false, false) => (0.0, 0.0196),
+            (true, true) => (0.0, 0.0689),
+            (true, false) => (0.0, 0.0689),
+        };
+        Self { scale, floor_m }
+    }
+
+    /// `config` with this calibration.
+    #[must_use]
+    pub fn apply(self, config: ArmFitConfig) -> ArmFitConfig {
+        ArmFitConfig {
+            uncertainty_scale: self.scale,
+            uncertainty_floor_m: self.floor_m,
+            ..config
+        }
     }
 }
 
@@ -604,7 +630,7 @@ impl<R: Renderer> ArmFitter<R> {
             part_gain: climb.score.part_gain,
             sigma_q,
             spread_m,
-            uncertainty_m: (c.uncertainty_scale * sigma_m).max(spread_m),
+            uncertainty_m: (c.uncertainty_scale * sigma_m + c.uncertainty_floor_m).max(spread_m),
             reacquired,
             renders: self.renders,
         }))

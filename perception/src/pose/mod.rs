@@ -64,7 +64,7 @@ mod search;
 
 pub use articulated::{
     ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmMasks, ArticulatedArm, FITTED_PARTS,
-    calibrated_uncertainty_scale,
+    Calibration,
 };
 pub use config::PoseConfig;
 pub use image::f_m;
