@@ -52,6 +52,9 @@ enum Command {
     Train(cli::perception::TrainArgs),
     /// Time ProcNet's training step and inference per backend (JSON lines).
     Bench(cli::perception::BenchArgs),
+    /// Time perception frame by frame on the cell's camera: ProcNet and the articulated
+    /// fit, a table of each stage.
+    BenchPerception(cli::evaluate::BenchPerceptionArgs),
     /// Evaluate trained models.
     Eval {
         #[command(subcommand)]
@@ -157,6 +160,7 @@ fn main() -> ExitCode {
         } => cli::dataset::stats(&a),
         Command::Train(a) => cli::perception::train(&a),
         Command::Bench(a) => cli::perception::bench(&a),
+        Command::BenchPerception(a) => cli::evaluate::bench_perception(&a),
         Command::Eval {
             command: EvalCommand::Segmentation(a),
         } => cli::perception::eval_segmentation(&a),

@@ -462,7 +462,7 @@ impl ArmTracker {
             mut masks,
         } = self.segment(camera, rgb)?;
         masks.depth_m = depth_m.map(|d| roi.sample_nearest(d, w, h, DEFAULT_INPUT_PX));
-        self.fit(&roi_camera, &masks)
+        self.track_roi(&roi_camera, &masks)
     }
 
     /// One frame given as masks at the camera's resolution (a perfect segmenter's, or
@@ -505,7 +505,7 @@ impl ArmTracker {
                 None => None,
             },
         };
-        self.fit(&roi.camera(camera, s as u32)?, &cropped)
+        self.track_roi(&roi.camera(camera, s as u32)?, &cropped)
     }
 
     /// A frame the camera did not deliver: no estimate. The track is kept; the next frame
@@ -514,8 +514,12 @@ impl ArmTracker {
         Err(NoEstimate::NoFrame)
     }
 
-    /// The articulated fit of masks already in the region of interest's camera.
-    fn fit(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmOutcome> {
+    /// One frame given as masks already in the region of interest's camera (what
+    /// [`ArmTracker::segment`] returns, with the depth there if there is one).
+    ///
+    /// # Errors
+    /// As [`ArmFitter::fit`].
+    pub fn track_roi(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmOutcome> {
         let fit = match self.fitter.fit(camera, masks)? {
             Ok(fit) => fit,
             Err(reason) => {

@@ -559,3 +559,93 @@ pub fn announce(record: &RunRecord, out: &Path) -> usize {
     }
     violating.len()
 }
+
+#[derive(Debug, clap::Args)]
+pub struct BenchPerceptionArgs {
+    /// Evaluation file whose cell, camera and `[perception]` settings are timed.
+    #[arg(default_value = "configs/evaluate.toml")]
+    pub evaluation: PathBuf,
+    /// Frames of the cell's camera, at its rate from the start of the episode (1 to 100,000).
+    #[arg(long, default_value_t = 300, value_parser = super::count_in::<1, 100_000>)]
+    pub frames: usize,
+    /// Seed of the episode (the human's motion).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The camera measures depth: the fit uses it (sets `perception.depth`).
+    #[arg(long)]
+    pub depth: bool,
+    /// CPU threads of the network (1 to 256; the fit runs on one).
+    #[arg(long, default_value_t = 2, value_parser = super::count_in::<1, { super::MAX_THREADS }>)]
+    pub threads: usize,
+    /// Override a key of the evaluation file (repeatable; TOML values).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+}
+
+/// Times ProcNet and the articulated fit frame by frame on the cell's camera and prints a
+/// table: each stage's mean, median, 95th percentile and worst, and the share of frames
+/// within a 30 Hz camera's 33.3 ms.
+pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
+    let mut overrides = args.overrides.clone();
+    if args.depth {
+        overrides.push("perception.depth = true".into());
+    }
+    let evaluation = Evaluation::from_file_with(&args.evaluation, &overrides)?;
+    workcell::perception::backend::set_threads(args.threads);
+    let bar = super::progress_bar(args.frames as u64, "{spinner} frames [{bar:40}] {pos}/{len}");
+    let timings = workcell::evaluate::procnet::bench_tracker(
+        &evaluation,
+        args.seed,
+        args.frames,
+        |k| bar.set_position(k as u64),
+    )?;
+    bar.finish_and_clear();
+    let p = &evaluation.config.perception;
+    say!(
+        "perception on {} frames of the cell's camera ({}; seed {}), {}, network on {} thread(s)",
+        timings.len(),
+        args.evaluation.display(),
+        args.seed,
+        if p.depth { "RGB-D" } else { "RGB" },
+        args.threads,
+    );
+    say!();
+    say!("| stage | frames | mean (ms) | median (ms) | 95th pct (ms) | worst (ms) |");
+    say!("|---|---|---|---|---|---|");
+    let row = |name: &str, v: Vec<f64>| {
+        if v.is_empty() {
+            say!("| {name} | 0 | - | - | - | - |");
+            return;
+        }
+        let mut s = v.clone();
+        s.sort_by(f64::total_cmp);
+        let q = |f: f64| s[((f * s.len() as f64) as usize).min(s.len() - 1)];
+        say!(
+            "| {name} | {} | {:.1} | {:.1} | {:.1} | {:.1} |",
+            s.len(),
+            s.iter().sum::<f64>() / s.len() as f64,
+            q(0.5),
+            q(0.95),
+            s[s.len() - 1]
+        );
+    };
+    let pick = |f: &dyn Fn(&workcell::evaluate::procnet::FrameTiming) -> Option<f64>| -> Vec<f64> {
+        timings.iter().filter_map(f).collect()
+    };
+    row("render (the simulator's camera)", pick(&|t| Some(t.render_ms)));
+    row("network (region of interest + ProcNet)", pick(&|t| Some(t.network_ms)));
+    row("fit, tracked frames", pick(&|t| (!t.reacquired).then_some(t.fit_ms)));
+    row("fit, re-acquired frames", pick(&|t| t.reacquired.then_some(t.fit_ms)));
+    let total = pick(&|t| Some(t.network_ms + t.fit_ms));
+    let within = total.iter().filter(|&&ms| ms <= 1e3 / 30.0).count();
+    row("**network + fit**", total);
+    say!();
+    say!(
+        "{} of {} frames gave an estimate; {} of {} within 33.3 ms (a 30 Hz camera's period)",
+        timings.iter().filter(|t| t.estimate).count(),
+        timings.len(),
+        within,
+        timings.len()
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -285,6 +285,87 @@ impl HumanPerception for ProcNetCamera {
     }
 }
 
+/// One frame of [`bench_tracker`]: milliseconds per stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameTiming {
+    /// The simulator's camera (not perception's work).
+    pub render_ms: f64,
+    /// The region of interest resampled and segmented by the network.
+    pub network_ms: f64,
+    /// The articulated fit.
+    pub fit_ms: f64,
+    /// The fit searched globally (first frame, lost track).
+    pub reacquired: bool,
+    /// The frame gave an estimate.
+    pub estimate: bool,
+}
+
+/// Times perception on `frames` frames of the cell's camera at its rate, from the start of
+/// episode `seed` of `evaluation` with the robot on its nominal path: the network (its
+/// weights, `perception.weights`) and the articulated fit, with the depth image when
+/// `perception.depth` is set, one thread each as in the loop.
+///
+/// # Errors
+/// The cell, its camera or the weights do not load; the simulator fails.
+pub fn bench_tracker(
+    evaluation: &super::Evaluation,
+    seed: u64,
+    frames: usize,
+    mut progress: impl FnMut(usize),
+) -> Result<Vec<FrameTiming>> {
+    use std::time::Instant;
+    let c = &evaluation.config.perception;
+    let mut scenario = evaluation.scenario.clone();
+    scenario.seed = seed;
+    let model = CellModel::new(&scenario, &evaluation.scenario_path)?;
+    let config = PerceptionConfig {
+        masks: MaskKind::Network,
+        ..c.clone()
+    };
+    let mut camera = ProcNetCamera::new(&config, &scenario, &model)?;
+    let mut state = workcell_sim::CellState::new(&model)?;
+    let dt = model.time_step_s();
+    let period = 1.0 / camera.config.rate_hz;
+    let mut out = Vec::with_capacity(frames);
+    let mut t = 0.0;
+    for k in 0..frames {
+        while t + 1e-9 < k as f64 * period {
+            workcell_sim::step(&model, &mut state, &workcell_sim::RobotCommand::Nominal)?;
+            t += dt;
+        }
+        let t0 = Instant::now();
+        camera.scene.update(&state);
+        camera
+            .renderer
+            .render(&camera.scene.scene, &camera.camera, &mut camera.frame)
+            .map_err(workcell_sim::SimError::from)?;
+        let t1 = Instant::now();
+        let mut roi = camera.tracker.segment(&camera.camera, &camera.frame.rgb)?;
+        if config.depth {
+            let (w, h) = (camera.camera.width as usize, camera.camera.height as usize);
+            roi.masks.depth_m = Some(roi.roi.sample_nearest(
+                &camera.frame.depth_m,
+                w,
+                h,
+                roi.masks.width,
+            ));
+        }
+        let t2 = Instant::now();
+        let outcome = camera.tracker.track_roi(&roi.camera, &roi.masks)?;
+        let t3 = Instant::now();
+        let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+        out.push(FrameTiming {
+            render_ms: ms(t0, t1),
+            network_ms: ms(t1, t2),
+            fit_ms: ms(t2, t3),
+            reacquired: outcome.as_ref().is_ok_and(|e| e.fit.reacquired),
+            estimate: outcome.is_ok(),
+        });
+        progress(k + 1);
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
