@@ -41,7 +41,7 @@ diff -rq "$C/old_dataset" "$C/new_dataset" -x manifest.json -x '*.txt' && echo "
 same "dataset manifest (without the human record)" "$C/old_dataset/manifest.json" "$C/new_dataset/manifest.json" \
   no_human
 for f in qp none; do
-  run "eval_$f" evaluate configs/evaluate.toml --episodes 20 --seed 1 --filter "$f"
+  run "eval_$f" evaluate configs/evaluate.toml --episodes 20 --seed 1 --filter "$f" --perception noisy
   same "evaluate --filter $f: summary.md" "$C/old_eval_$f/summary.md" "$C/new_eval_$f/summary.md" no_timing
   same "evaluate --filter $f: metrics.csv" "$C/old_eval_$f/metrics.csv" "$C/new_eval_$f/metrics.csv" csv_no_timing
 done

@@ -22,7 +22,7 @@ for d_min in 0.05 0.10 0.15; do
         dir="$out/d${d_min}-g${gamma}"
         if [ ! -f "$dir/metrics.csv" ]; then
             "$bin" evaluate configs/evaluate.toml --episodes "$episodes" --seed 1 --filter qp \
-                --set "safety.d_min_m=$d_min" --set "safety.gamma_per_s=$gamma" \
+                --perception noisy --set "safety.d_min_m=$d_min" --set "safety.gamma_per_s=$gamma" \
                 --set "safety.detection_m=$detection" --out "$dir" --force >/dev/null
         fi
         python3 - "$dir/metrics.csv" "$d_min" "$gamma" "$detection" <<'PY'

@@ -82,6 +82,28 @@ fn counts_beyond_their_limits_are_refused_by_the_parser() {
             vec!["eval", "pose", "--threads", "0"],
             "0 is not from 1 to 256",
         ),
+        (
+            vec!["bench-perception", "--frames", "0"],
+            "0 is not from 1 to 100000",
+        ),
+        (
+            vec![
+                "evaluate",
+                "configs/evaluate.toml",
+                "--set",
+                "perception.occlusion=1.5",
+            ],
+            "perception.occlusion: out of range: 1.5",
+        ),
+        (
+            vec![
+                "evaluate",
+                "configs/evaluate.toml",
+                "--set",
+                "perception.camera_fails_at_s=nan",
+            ],
+            "perception.camera_fails_at_s",
+        ),
     ] {
         refused(&args, needle);
     }

@@ -33,7 +33,9 @@ fn pose_of(track: &Track, k: usize) -> Pose {
 fn an_episode_reads_back_with_the_simulations_poses() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate.toml");
     let text = std::fs::read_to_string(&path).expect("evaluate.toml");
-    let text = apply_overrides(&text, &["task_s=3".into()], &path).expect("override");
+    // The noisy camera model: the replay's poses, not perception, are under test.
+    let overrides = ["task_s=3".into(), "perception.kind=\"noisy\"".into()];
+    let text = apply_overrides(&text, &overrides, &path).expect("override");
     let evaluation = Evaluation::from_toml(&text, &path).expect("evaluation");
     let seed = 2;
     let (metrics, _, recording) =

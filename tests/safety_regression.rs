@@ -162,10 +162,17 @@ fn episodes_are_deterministic() {
     );
 }
 
-/// The README's evaluation (`configs/evaluate.toml`).
+/// The README's evaluation (`configs/evaluate.toml`) with the noisy camera model its filter
+/// cases were found with (`--perception noisy`): these tests are about the filter and the
+/// controller, at the simulator's speed; ProcNet perception has its own case in
+/// tests/scenarios/expectations.toml.
 fn readme_evaluation() -> Evaluation {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    Evaluation::from_file(&root.join("configs/evaluate.toml")).expect("evaluation loads")
+    Evaluation::from_file_with(
+        &root.join("configs/evaluate.toml"),
+        &["perception.kind = \"noisy\"".into()],
+    )
+    .expect("evaluation loads")
 }
 
 /// The README's evaluation with the filter the older cases were found with: one that reacts
@@ -477,7 +484,10 @@ fn a_camera_that_fails_mid_episode_stops_the_robot_without_a_violation() {
     for seed in 1..=3 {
         let (metrics, trace) = run_qp(&evaluation, seed);
         assert_eq!(metrics.violations, 0, "seed {seed}: {metrics:?}");
-        assert!(metrics.task_time_s.is_none(), "seed {seed} finished its task");
+        assert!(
+            metrics.task_time_s.is_none(),
+            "seed {seed} finished its task"
+        );
         let after: Vec<f64> = trace
             .t_s
             .iter()
@@ -506,6 +516,9 @@ fn a_camera_that_fails_mid_episode_stops_the_robot_without_a_violation() {
             .zip(&trace.command_rad_s)
             .filter(|(t, c)| **t < fails_at && **c > 0.01)
             .count();
-        assert!(before > 100, "seed {seed}: the robot hardly moved before the failure");
+        assert!(
+            before > 100,
+            "seed {seed}: the robot hardly moved before the failure"
+        );
     }
 }

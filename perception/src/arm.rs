@@ -543,18 +543,19 @@ impl ArmTracker {
                 })
             })
             .collect();
-        let wrist = parts
-            .iter()
-            .find(|p| p.part == HumanPart::Forearm)
-            .map_or(X_WL[2].translation, |p| {
-                // The capsule's end away from the elbow.
-                let e = X_WL[1].translation;
-                if (p.a_W - e).length() > (p.b_W - e).length() {
-                    p.a_W
-                } else {
-                    p.b_W
-                }
-            });
+        let wrist =
+            parts
+                .iter()
+                .find(|p| p.part == HumanPart::Forearm)
+                .map_or(X_WL[2].translation, |p| {
+                    // The capsule's end away from the elbow.
+                    let e = X_WL[1].translation;
+                    if (p.a_W - e).length() > (p.b_W - e).length() {
+                        p.a_W
+                    } else {
+                        p.b_W
+                    }
+                });
         self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist]);
         Ok(Ok(ArmEstimate {
             parts,
@@ -667,19 +668,17 @@ mod tests {
 
     /// What a perfect segmenter and a depth camera give of `human`'s arm at `q`: the three
     /// parts rendered together (z-buffered) as masks, with the depth image.
-    fn observe(
-        human: &RobotModel,
-        tracker: &ArmTracker,
-        camera: &Camera,
-        q: &[f64],
-    ) -> ArmMasks {
+    fn observe(human: &RobotModel, tracker: &ArmTracker, camera: &Camera, q: &[f64]) -> ArmMasks {
         let arm = tracker.articulated();
         let poses = arm.part_poses(q, &Pose::IDENTITY).expect("poses");
         let mut scene = workcell_render::Scene::default();
         for (p, part) in FITTED_PARTS.into_iter().enumerate() {
             let mut mesh = RenderMesh::default();
             for g in &human.links()[arm.part_links()[p]].visuals {
-                mesh.append(&RenderMesh::from_geometry(g, [0.8, 0.7, 0.6]), &Pose::IDENTITY);
+                mesh.append(
+                    &RenderMesh::from_geometry(g, [0.8, 0.7, 0.6]),
+                    &Pose::IDENTITY,
+                );
             }
             scene.push(workcell_render::SceneObject {
                 name: part.name().into(),
@@ -805,7 +804,12 @@ mod tests {
         assert!(inside(u, tracked.x0) && inside(v, tracked.y0));
         // A lost track falls back to the workspace.
         let empty = ArmMasks::from_classes(&vec![0; 640 * 480], 640, 480).expect("masks");
-        assert!(tracker.track_masks(&camera, &empty).expect("no error").is_err());
+        assert!(
+            tracker
+                .track_masks(&camera, &empty)
+                .expect("no error")
+                .is_err()
+        );
         assert_eq!(tracker.roi(&camera), workspace);
     }
 

@@ -592,13 +592,14 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
     }
     let evaluation = Evaluation::from_file_with(&args.evaluation, &overrides)?;
     workcell::perception::backend::set_threads(args.threads);
-    let bar = super::progress_bar(args.frames as u64, "{spinner} frames [{bar:40}] {pos}/{len}");
-    let timings = workcell::evaluate::procnet::bench_tracker(
-        &evaluation,
-        args.seed,
-        args.frames,
-        |k| bar.set_position(k as u64),
-    )?;
+    let bar = super::progress_bar(
+        args.frames as u64,
+        "{spinner} frames [{bar:40}] {pos}/{len}",
+    );
+    let timings =
+        workcell::evaluate::procnet::bench_tracker(&evaluation, args.seed, args.frames, |k| {
+            bar.set_position(k as u64)
+        })?;
     bar.finish_and_clear();
     let p = &evaluation.config.perception;
     say!(
@@ -632,10 +633,22 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
     let pick = |f: &dyn Fn(&workcell::evaluate::procnet::FrameTiming) -> Option<f64>| -> Vec<f64> {
         timings.iter().filter_map(f).collect()
     };
-    row("render (the simulator's camera)", pick(&|t| Some(t.render_ms)));
-    row("network (region of interest + ProcNet)", pick(&|t| Some(t.network_ms)));
-    row("fit, tracked frames", pick(&|t| (!t.reacquired).then_some(t.fit_ms)));
-    row("fit, re-acquired frames", pick(&|t| t.reacquired.then_some(t.fit_ms)));
+    row(
+        "render (the simulator's camera)",
+        pick(&|t| Some(t.render_ms)),
+    );
+    row(
+        "network (region of interest + ProcNet)",
+        pick(&|t| Some(t.network_ms)),
+    );
+    row(
+        "fit, tracked frames",
+        pick(&|t| (!t.reacquired).then_some(t.fit_ms)),
+    );
+    row(
+        "fit, re-acquired frames",
+        pick(&|t| t.reacquired.then_some(t.fit_ms)),
+    );
     let total = pick(&|t| Some(t.network_ms + t.fit_ms));
     let within = total.iter().filter(|&&ms| ms <= 1e3 / 30.0).count();
     row("**network + fit**", total);

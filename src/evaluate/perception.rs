@@ -298,7 +298,11 @@ impl PerceptionConfig {
                     ),
                     MaskKind::GroundTruth => "ground-truth arm masks".to_string(),
                 },
-                if self.depth { " with depth (RGB-D)" } else { "" },
+                if self.depth {
+                    " with depth (RGB-D)"
+                } else {
+                    ""
+                },
                 if self.occlusion > 0.0 {
                     format!(", {:.0} % of the forearm hidden", 100.0 * self.occlusion)
                 } else {

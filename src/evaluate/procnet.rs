@@ -343,12 +343,11 @@ pub fn bench_tracker(
         let mut roi = camera.tracker.segment(&camera.camera, &camera.frame.rgb)?;
         if config.depth {
             let (w, h) = (camera.camera.width as usize, camera.camera.height as usize);
-            roi.masks.depth_m = Some(roi.roi.sample_nearest(
-                &camera.frame.depth_m,
-                w,
-                h,
-                roi.masks.width,
-            ));
+            roi.masks.depth_m =
+                Some(
+                    roi.roi
+                        .sample_nearest(&camera.frame.depth_m, w, h, roi.masks.width),
+                );
         }
         let t2 = Instant::now();
         let outcome = camera.tracker.track_roi(&roi.camera, &roi.masks)?;
@@ -422,7 +421,10 @@ mod tests {
             };
             perception.estimate(&input, &mut out);
             if t < config.latency_s {
-                assert!(out.parts.is_empty(), "an estimate before the first frame arrived");
+                assert!(
+                    out.parts.is_empty(),
+                    "an estimate before the first frame arrived"
+                );
             }
             // Every tenth tick's estimate against the truth then.
             if tick % 10 == 0 && t > 0.5 && !out.parts.is_empty() {
@@ -499,7 +501,11 @@ mod tests {
         perception.scene.update(&state);
         perception
             .renderer
-            .render(&perception.scene.scene, &perception.camera, &mut perception.frame)
+            .render(
+                &perception.scene.scene,
+                &perception.camera,
+                &mut perception.frame,
+            )
             .expect("render");
         let mut classes = perception.frame.classes(&perception.scene.scene);
         let forearm = |c: &[u8]| c.iter().filter(|&&v| v == Class::Forearm as u8).count();

@@ -63,8 +63,8 @@ mod model;
 mod search;
 
 pub use articulated::{
-    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmMasks, ArticulatedArm, FITTED_PARTS,
-    Calibration,
+    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmMasks, ArticulatedArm, Calibration,
+    FITTED_PARTS,
 };
 pub use config::PoseConfig;
 pub use image::f_m;

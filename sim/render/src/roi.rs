@@ -316,7 +316,13 @@ impl Roi {
     /// must not be mixed, such as depth, where the mean of a surface and of "no surface" (0)
     /// is a depth nothing has.
     #[must_use]
-    pub fn sample_nearest(&self, src: &[f32], width: usize, height: usize, out_px: usize) -> Vec<f32> {
+    pub fn sample_nearest(
+        &self,
+        src: &[f32],
+        width: usize,
+        height: usize,
+        out_px: usize,
+    ) -> Vec<f32> {
         let scale = f64::from(self.size) / out_px.max(1) as f64;
         let at = |i: usize, origin: i64| origin + ((i as f64 + 0.5) * scale).floor() as i64;
         let mut out = vec![0f32; out_px * out_px];
@@ -439,6 +445,24 @@ mod tests {
         }
         // The image's mean is kept.
         assert!((out.iter().sum::<f32>() / 4.0 - 4.5).abs() < 1e-5);
+    }
+
+    /// Nearest sampling takes the pixel under each output pixel's centre and never mixes
+    /// values: a 4x4 region of a 6x6 image at 2x2 reads pixels (x0 + 1, y0 + 1) and
+    /// (x0 + 3, y0 + 3) in each direction; past the edges it reads 0.
+    #[test]
+    fn nearest_sampling_takes_the_pixel_under_each_centre() {
+        let src: Vec<f32> = (0..36).map(|v| v as f32).collect();
+        let roi = Roi { x0: 1, y0: 0, size: 4 };
+        // Centres at 1 + 1 = 2 and 1 + 3 = 4 across, 1 and 3 down.
+        assert_eq!(roi.sample_nearest(&src, 6, 6, 2), vec![8.0, 10.0, 20.0, 22.0]);
+        // At its own size it is the crop.
+        assert_eq!(roi.sample_nearest(&src, 6, 6, 4), roi.crop(&src, 1, 6, 6));
+        // A region half past the left and top edges reads 0 there.
+        let out = Roi { x0: -2, y0: -2, size: 4 }.sample_nearest(&src, 6, 6, 4);
+        assert_eq!(&out[..2], &[0.0, 0.0]);
+        assert_eq!(out[2 * 4 + 3], 1.0);
+        assert_eq!(out[3 * 4 + 3], 7.0);
     }
 
     #[test]
