@@ -20,7 +20,7 @@ use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{HumanPart, JointKind, LinkId, PackageMap, RobotModel};
 
 use crate::error::{PerceptionError, Result};
-use crate::image::planar_rgb;
+use crate::image::{planar_rgb_crop, resample};
 use crate::infer::ProcNet;
 use crate::pose::{
     Anchor, ArmFit, ArmFitConfig, ArmFitter, ArmMasks, ArticulatedArm, FITTED_PARTS, NoPose,
@@ -430,7 +430,8 @@ impl ArmTracker {
             message: "this tracker has no network; give it masks with track_masks".into(),
         })?;
         let s = DEFAULT_INPUT_PX;
-        let input = roi.resample(&planar_rgb(rgb, w, h), 3, w, h, s);
+        let size = roi.size as usize;
+        let input = resample(&planar_rgb_crop(rgb, w, h, &roi), 3, size, size, s, s);
         let planes = net.planes(&input, s, s)?;
         let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
         Ok(RoiMasks {
