@@ -61,8 +61,16 @@ mod tests {
         let (w, h) = (7, 5);
         let rgb: Vec<u8> = (0..w * h * 3).map(|v| (v * 7 % 256) as u8).collect();
         for roi in [
-            workcell_render::roi::Roi { x0: 1, y0: 1, size: 3 },
-            workcell_render::roi::Roi { x0: -2, y0: 3, size: 4 },
+            workcell_render::roi::Roi {
+                x0: 1,
+                y0: 1,
+                size: 3,
+            },
+            workcell_render::roi::Roi {
+                x0: -2,
+                y0: 3,
+                size: 4,
+            },
         ] {
             assert_eq!(
                 planar_rgb_crop(&rgb, w, h, &roi),

@@ -453,13 +453,25 @@ mod tests {
     #[test]
     fn nearest_sampling_takes_the_pixel_under_each_centre() {
         let src: Vec<f32> = (0..36).map(|v| v as f32).collect();
-        let roi = Roi { x0: 1, y0: 0, size: 4 };
+        let roi = Roi {
+            x0: 1,
+            y0: 0,
+            size: 4,
+        };
         // Centres at 1 + 1 = 2 and 1 + 3 = 4 across, 1 and 3 down.
-        assert_eq!(roi.sample_nearest(&src, 6, 6, 2), vec![8.0, 10.0, 20.0, 22.0]);
+        assert_eq!(
+            roi.sample_nearest(&src, 6, 6, 2),
+            vec![8.0, 10.0, 20.0, 22.0]
+        );
         // At its own size it is the crop.
         assert_eq!(roi.sample_nearest(&src, 6, 6, 4), roi.crop(&src, 1, 6, 6));
         // A region half past the left and top edges reads 0 there.
-        let out = Roi { x0: -2, y0: -2, size: 4 }.sample_nearest(&src, 6, 6, 4);
+        let out = Roi {
+            x0: -2,
+            y0: -2,
+            size: 4,
+        }
+        .sample_nearest(&src, 6, 6, 4);
         assert_eq!(&out[..2], &[0.0, 0.0]);
         assert_eq!(out[2 * 4 + 3], 1.0);
         assert_eq!(out[3 * 4 + 3], 7.0);
