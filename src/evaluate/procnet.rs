@@ -152,12 +152,18 @@ impl ProcNetCamera {
         self.renderer
             .render(&self.scene.scene, &self.camera, &mut self.frame)
             .map_err(workcell_sim::SimError::from)?;
-        let mut classes = self.frame.classes(&self.scene.scene);
+        // The class image: for the occluder and the perfect segmenter only.
+        let network = self.tracker.network().is_some();
+        let mut classes = if self.config.occlusion > 0.0 || !network {
+            self.frame.classes(&self.scene.scene)
+        } else {
+            Vec::new()
+        };
         if self.config.occlusion > 0.0 {
             self.occlude(&mut classes);
         }
         let depth = self.config.depth.then_some(self.frame.depth_m.as_slice());
-        let outcome = if self.tracker.network().is_some() {
+        let outcome = if network {
             self.tracker.track(&self.camera, &self.frame.rgb, depth)?
         } else {
             // The perfect segmenter: each part's pixels in the frame.
