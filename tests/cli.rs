@@ -859,17 +859,17 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     assert_eq!(csv.lines().count(), 3, "header and one row per episode");
     let summary = std::fs::read_to_string(out_dir.join("summary.md")).expect("summary");
     assert!(summary.contains("## Verdict") && summary.contains("![separation](separation.png)"));
-    // ProcNet and render-and-compare in the loop: the camera is rendered, segmented and fitted
-    // at its rate, and the report says so.
+    // ProcNet and the articulated fit in the loop: the camera is rendered, segmented and
+    // fitted at its rate, and the report says so.
     for (perception, name) in [
         // The shipped weights by default, wherever the evaluation file is.
         (
             "procnet",
-            "perception/weights/procnet-cpu.safetensors) + render-and-compare",
+            "perception/weights/procnet-cpu.safetensors) + articulated render-and-compare",
         ),
         (
             "pose-gt-masks",
-            "ground-truth forearm masks + render-and-compare",
+            "ground-truth arm masks + articulated render-and-compare",
         ),
     ] {
         let loop_dir = dir.path().join(perception);

@@ -88,7 +88,7 @@ pub struct PerceptionConfig {
     pub foresight_s: f64,
 }
 
-/// Where the `procnet` perception's forearm masks come from.
+/// Where the `procnet` perception's masks of the arm come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MaskKind {
