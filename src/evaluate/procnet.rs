@@ -385,6 +385,27 @@ mod tests {
         (scenario, model)
     }
 
+    /// One control tick: the cell stepped by `dt`, then `perception`'s estimate at the new
+    /// time into `out` (`truth` is what the loop would pass as the true human).
+    fn tick(
+        model: &CellModel,
+        state: &mut CellState,
+        perception: &mut ProcNetCamera,
+        t: &mut f64,
+        truth: &HumanEstimate,
+        out: &mut HumanEstimate,
+    ) {
+        step(model, state, &RobotCommand::Nominal).expect("step");
+        *t += model.time_step_s();
+        let input = PerceptionInput {
+            t_s: *t,
+            model,
+            state,
+            truth,
+        };
+        perception.estimate(&input, out);
+    }
+
     fn perfect_masks() -> PerceptionConfig {
         PerceptionConfig {
             kind: super::super::perception::PerceptionKind::Procnet,
@@ -407,25 +428,24 @@ mod tests {
         let mut kinematics = KinematicState::new(&model.human);
         kinematics.X_WB = model.X_WH;
         let (mut out, mut truth) = (HumanEstimate::default(), HumanEstimate::default());
-        let dt = model.time_step_s();
         let mut t = 0.0;
-        let (mut checked, mut tick) = (0, 0);
-        while t < 2.0 {
-            tick += 1;
-            step(&model, &mut state, &RobotCommand::Nominal).expect("step");
-            t += dt;
+        let (mut checked, mut ticks) = (0, 0);
+        // Four seconds: the human reaches in (up to about 0.5 m/s at the wrist) after two.
+        while t < 4.0 {
+            ticks += 1;
+            tick(
+                &model,
+                &mut state,
+                &mut perception,
+                &mut t,
+                &truth,
+                &mut out,
+            );
             model
                 .human
                 .forward_kinematics(state.human_q(), &mut kinematics)
                 .expect("fk");
             geometry.estimate_into(&model.human, &kinematics, state.human_qd(), &mut truth);
-            let input = PerceptionInput {
-                t_s: t,
-                model: &model,
-                state: &state,
-                truth: &truth,
-            };
-            perception.estimate(&input, &mut out);
             if t < config.latency_s {
                 assert!(
                     out.parts.is_empty(),
@@ -433,7 +453,7 @@ mod tests {
                 );
             }
             // Every tenth tick's estimate against the truth then.
-            if tick % 10 == 0 && t > 0.5 && !out.parts.is_empty() {
+            if ticks % 10 == 0 && t > 0.5 && !out.parts.is_empty() {
                 checked += 1;
                 let forearm = |e: &HumanEstimate| {
                     e.parts
@@ -450,9 +470,9 @@ mod tests {
                 assert!(out.uncertainty_m > 0.0 && out.uncertainty_m < 0.5);
             }
         }
-        assert!(checked > 120, "{checked} ticks checked");
+        assert!(checked > 320, "{checked} ticks checked");
         let counts = perception.counts();
-        assert!(counts.frames >= 59 && counts.estimates + counts.no_pose == counts.frames);
+        assert!(counts.frames >= 119 && counts.estimates + counts.no_pose == counts.frames);
     }
 
     /// A camera that stops delivering frames: the estimate ages out after `MAX_AGE_S` and
@@ -471,15 +491,14 @@ mod tests {
         let dt = model.time_step_s();
         let (mut t, mut last_seen) = (0.0, 0.0);
         while t < 1.2 {
-            step(&model, &mut state, &RobotCommand::Nominal).expect("step");
-            t += dt;
-            let input = PerceptionInput {
-                t_s: t,
-                model: &model,
-                state: &state,
-                truth: &truth,
-            };
-            perception.estimate(&input, &mut out);
+            tick(
+                &model,
+                &mut state,
+                &mut perception,
+                &mut t,
+                &truth,
+                &mut out,
+            );
             if !out.parts.is_empty() {
                 last_seen = t;
             }
