@@ -4,12 +4,13 @@
 //! same `ArmTracker` runs beside a real camera.
 //!
 //! `cargo run --release --example perception_on_frames -- out/dataset/seq_00000`
-//! (add `--true-masks` to feed the frames' ground-truth class pixels instead of ProcNet's).
+//! (add `--true-masks` to feed the frames' ground-truth class pixels instead of ProcNet's,
+//! `--depth` to give the fit each frame's depth image, as from an RGB-D camera).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use workcell::perception::pose::{ArmFitConfig, ArmMasks};
+use workcell::perception::pose::{ArmFitConfig, ArmMasks, Calibration};
 use workcell::perception::{ArmTracker, Backend, ProcNet};
 use workcell::render::dataset::{FrameLabels, Manifest};
 use workcell::render::image::{PixelKind, read_png};
@@ -20,10 +21,18 @@ use workcell::robots::{PackageMap, RobotModel};
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let dir = PathBuf::from(args.next().context(
-        "usage: perception_on_frames SEQUENCE_DIR [--true-masks] (a folder of \
+        "usage: perception_on_frames SEQUENCE_DIR [--true-masks] [--depth] (a folder of \
          frame_NNN_rgb.png with their frame_NNN.json, e.g. out/dataset/seq_00000)",
     )?);
-    let true_masks = args.any(|a| a == "--true-masks");
+    let mut true_masks = false;
+    let mut depth = false;
+    for arg in args {
+        match arg.as_str() {
+            "--true-masks" => true_masks = true,
+            "--depth" => depth = true,
+            other => bail!("unknown option {other:?} (--true-masks, --depth)"),
+        }
+    }
 
     // The human: its model and where it stands. A dataset's manifest records both; beside a
     // real camera they come from the cell's set-up.
@@ -39,7 +48,10 @@ fn main() -> anyhow::Result<()> {
     // What the frames show of it: its flesh, or the paper's bones.
     model.retain_visuals(|g| human.look.shows(g.name.as_deref()));
     let X_WH = Pose::from(&human.X_WH);
-    let mut tracker = ArmTracker::new(&model, &X_WH, ArmFitConfig::default())?;
+    // The radius to inflate the capsules by, as measured for these masks and this camera
+    // (docs/perception.md): 99 % of the validation split's frames within it.
+    let config = Calibration::measured(!true_masks, depth).apply(ArmFitConfig::default());
+    let mut tracker = ArmTracker::new(&model, &X_WH, config)?;
     if !true_masks {
         let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("perception/weights/procnet-cpu.safetensors");
@@ -61,16 +73,25 @@ fn main() -> anyhow::Result<()> {
         let labels: FrameLabels =
             serde_json::from_slice(&std::fs::read(dir.join(format!("frame_{t:03}.json")))?)?;
         let camera = Camera::from(&labels.camera);
+        let depth_m = if depth {
+            Some(read_depth(
+                &dir.join(format!("frame_{t:03}_depth.png")),
+                &camera,
+            )?)
+        } else {
+            None
+        };
         let outcome = if true_masks {
             let (w, h, _, classes) = read_png(&dir.join(format!("frame_{t:03}_class.png")))?;
-            let masks = ArmMasks::from_classes(&classes, w as usize, h as usize)?;
+            let mut masks = ArmMasks::from_classes(&classes, w as usize, h as usize)?;
+            masks.depth_m = depth_m;
             tracker.track_masks(&camera, &masks)?
         } else {
             let (w, h, kind, rgb) = read_png(&image)?;
             if kind != PixelKind::Rgb || (w, h) != (camera.width, camera.height) {
                 bail!("{}: not an RGB frame of the camera's size", image.display());
             }
-            tracker.track(&camera, &rgb, None)?
+            tracker.track(&camera, &rgb, depth_m.as_deref())?
         };
         match outcome {
             Ok(estimate) => {
@@ -103,4 +124,20 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// A depth image as the datasets store it (a 16-bit PNG of the camera-frame z in mm, 0 where
+/// nothing is), in m.
+fn read_depth(path: &Path, camera: &Camera) -> anyhow::Result<Vec<f32>> {
+    let (w, h, kind, data) = read_png(path)?;
+    if kind != PixelKind::Gray16 || (w, h) != (camera.width, camera.height) {
+        bail!(
+            "{}: not a 16-bit depth image of the camera's size",
+            path.display()
+        );
+    }
+    Ok(data
+        .chunks_exact(2)
+        .map(|b| f32::from(u16::from_be_bytes([b[0], b[1]])) / 1000.0)
+        .collect())
 }
