@@ -48,6 +48,8 @@ pub struct ProcNet {
     model: ProcNetModel,
     config: ProcNetConfig,
     device: Device,
+    /// The device is flex's: the forward pass runs on [`crate::backend::on_stream_threads`].
+    flex: bool,
     state: Option<ProcNetState>,
 }
 
@@ -75,6 +77,7 @@ impl ProcNet {
         Self {
             model,
             config,
+            flex: device == Device::flex(),
             device,
             state: None,
         }
@@ -180,15 +183,25 @@ impl ProcNet {
             Some(state) => state,
             None => self.model.initial_state(1, s, s, &self.device),
         };
-        let (out, state) = self.model.step(x, state);
+        let model = &self.model;
+        let forward = move || {
+            let (out, state) = model.step(x, state);
+            let probabilities = burn::tensor::activation::sigmoid(out.logits)
+                .into_data()
+                .try_into_vec::<f32>();
+            (state, probabilities)
+        };
+        // On flex, threads that flush subnormals: the stream's state decays into them.
+        let (state, probabilities) = if self.flex {
+            crate::backend::on_stream_threads(forward)
+        } else {
+            forward()
+        };
         self.state = Some(state);
-        let probabilities = burn::tensor::activation::sigmoid(out.logits)
-            .into_data()
-            .try_into_vec::<f32>()
-            .map_err(|e| PerceptionError::Backend {
-                name: format!("{:?}", self.device),
-                message: format!("cannot read the output: {e:?}"),
-            })?;
+        let probabilities = probabilities.map_err(|e| PerceptionError::Backend {
+            name: format!("{:?}", self.device),
+            message: format!("cannot read the output: {e:?}"),
+        })?;
         Ok(Masks {
             classes: self.config.classes.clone(),
             size: s,

@@ -212,13 +212,24 @@ impl Projection {
         let (wa, wb, wc) = (iz[0] * inv_area, iz[1] * inv_area, iz[2] * inv_area);
         let stride = self.width as usize;
         for j in j0..=j1 {
-            let mut e = row;
-            let base = j as usize * stride;
-            for i in i0..=i1 {
-                if (e[0] | e[1] | e[2]) >= 0 {
-                    let z = e[1] as f32 * wa + e[2] as f32 * wb + e[0] as f32 * wc;
-                    pixel(base + i as usize, z);
+            // The row's span: E_k(i0 + t) = row_k + t step_k >= 0 for every edge, solved for
+            // t exactly in integers (the same pixels as testing each one of the bounding box).
+            let (mut lo, mut hi) = (0i64, i1 - i0);
+            for k in 0..3 {
+                let (r, s) = (row[k], step_x[k]);
+                match s.cmp(&0) {
+                    std::cmp::Ordering::Greater => lo = lo.max((s - 1 - r).div_euclid(s)),
+                    std::cmp::Ordering::Less => hi = hi.min(r.div_euclid(-s)),
+                    std::cmp::Ordering::Equal if r < 0 => hi = -1,
+                    std::cmp::Ordering::Equal => {}
                 }
+            }
+            let base = j as usize * stride;
+            let mut e = [0, 1, 2].map(|k| row[k] + lo * step_x[k]);
+            for i in lo..=hi {
+                debug_assert!((e[0] | e[1] | e[2]) >= 0, "a pixel outside the span");
+                let z = e[1] as f32 * wa + e[2] as f32 * wb + e[0] as f32 * wc;
+                pixel(base + (i0 + i) as usize, z);
                 e[0] += step_x[0];
                 e[1] += step_x[1];
                 e[2] += step_x[2];
