@@ -631,6 +631,13 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "{md}"
         );
         assert!(md.contains(says) && md.contains("within the bound"), "{md}");
+        // True masks have a measured calibration, and the report names the bound it used.
+        if method == "articulated" {
+            assert!(
+                md.contains("The bound is the one calibrated for these masks"),
+                "{md}"
+            );
+        }
         for file in [
             "pose_eval.md",
             "pose_frames.csv",
@@ -645,7 +652,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
                 && csv
                     .lines()
                     .next()
-                    .is_some_and(|h| h.ends_with(",ends_cm,truth_gain")),
+                    .is_some_and(|h| h.ends_with(",ends_cm,truth_gain,sigma_m,spread_m")),
             "{csv}"
         );
     }

@@ -646,7 +646,7 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
         pick(&|t| (!t.reacquired).then_some(t.fit_ms)),
     );
     row(
-        "fit, re-acquired frames",
+        "fit with the global search (no track, or a poor one)",
         pick(&|t| t.reacquired.then_some(t.fit_ms)),
     );
     let total = pick(&|t| Some(t.network_ms + t.fit_ms));

@@ -10,7 +10,7 @@ use workcell::perception::pose::eval::{
     GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, PoseMethod, VisibleMasks,
     compare_markdown, evaluate_pose,
 };
-use workcell::perception::pose::{ArmFitConfig, PoseConfig};
+use workcell::perception::pose::{ArmFitConfig, Calibration, PoseConfig};
 use workcell::perception::{Backend, ProcNet, backend};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
 use workcell::sim::dataset::Dataset;
@@ -158,6 +158,20 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
     let mut evaluations = Vec::with_capacity(kinds.len());
     let mut written = Vec::new();
     for (kind, source) in kinds.iter().zip(&mut sources) {
+        // The bound of "within the bound": the calibration measured for these masks, where
+        // there is one (the shipped ProcNet's, or true masks').
+        let calibration = match *kind {
+            "gt" => Some(Calibration::measured(false, args.depth)),
+            "procnet" if args.weights.is_none() => Some(Calibration::measured(true, args.depth)),
+            _ => None,
+        };
+        let method = match &method {
+            PoseMethod::Articulated { config, depth } => PoseMethod::Articulated {
+                config: calibration.map_or_else(|| config.clone(), |c| c.apply(config.clone())),
+                depth: *depth,
+            },
+            paper => paper.clone(),
+        };
         let progress = super::progress_bar(
             n as u64,
             &format!("{kind}: {{bar:40}} {{pos}}/{{len}} sequences, {{elapsed}} (eta {{eta}})"),
@@ -166,8 +180,23 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             progress.set_position(done as u64);
         })?;
         progress.finish_and_clear();
+        let bound = match (&method, calibration) {
+            (PoseMethod::Paper { .. }, _) => String::new(),
+            (_, Some(c)) => format!(
+                "\nThe bound is the one calibrated for these masks (`Calibration::measured`): \
+                 {:.2} cm plus {} times the curvature's spread, the hypotheses' spread where it \
+                 is larger.\n",
+                100.0 * c.floor_m,
+                c.scale
+            ),
+            (_, None) => "\nThese masks have no calibration: the bound is the curvature's spread \
+                          alone, or the hypotheses' where it is larger \
+                          (`scripts/calibrate_uncertainty.py` fits one from this run's \
+                          pose_frames.csv on the validation split).\n"
+                .to_string(),
+        };
         let md = format!(
-            "# Forearm pose: {}, {kind} masks\n\nDataset `{}`.\n\n{}",
+            "# Forearm pose: {}, {kind} masks\n\nDataset `{}`.\n\n{}{bound}",
             args.split,
             args.dataset.display(),
             ev.to_markdown()

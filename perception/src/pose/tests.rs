@@ -399,6 +399,8 @@ fn frame_result(
         f_m: 0.0,
         gain: 0.0,
         uncertainty_m: 0.0,
+        sigma_m: f64::NAN,
+        spread_m: f64::NAN,
         pose_ms: 0.0,
         mask_ms: 0.0,
         renders: 0,

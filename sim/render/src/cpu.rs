@@ -165,8 +165,8 @@ impl Projection {
         for k in 0..3 {
             let [px, py, pz] = t[k];
             iz[k] = 1.0 / pz;
-            x[k] = ((self.fx * px * iz[k] + self.cx) * SUB as f32).round() as i64;
-            y[k] = ((self.fy * py * iz[k] + self.cy) * SUB as f32).round() as i64;
+            x[k] = round_to_int((self.fx * px * iz[k] + self.cx) * SUB as f32);
+            y[k] = round_to_int((self.fy * py * iz[k] + self.cy) * SUB as f32);
         }
         let mut area = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]);
         if area == 0 {
@@ -241,6 +241,35 @@ impl Projection {
     }
 }
 
+/// `v.floor() as i32` without the library call that `floor` is on CPUs before SSE4.1 (the
+/// baseline x86-64 target): the texture takes three a pixel. The same value for every `v`
+/// (saturating like `as`; NaN is 0).
+#[inline]
+pub(crate) fn floor_to_int(v: f32) -> i32 {
+    let i = v as i32;
+    if (i as f32) > v {
+        i.saturating_sub(1)
+    } else {
+        i
+    }
+}
+
+/// `v.round() as i64` (half away from zero) without the library call, as [`floor_to_int`]:
+/// the rasterizer snaps six coordinates a triangle.
+#[inline]
+pub(crate) fn round_to_int(v: f32) -> i64 {
+    let i = v as i64;
+    // Exact: below 2^23 the fraction is representable, above it every f32 is an integer.
+    let f = v - i as f32;
+    if f >= 0.5 {
+        i.saturating_add(1)
+    } else if f <= -0.5 {
+        i.saturating_sub(1)
+    } else {
+        i
+    }
+}
+
 /// A hash of an integer lattice point to [0, 1), the texture's value noise.
 #[inline]
 pub(crate) fn lattice_noise(x: i32, y: i32, z: i32) -> f32 {
@@ -257,7 +286,7 @@ pub(crate) fn lattice_noise(x: i32, y: i32, z: i32) -> f32 {
 #[inline]
 pub(crate) fn texture_factor(p: [f32; 3], amplitude: f32) -> f32 {
     let cell = |s: f32| {
-        let q = p.map(|v| (v / s).floor() as i32);
+        let q = p.map(|v| floor_to_int(v / s));
         lattice_noise(q[0], q[1], q[2])
     };
     let n = 0.6 * cell(0.03) + 0.4 * cell(0.15);
@@ -464,6 +493,47 @@ pub(crate) fn draw_mask(
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    /// The library-free floor and round agree with `f32::floor` and `f32::round` everywhere:
+    /// halves, negatives, integers, the edges of the exact range, huge values and NaN.
+    #[test]
+    fn floor_and_round_without_the_library_agree_with_it() {
+        let mut values = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.49999997,
+            -0.49999997,
+            1.0,
+            -1.0,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            16_777_217.0,
+            1e12,
+            -1e12,
+            3e9,
+            -3e9,
+            f32::MAX,
+            f32::MIN,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            1e-40,
+        ];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        values.extend((0..100_000).map(|_| rng.random_range(-2e5f32..2e5)));
+        values.extend((0..10_000).map(|k| (k as f32 - 5000.0) * 0.25));
+        for v in values {
+            assert_eq!(floor_to_int(v), v.floor() as i32, "floor {v}");
+            assert_eq!(round_to_int(v), v.round() as i64, "round {v}");
+        }
+    }
 
     /// A jittered grid of triangles over the whole image (and beyond) covers every pixel
     /// centre exactly once: the top-left rule leaves no gap and no double cover on shared

@@ -87,6 +87,10 @@ pub struct FrameResult {
     pub f_m: f64,
     pub gain: f64,
     pub uncertainty_m: f64,
+    /// The articulated fit's curvature spread and hypotheses' spread, m (NaN for the paper's
+    /// method and for frames without a pose): what the calibration's radius is made of.
+    pub sigma_m: f64,
+    pub spread_m: f64,
     /// Time of the pose search (not the network), ms.
     pub pose_ms: f64,
     /// Time of the mask source (the network), ms.

@@ -97,6 +97,9 @@ struct Found {
     f_m: f64,
     gain: f64,
     uncertainty_m: f64,
+    /// The articulated fit's curvature and hypotheses' spreads, m (NaN for the paper's).
+    sigma_m: f64,
+    spread_m: f64,
     renders: usize,
 }
 
@@ -172,6 +175,8 @@ pub fn evaluate_pose(
                         f_m: fit.f_m,
                         gain: fit.gain,
                         uncertainty_m: fit.uncertainty_m,
+                        sigma_m: fit.sigma_m,
+                        spread_m: fit.spread_m,
                         renders: fit.renders,
                     });
                     (found, mask_ms, pose_ms)
@@ -193,6 +198,8 @@ pub fn evaluate_pose(
                         f_m: e.f_m,
                         gain: e.gain,
                         uncertainty_m: e.uncertainty_m,
+                        sigma_m: f64::NAN,
+                        spread_m: f64::NAN,
                         renders: e.renders,
                     });
                     (found, mask_ms, pose_ms)
@@ -210,9 +217,11 @@ pub fn evaluate_pose(
             let truth = Pose::from(&part.X_CP);
             let (mut reacquired, mut fm, mut gain, mut unc, mut renders) =
                 (false, 0.0, 0.0, 0.0, 0);
+            let (mut sigma_m, mut spread_m) = (f64::NAN, f64::NAN);
             let outcome = found.map(|e| {
                 (reacquired, fm, gain, unc, renders) =
                     (e.reacquired, e.f_m, e.gain, e.uncertainty_m, e.renders);
+                (sigma_m, spread_m) = (e.sigma_m, e.spread_m);
                 // The hand tells the articulated fit's wrist from its elbow: no twin.
                 pose_error_with(
                     &model,
@@ -233,6 +242,8 @@ pub fn evaluate_pose(
                 f_m: fm,
                 gain,
                 uncertainty_m: unc,
+                sigma_m,
+                spread_m,
                 pose_ms,
                 mask_ms,
                 renders,

@@ -314,7 +314,7 @@ impl PoseEvaluation {
             ),
             ("pose, tracked", tracked.iter().map(|f| f.pose_ms).collect()),
             (
-                "pose, re-acquired (global search)",
+                "pose with the global search (no track, or a poor one)",
                 self.frames
                     .iter()
                     .filter(|f| f.reacquired)
@@ -343,7 +343,7 @@ impl PoseEvaluation {
     #[must_use]
     pub fn to_csv(&self) -> String {
         let mut csv = String::from(
-            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm,truth_gain\n",
+            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm,truth_gain,sigma_m,spread_m\n",
         );
         for f in &self.frames {
             let (no_pose, e) = match &f.outcome {
@@ -353,7 +353,7 @@ impl PoseEvaluation {
             let v = |g: fn(&PoseError) -> f64| e.map_or(String::new(), |e| format!("{:.4}", g(e)));
             let _ = writeln!(
                 csv,
-                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{},{:.4}",
+                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{},{:.4},{:.5},{:.5}",
                 f.sequence,
                 f.frame,
                 f.distance_class,
@@ -376,7 +376,9 @@ impl PoseEvaluation {
                 f.pose_ms,
                 f.renders,
                 v(|e| e.ends_cm),
-                f.truth_gain
+                f.truth_gain,
+                f.sigma_m,
+                f.spread_m
             );
         }
         csv
