@@ -122,7 +122,12 @@ static STREAM_POOL: OnceLock<Option<rayon::ThreadPool>> = OnceLock::new();
 /// only on a pool of this module's own threads, so the caller's threads (the physics, the
 /// fit) keep IEEE arithmetic. Elsewhere than on x86-64 the pool keeps subnormals. A pool that
 /// cannot start runs `f` on the caller's thread.
-pub fn on_stream_threads<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+///
+/// The caller waits for `f` blocked, not inside rayon: a caller that is itself a rayon worker
+/// (the evaluation runs its episodes on rayon's pool) would otherwise run other jobs of its
+/// pool while it waits (rayon's `install` from a foreign pool does), nesting whole episodes on
+/// its stack. A panic in `f` is resumed in the caller.
+pub fn on_stream_threads<R: Send + 'static>(f: impl FnOnce() -> R + Send + 'static) -> R {
     let pool = STREAM_POOL.get_or_init(|| {
         let threads = match STREAM_THREADS.load(Ordering::Relaxed) {
             0 => rayon::current_num_threads(),
@@ -135,9 +140,19 @@ pub fn on_stream_threads<R: Send>(f: impl FnOnce() -> R + Send) -> R {
             .build()
             .ok()
     });
-    match pool {
-        Some(pool) => pool.install(f),
-        None => f(),
+    let Some(pool) = pool else {
+        return f();
+    };
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    pool.spawn(move || {
+        // The receiver waits for this send; it cannot have gone away.
+        let _ = tx.send(std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)));
+    });
+    match rx.recv() {
+        Ok(Ok(result)) => result,
+        Ok(Err(panic)) => std::panic::resume_unwind(panic),
+        // The pool lives as long as the process and runs every job spawned on it.
+        Err(_) => unreachable!("the stream pool dropped a job"),
     }
 }
 
@@ -193,5 +208,37 @@ mod tests {
         }
         // The caller's thread is left as it was.
         assert!(tiny_product().is_subnormal());
+    }
+
+    /// A caller that is a rayon worker waits for the stream blocked: it runs no other job of
+    /// its pool meanwhile (each job here would see the other as running on its thread).
+    #[test]
+    fn a_rayon_worker_waiting_for_the_stream_runs_nothing_else() {
+        use std::sync::atomic::AtomicBool;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .expect("pool");
+        let busy = AtomicBool::new(false);
+        let nested = AtomicBool::new(false);
+        pool.scope(|s| {
+            for _ in 0..4 {
+                s.spawn(|_| {
+                    if busy.swap(true, Ordering::SeqCst) {
+                        nested.store(true, Ordering::SeqCst);
+                    }
+                    on_stream_threads(|| std::thread::sleep(std::time::Duration::from_millis(5)));
+                    busy.store(false, Ordering::SeqCst);
+                });
+            }
+        });
+        assert!(!nested.load(Ordering::SeqCst));
+    }
+
+    #[test]
+    fn a_panic_on_the_stream_threads_reaches_the_caller() {
+        let caught = std::panic::catch_unwind(|| on_stream_threads(|| panic!("in the stream")));
+        let message = caught.expect_err("the panic comes back");
+        assert_eq!(message.downcast_ref::<&str>(), Some(&"in the stream"));
     }
 }

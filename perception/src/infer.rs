@@ -1,6 +1,7 @@
 //! Inference on one camera stream: a stateful ProcNet that takes a frame, returns class masks.
 
 use std::path::Path;
+use std::sync::Arc;
 use workcell_render::Class;
 
 use burn::tensor::{Device, Tensor, TensorData};
@@ -45,7 +46,8 @@ impl Masks {
 
 /// A ProcNet following one camera stream: each [`ProcNet::segment`] advances its state.
 pub struct ProcNet {
-    model: ProcNetModel,
+    /// Shared with the stream's threads ([`crate::backend::on_stream_threads`]).
+    model: Arc<ProcNetModel>,
     config: ProcNetConfig,
     device: Device,
     /// The device is flex's: the forward pass runs on [`crate::backend::on_stream_threads`].
@@ -75,7 +77,7 @@ impl ProcNet {
     #[must_use]
     pub fn new(model: ProcNetModel, config: ProcNetConfig, device: Device) -> Self {
         Self {
-            model,
+            model: Arc::new(model),
             config,
             flex: device == Device::flex(),
             device,
@@ -183,7 +185,7 @@ impl ProcNet {
             Some(state) => state,
             None => self.model.initial_state(1, s, s, &self.device),
         };
-        let model = &self.model;
+        let model = Arc::clone(&self.model);
         let forward = move || {
             let (out, state) = model.step(x, state);
             let probabilities = burn::tensor::activation::sigmoid(out.logits)
