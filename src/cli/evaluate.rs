@@ -574,7 +574,7 @@ pub struct BenchPerceptionArgs {
     /// The camera measures depth: the fit uses it (sets `perception.depth`).
     #[arg(long)]
     pub depth: bool,
-    /// CPU threads of the network (1 to 256; the fit runs on one).
+    /// CPU threads of the network and of the fit's renders (1 to 256).
     #[arg(long, default_value_t = 2, value_parser = super::count_in::<1, { super::MAX_THREADS }>)]
     pub threads: usize,
     /// Override a key of the evaluation file (repeatable; TOML values).
@@ -603,7 +603,7 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
     bar.finish_and_clear();
     let p = &evaluation.config.perception;
     say!(
-        "perception on {} frames of the cell's camera ({}; seed {}), {}, network on {} thread(s)",
+        "perception on {} frames of the cell's camera ({}; seed {}), {}, network and fit on {} thread(s)",
         timings.len(),
         args.evaluation.display(),
         args.seed,
