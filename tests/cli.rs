@@ -1439,3 +1439,35 @@ fn shards_merge_into_the_report_of_one_process() {
         );
     }
 }
+
+/// `bench-perception` times the cell camera's frames through the shipped ProcNet and the
+/// articulated fit and prints one row per stage; the first frame has no track, so it runs
+/// the global search, and every frame is either tracked or searched.
+#[test]
+fn bench_perception_prints_each_stage() {
+    let out = workcell(&["bench-perception", "--depth", "--frames", "4"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let table = text(&out.stdout);
+    for row in [
+        "| render (the simulator's camera) | 4 |",
+        "| network (region of interest + ProcNet) | 4 |",
+        "| **network + fit** | 4 |",
+        "RGB-D, network and fit on 2 thread(s)",
+        "4 of 4 frames gave an estimate",
+    ] {
+        assert!(table.contains(row), "no {row:?} in\n{table}");
+    }
+    let frames = |stage: &str| -> usize {
+        table
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("| {stage} | ")))
+            .and_then(|rest| rest.split(" |").next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or(0)
+    };
+    let (tracked, searched) = (
+        frames("fit, tracked frames"),
+        frames("fit with the global search (no track, or a poor one)"),
+    );
+    assert!(searched >= 1 && tracked + searched == 4, "{table}");
+}
