@@ -489,19 +489,19 @@ struct Target {
     width: usize,
     ss: usize,
     /// Per part: `s_p - alpha min(d_p, cap)` and `s_p`, both divided by the mass.
-    value: [Vec<f32>; 3],
-    signed: [Vec<f32>; 3],
+    value: Arc<[Vec<f32>; 3]>,
+    signed: Arc<[Vec<f32>; 3]>,
     /// Mask pixels: the mass, all parts together.
     mass: f64,
     /// The crop's camera (not supersampled), and per part where its mask is; the depth in
     /// the crop when there is one.
     camera: Camera,
-    inside: [Vec<bool>; 3],
-    depth_m: Option<Vec<f32>>,
+    inside: Arc<[Vec<bool>; 3]>,
+    depth_m: Option<Arc<Vec<f32>>>,
 }
 
 impl Target {
-    /// The same target for renders of `ss` samples per pixel side.
+    /// The same target for renders of `ss` samples per pixel side (its planes shared).
     fn supersampled(&self, ss: u32) -> Result<Self> {
         let ss = ss.max(1);
         Ok(Self {
@@ -954,12 +954,12 @@ impl<R: Renderer> ArmFitter<R> {
             X_WC: camera.X_WC,
             width: rw,
             ss: ss as usize,
-            value,
-            signed,
+            value: Arc::new(value),
+            signed: Arc::new(signed),
             mass,
             camera: roi,
-            inside,
-            depth_m,
+            inside: Arc::new(inside),
+            depth_m: depth_m.map(Arc::new),
         }))
     }
 
