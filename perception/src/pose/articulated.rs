@@ -28,6 +28,14 @@
 //! - `prior(q)`: tracking, a constant-velocity prediction from the last two fits,
 //!   `w sum ((q - q_pred) / sigma)^2 / dof`.
 //!
+//! A part renders as row spans ([`SpanBatch`]: each sample row's first and last covered
+//! sample), from the triangles of its visuals that are not inside another of them
+//! ([`RenderMesh::outer_union`]: the human model's bones and the caps between its limb
+//! segments left out, 652 of 2,544 triangles kept, the same masks). A part's row is nearly
+//! always one run, and a span sums in two lookups of the row's prefix sums. Both took the
+//! tracked fit from 15-17 to 8-10 ms a frame on the cell's camera (`workcell
+//! bench-perception --depth`).
+//!
 //! **The search.** Tracking, a climb from the prediction: each iteration renders the
 //! configurations one step along each joint either way (a central-difference gradient and
 //! each joint's curvature), then three points along the gradient and a few random probes;
@@ -60,10 +68,9 @@ use std::sync::Arc;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
-use workcell_render::{Camera, Class, MaskBatch, RenderMesh, Renderer};
+use workcell_render::{Camera, Class, MaskBatch, RenderMesh, Renderer, SpanBatch};
 use workcell_robots::math::{Pose, Vector};
-use workcell_robots::{HumanPart, LinkId, RobotModel};
+use workcell_robots::{HumanPart, LinkId, RobotModel, Shape};
 
 use super::image::crop_camera;
 use super::{NoPose, RigidModel, f_m};
@@ -189,13 +196,14 @@ impl Calibration {
     pub fn measured(network: bool, depth: bool) -> Self {
         let (scale, floor_m) = match (network, depth) {
             // The validation split (docs/perception.md): true masks with depth, 3,828
-            // frames, 99 % within 2.27 cm; without, the mirror's misses (35.8 cm, measured
-            // before the climb's coarser last step and the search of poor tracks).
-            (false, true) => (0.0, 0.0227),
+            // frames, 99 % within 1.97 cm (the renders as row spans); without, the mirror's
+            // misses (35.8 cm, measured before the climb's coarser last step and the search
+            // of poor tracks).
+            (false, true) => (0.0, 0.0197),
             (false, false) => (0.5, 0.3090),
-            // ProcNet's masks with depth, 3,776 frames: 99 % within 4.91 cm; without, 41 cm
+            // ProcNet's masks with depth, 3,776 frames: 99 % within 5.15 cm; without, 41 cm
             // (as measured before, like true masks without depth).
-            (true, true) => (0.0, 0.0491),
+            (true, true) => (0.0, 0.0515),
             (true, false) => (0.0, 0.4144),
         };
         Self { scale, floor_m }
@@ -259,21 +267,32 @@ impl ArticulatedArm {
         }
         let mut links = [0; 3];
         let mut meshes: [Option<Arc<RenderMesh>>; 3] = [None, None, None];
+        let mut models: [Option<RigidModel>; 3] = [None, None, None];
         for (i, part) in FITTED_PARTS.into_iter().enumerate() {
             let link = human
                 .link_id(part.link_name())
                 .ok_or_else(|| missing(format!("no link named {part}")))?;
+            let pieces: Vec<(RenderMesh, bool)> = human.links()[link]
+                .visuals
+                .iter()
+                .map(|g| {
+                    let mesh =
+                        RenderMesh::from_geometry_with(g, [0.85, 0.72, 0.62], POSE_MESH_SEGMENTS);
+                    (mesh, !matches!(g.shape, Shape::Mesh { .. }))
+                })
+                .collect();
             let mut mesh = RenderMesh::default();
-            for g in &human.links()[link].visuals {
-                mesh.append(
-                    &RenderMesh::from_geometry_with(g, [0.85, 0.72, 0.62], POSE_MESH_SEGMENTS),
-                    &Pose::IDENTITY,
-                );
+            for (piece, _) in &pieces {
+                mesh.append(piece, &Pose::IDENTITY);
             }
             links[i] = link;
-            meshes[i] = (!mesh.is_empty()).then(|| Arc::new(mesh));
+            if !mesh.is_empty() {
+                // The parts' geometry from every visual; their renders from the outside ones.
+                models[i] = Some(RigidModel::new(Arc::new(mesh))?);
+                meshes[i] = Some(Arc::new(RenderMesh::outer_union(&pieces)));
+            }
         }
-        let forearm = meshes[1]
+        let forearm = models[1]
             .clone()
             .ok_or_else(|| missing("the forearm link has no visual geometry".into()))?;
         let limits = human
@@ -284,11 +303,6 @@ impl ArticulatedArm {
                 if lo <= hi { [lo, hi] } else { [0.0, 0.0] }
             })
             .collect();
-        let models = [0, 1, 2].map(|p| {
-            meshes[p]
-                .as_ref()
-                .and_then(|m| RigidModel::new(m.clone()).ok())
-        });
         Ok(Self {
             human: human.clone(),
             X_WH: *X_WH,
@@ -296,7 +310,7 @@ impl ArticulatedArm {
             meshes,
             models,
             limits,
-            forearm: RigidModel::new(forearm)?,
+            forearm,
         })
     }
 
@@ -486,11 +500,10 @@ struct Target {
     /// The camera at `supersample` times its resolution.
     fine: Camera,
     X_WC: Pose,
-    width: usize,
     ss: usize,
-    /// Per part: `s_p - alpha min(d_p, cap)` and `s_p`, both divided by the mass.
-    value: Arc<[Vec<f32>; 3]>,
-    signed: Arc<[Vec<f32>; 3]>,
+    /// Per part: the row sums of `s_p - alpha min(d_p, cap)` and of `s_p`, both divided by
+    /// the mass.
+    sums: Arc<[RowSums; 3]>,
     /// Mask pixels: the mass, all parts together.
     mass: f64,
     /// The crop's camera (not supersampled), and per part where its mask is; the depth in
@@ -536,6 +549,7 @@ pub struct ArmFitter<R: Renderer> {
     /// The hypotheses tracked, best first: each its last fits, oldest first (at most two).
     tracks: Vec<Vec<Vec<f64>>>,
     batch: MaskBatch,
+    spans: SpanBatch,
     poses: Vec<Pose>,
     renders: usize,
     rng: ChaCha8Rng,
@@ -550,6 +564,7 @@ impl<R: Renderer> ArmFitter<R> {
             config,
             tracks: Vec::new(),
             batch: MaskBatch::new(),
+            spans: SpanBatch::new(),
             poses: Vec::new(),
             renders: 0,
             rng: ChaCha8Rng::seed_from_u64(0),
@@ -934,13 +949,14 @@ impl<R: Renderer> ArmFitter<R> {
         });
         let inside: [Vec<bool>; 3] =
             std::array::from_fn(|p| parts[p].iter().map(|&v| v > c.threshold).collect());
-        let value: [Vec<f32>; 3] = std::array::from_fn(|p| {
+        let sums: [RowSums; 3] = std::array::from_fn(|p| {
             let d = distance_transform(&inside[p], rw, rh, c.distance_cap_px);
-            signed[p]
+            let value: Vec<f32> = signed[p]
                 .iter()
                 .zip(&d)
                 .map(|(&s, &d)| s - alpha * d * inv)
-                .collect()
+                .collect();
+            RowSums::new(&value, &signed[p], rw)
         });
         let roi = crop_camera(camera, x0, y0, rw, rh);
         let ss = ss.max(1);
@@ -952,10 +968,8 @@ impl<R: Renderer> ArmFitter<R> {
         Ok(Some(Target {
             fine: roi.resized(roi.width * ss, roi.height * ss)?,
             X_WC: camera.X_WC,
-            width: rw,
             ss: ss as usize,
-            value: Arc::new(value),
-            signed: Arc::new(signed),
+            sums: Arc::new(sums),
             mass,
             camera: roi,
             inside: Arc::new(inside),
@@ -976,8 +990,8 @@ impl<R: Renderer> ArmFitter<R> {
             .iter()
             .map(|q| self.arm.part_poses(q, &target.X_WC))
             .collect::<Result<_>>()?;
-        let (w, ss) = (target.width, target.ss);
-        let per_sample = 1.0 / (ss * ss) as f32;
+        let ss = target.ss;
+        let per_sample = 1.0 / (ss * ss) as f64;
         for p in 0..3 {
             let Some(mesh) = self.arm.meshes[p].clone() else {
                 continue;
@@ -985,20 +999,12 @@ impl<R: Renderer> ArmFitter<R> {
             self.poses.clear();
             self.poses.extend(all.iter().map(|x| x[p]));
             self.renderer
-                .render_masks(&mesh, &target.fine, &self.poses, &mut self.batch)?;
+                .render_spans(&mesh, &target.fine, &self.poses, &mut self.spans)?;
             self.renders += qs.len();
-            // Each render's sums over its samples, in parallel over the renders (each sum in
-            // a fixed order: the same scores on any number of threads).
-            let (batch, values, signs) = (&self.batch, &target.value[p], &target.signed[p]);
-            let sums: Vec<(f32, f32)> = (0..qs.len())
-                .into_par_iter()
-                .map(|k| mask_sums(batch.mask(k), values, signs, w, ss))
-                .collect();
-            for (score, (value, signed)) in scores.iter_mut().zip(sums) {
-                let (value, signed) = (
-                    f64::from(value * per_sample),
-                    f64::from(signed * per_sample),
-                );
+            let sums = &target.sums[p];
+            for (k, score) in scores.iter_mut().enumerate() {
+                let [value, signed] = sums.over(self.spans.spans(k), ss);
+                let (value, signed) = (value * per_sample, signed * per_sample);
                 score.objective += value;
                 score.gain += signed;
                 score.part_gain[p] = signed;
@@ -1197,36 +1203,59 @@ impl<R: Renderer> ArmFitter<R> {
     }
 }
 
-/// The sums of `values` and `signs` (`w` pixels a row) over a render of `ss x ss` samples a
-/// pixel, each pixel's weighted by how many of its samples `mask` covers.
-fn mask_sums(mask: &[u8], values: &[f32], signs: &[f32], w: usize, ss: usize) -> (f32, f32) {
-    /// Inlined with `ss` a constant where it is one: no division or branch per sample.
-    #[inline(always)]
-    fn sums(mask: &[u8], values: &[f32], signs: &[f32], w: usize, ss: usize) -> (f32, f32) {
-        let (mut value, mut signed) = (0.0f32, 0.0f32);
-        for (fy, row) in mask.chunks_exact(w * ss).enumerate() {
-            // Only the pixels from the row's first covered sample to its last: a part covers
-            // a small share of the crop.
-            let Some(first) = row.iter().position(|&m| m != 0) else {
-                continue;
-            };
-            let last = row.iter().rposition(|&m| m != 0).unwrap_or(first);
-            let (x0, x1) = (first / ss, last / ss + 1);
-            let base = (fy / ss) * w;
-            let (vrow, srow) = (&values[base + x0..base + x1], &signs[base + x0..base + x1]);
-            let row = &row[x0 * ss..x1 * ss];
-            for ((samples, &v), &s) in row.chunks_exact(ss).zip(vrow).zip(srow) {
-                let n: f32 = samples.iter().map(|&m| f32::from(u8::from(m != 0))).sum();
-                value += n * v;
-                signed += n * s;
+/// Prefix sums of two planes along each row, for sums over row spans of supersampled
+/// renders in two lookups a row.
+struct RowSums {
+    width: usize,
+    /// Per row, `width + 1` pairs: the sums of both planes over the row's first `i` pixels.
+    prefix: Vec<[f64; 2]>,
+}
+
+impl RowSums {
+    /// The prefix sums of `a` and `b`, `width` pixels a row.
+    fn new(a: &[f32], b: &[f32], width: usize) -> Self {
+        let mut prefix = Vec::with_capacity(a.len() + a.len() / width.max(1) + 1);
+        for (ra, rb) in a
+            .chunks_exact(width.max(1))
+            .zip(b.chunks_exact(width.max(1)))
+        {
+            let mut sum = [0.0f64; 2];
+            prefix.push(sum);
+            for (&x, &y) in ra.iter().zip(rb) {
+                sum[0] += f64::from(x);
+                sum[1] += f64::from(y);
+                prefix.push(sum);
             }
         }
-        (value, signed)
+        Self { width, prefix }
     }
-    match ss {
-        1 => sums(mask, values, signs, w, 1),
-        2 => sums(mask, values, signs, w, 2),
-        _ => sums(mask, values, signs, w, ss),
+
+    /// Both planes summed over the samples that `spans` cover, in a render of `ss x ss`
+    /// samples a pixel (one span per sample row): each pixel's value counted once per
+    /// covered sample.
+    fn over(&self, spans: &[[u32; 2]], ss: usize) -> [f64; 2] {
+        let stride = self.width + 1;
+        let mut total = [0.0f64; 2];
+        for (fy, &[first, last]) in spans.iter().enumerate() {
+            if first > last {
+                continue;
+            }
+            let row = &self.prefix[(fy / ss) * stride..(fy / ss + 1) * stride];
+            let (a, b) = (first as usize, last as usize);
+            let (pa, pb) = (a / ss, b / ss);
+            for k in 0..2 {
+                let pixel = |i: usize| row[i + 1][k] - row[i][k];
+                total[k] += if pa == pb {
+                    (b - a + 1) as f64 * pixel(pa)
+                } else {
+                    // The partly covered pixels at both ends, and the whole ones between.
+                    (ss - a % ss) as f64 * pixel(pa)
+                        + (b % ss + 1) as f64 * pixel(pb)
+                        + ss as f64 * (row[pb][k] - row[pa + 1][k])
+                };
+            }
+        }
+        total
     }
 }
 
@@ -1389,6 +1418,92 @@ mod tests {
             .render(&scene, camera, &mut frame)
             .expect("render");
         (frame.classes(&scene), frame.depth_m.clone())
+    }
+
+    #[test]
+    fn sums_over_spans_are_the_sums_over_the_covered_samples() {
+        let (w, h) = (7, 5);
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let mut plane = || -> Vec<f32> { (0..w * h).map(|_| rng.random::<f32>() - 0.3).collect() };
+        let (a, b) = (plane(), plane());
+        let sums = RowSums::new(&a, &b, w);
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        for ss in 1..=3 {
+            for _ in 0..20 {
+                let spans: Vec<[u32; 2]> = (0..h * ss)
+                    .map(|_| {
+                        let x = rng.random_range(0..(w * ss) as u32);
+                        let y = rng.random_range(0..(w * ss) as u32);
+                        if rng.random::<f32>() < 0.2 {
+                            SpanBatch::EMPTY
+                        } else {
+                            [x.min(y), x.max(y)]
+                        }
+                    })
+                    .collect();
+                let mut expected = [0.0f64; 2];
+                for (fy, &[first, last]) in spans.iter().enumerate() {
+                    for x in first as usize..=last as usize {
+                        if first > last {
+                            break;
+                        }
+                        let i = (fy / ss) * w + x / ss;
+                        expected[0] += f64::from(a[i]);
+                        expected[1] += f64::from(b[i]);
+                    }
+                }
+                let got = sums.over(&spans, ss);
+                for k in 0..2 {
+                    assert!(
+                        (got[k] - expected[k]).abs() < 1e-9,
+                        "ss {ss}: {got:?} {expected:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The parts' renders (their outside triangles) cover the pixels that every visual of
+    /// their link covers, at the fit's 2x2 samples a pixel.
+    #[test]
+    fn each_part_renders_as_its_visuals_do() {
+        let (arm, camera) = setup();
+        let human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+        let fine = camera.resized(256, 256).expect("camera");
+        let mut renderer = CpuRenderer::new();
+        let (mut a, mut b) = (MaskBatch::new(), MaskBatch::new());
+        for p in 0..3 {
+            let mut all = RenderMesh::default();
+            for g in &human.links()[arm.links[p]].visuals {
+                all.append(
+                    &RenderMesh::from_geometry_with(g, [0.5; 3], POSE_MESH_SEGMENTS),
+                    &Pose::IDENTITY,
+                );
+            }
+            let outer = arm.meshes[p].as_ref().expect("mesh");
+            // 258 of 504, 264 of 672 and 130 of 1,368 triangles.
+            assert!(
+                10 * outer.len() < 6 * all.len(),
+                "{} of {}",
+                outer.len(),
+                all.len()
+            );
+            let poses: Vec<Pose> = (0..12)
+                .map(|k| {
+                    let t = f64::from(k) / 12.0;
+                    let q = [1.2 * t - 0.2, 1.6 * (1.0 - t), 2.0 * t];
+                    arm.part_poses(&q, &camera.X_WC).expect("poses")[p]
+                })
+                .collect();
+            renderer
+                .render_masks(&all, &fine, &poses, &mut a)
+                .expect("render");
+            renderer
+                .render_masks(outer, &fine, &poses, &mut b)
+                .expect("render");
+            assert!(a.data.contains(&1), "part {p} in view");
+            assert_eq!(a, b, "part {p}");
+        }
     }
 
     fn classes(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> Vec<u8> {

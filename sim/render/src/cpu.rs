@@ -5,7 +5,8 @@ use workcell_robots::math::Pose;
 
 use crate::error::{RenderError, Result};
 use crate::{
-    Camera, Frame, MaskBatch, NEAR_M, RenderMesh, Renderer, SUBPIXEL_BITS, Scene, pose_is_finite,
+    Camera, Frame, MaskBatch, NEAR_M, RenderMesh, Renderer, SUBPIXEL_BITS, Scene, SpanBatch,
+    pose_is_finite,
 };
 
 const SUB: i64 = 1 << SUBPIXEL_BITS;
@@ -88,6 +89,20 @@ pub(crate) struct Projection {
     planes: [([f32; 3], f32); 5],
 }
 
+/// One image row's run of pixel centres that a triangle covers, `first..=last`, with the
+/// triangle's edge functions at `first` and their step per pixel (for interpolation).
+pub(crate) struct RowSpan {
+    pub(crate) row: usize,
+    /// The row's first pixel's index in the image.
+    pub(crate) base: usize,
+    pub(crate) first: usize,
+    pub(crate) last: usize,
+    pub(crate) e: [i64; 3],
+    pub(crate) step: [i64; 3],
+    /// `1/z` at each vertex over twice the area: `E_1 w_0 + E_2 w_1 + E_0 w_2` is `1/z`.
+    pub(crate) w: [f32; 3],
+}
+
 impl Projection {
     pub(crate) fn new(c: &Camera) -> Self {
         let (fx, fy, cx, cy) = (c.fx as f32, c.fy as f32, c.cx as f32, c.cy as f32);
@@ -115,13 +130,30 @@ impl Projection {
     /// calling `pixel(index, 1/z)` for every covered pixel centre.
     #[inline]
     pub(crate) fn triangle(&self, t: [[f32; 3]; 3], pixel: &mut impl FnMut(usize, f32)) {
+        self.triangle_rows(t, &mut |span: &RowSpan| {
+            let mut e = span.e;
+            for i in span.first..=span.last {
+                debug_assert!((e[0] | e[1] | e[2]) >= 0, "a pixel outside the span");
+                let z = e[1] as f32 * span.w[0] + e[2] as f32 * span.w[1] + e[0] as f32 * span.w[2];
+                pixel(span.base + i, z);
+                for (e, step) in e.iter_mut().zip(span.step) {
+                    *e += step;
+                }
+            }
+        });
+    }
+
+    /// Clips triangle `(a, b, c)` (camera frame) to the view and calls `row` with each
+    /// image row's run of covered pixel centres (the same pixels as [`Projection::triangle`]).
+    #[inline]
+    pub(crate) fn triangle_rows(&self, t: [[f32; 3]; 3], row: &mut impl FnMut(&RowSpan)) {
         let inside = |p: [f32; 3], (n, d): ([f32; 3], f32)| dot(n, p) + d >= 0.0;
         if self
             .planes
             .iter()
             .all(|&pl| t.iter().all(|&p| inside(p, pl)))
         {
-            self.raster(t, pixel);
+            self.raster(t, row);
             return;
         }
         // Sutherland-Hodgman against each plane; a triangle gains at most one vertex per plane.
@@ -151,14 +183,15 @@ impl Projection {
             }
         }
         for i in 1..n - 1 {
-            self.raster([poly[0], poly[i], poly[i + 1]], pixel);
+            self.raster([poly[0], poly[i], poly[i + 1]], row);
         }
     }
 
     /// Rasterizes a triangle in front of the near plane: vertices snapped to 1/256 px,
-    /// integer edge functions, top-left rule for pixel centres on an edge.
+    /// integer edge functions, top-left rule for pixel centres on an edge; `row` gets each
+    /// row's run of covered pixels.
     #[inline]
-    fn raster(&self, t: [[f32; 3]; 3], pixel: &mut impl FnMut(usize, f32)) {
+    fn raster(&self, t: [[f32; 3]; 3], row_span: &mut impl FnMut(&RowSpan)) {
         let mut x = [0i64; 3];
         let mut y = [0i64; 3];
         let mut iz = [0f32; 3];
@@ -224,15 +257,16 @@ impl Projection {
                     std::cmp::Ordering::Equal => {}
                 }
             }
-            let base = j as usize * stride;
-            let mut e = [0, 1, 2].map(|k| row[k] + lo * step_x[k]);
-            for i in lo..=hi {
-                debug_assert!((e[0] | e[1] | e[2]) >= 0, "a pixel outside the span");
-                let z = e[1] as f32 * wa + e[2] as f32 * wb + e[0] as f32 * wc;
-                pixel(base + (i0 + i) as usize, z);
-                e[0] += step_x[0];
-                e[1] += step_x[1];
-                e[2] += step_x[2];
+            if lo <= hi {
+                row_span(&RowSpan {
+                    row: j as usize,
+                    base: j as usize * stride,
+                    first: (i0 + lo) as usize,
+                    last: (i0 + hi) as usize,
+                    e: [0, 1, 2].map(|k| row[k] + lo * step_x[k]),
+                    step: step_x,
+                    w: [wa, wb, wc],
+                });
             }
             row[0] += step_y[0];
             row[1] += step_y[1];
@@ -448,6 +482,45 @@ impl Renderer for CpuRenderer {
             });
         Ok(())
     }
+
+    fn render_spans(
+        &mut self,
+        mesh: &RenderMesh,
+        camera: &Camera,
+        X_CO: &[Pose],
+        spans: &mut SpanBatch,
+    ) -> Result<()> {
+        camera.validate()?;
+        check_poses(X_CO)?;
+        let proj = Projection::new(camera);
+        spans.resize(camera.width, camera.height, X_CO.len());
+        spans
+            .spans
+            .par_chunks_mut((camera.height as usize).max(1))
+            .zip(X_CO.par_iter())
+            .for_each_init(Vec::new, |vertices, (rows, X)| {
+                draw_spans(&proj, mesh, &Affine::from_pose(X), vertices, rows);
+            });
+        Ok(())
+    }
+}
+
+/// Covers the pixels of `mesh` at `X_CO` in `spans` (one a row, [`SpanBatch::EMPTY`]
+/// before): each row's first and last covered pixel, as [`draw_mask`] would cover them.
+pub(crate) fn draw_spans(
+    proj: &Projection,
+    mesh: &RenderMesh,
+    X_CO: &Affine,
+    vertices: &mut Vec<[f32; 3]>,
+    spans: &mut [[u32; 2]],
+) {
+    front_faces(mesh, X_CO, vertices, |t, _, _| {
+        proj.triangle_rows(t, &mut |run: &RowSpan| {
+            let span = &mut spans[run.row];
+            span[0] = span[0].min(run.first as u32);
+            span[1] = span[1].max(run.last as u32);
+        });
+    });
 }
 
 /// The triangles of `mesh` at `X_CO` as both backends draw them: camera-frame vertices

@@ -129,6 +129,64 @@ impl MaskBatch {
     }
 }
 
+/// N silhouettes of one size as row spans: per mask and row, the first and the last covered
+/// pixel (inclusive; [`SpanBatch::EMPTY`] for a row with none). The pixels between them count
+/// as covered: a row of a convex silhouette is one run, and a part of the human arm is
+/// nearly convex. Scoring a span is two lookups in a row's prefix sums, where a mask's is a
+/// pass over its pixels.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SpanBatch {
+    pub width: u32,
+    pub height: u32,
+    pub len: usize,
+    pub spans: Vec<[u32; 2]>,
+}
+
+impl SpanBatch {
+    /// A row that covers nothing.
+    pub const EMPTY: [u32; 2] = [u32::MAX, 0];
+
+    /// An empty batch; renderers size it.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Sizes the batch for `len` silhouettes of `width x height`, every row empty; reuses
+    /// the allocation.
+    pub fn resize(&mut self, width: u32, height: u32, len: usize) {
+        self.width = width;
+        self.height = height;
+        self.len = len;
+        self.spans.clear();
+        self.spans.resize(len * height as usize, Self::EMPTY);
+    }
+
+    /// Silhouette `k`: one span a row, top to bottom.
+    #[must_use]
+    pub fn spans(&self, k: usize) -> &[[u32; 2]] {
+        let n = self.height as usize;
+        &self.spans[k * n..(k + 1) * n]
+    }
+
+    /// The spans of `masks`: each row's first and last covered pixel.
+    pub fn from_masks(&mut self, masks: &MaskBatch) {
+        self.resize(masks.width, masks.height, masks.len);
+        let w = masks.width as usize;
+        if w == 0 {
+            return;
+        }
+        for (span, row) in self.spans.iter_mut().zip(masks.data.chunks_exact(w)) {
+            if let (Some(first), Some(last)) = (
+                row.iter().position(|&m| m != 0),
+                row.iter().rposition(|&m| m != 0),
+            ) {
+                *span = [first as u32, last as u32];
+            }
+        }
+    }
+}
+
 /// A renderer backend.
 pub trait Renderer {
     /// A short name for reports ("cpu", "wgpu").
@@ -153,6 +211,24 @@ pub trait Renderer {
         X_CO: &[Pose],
         masks: &mut MaskBatch,
     ) -> Result<()>;
+
+    /// Renders `mesh` alone at each pose `X_CO[k]` as [`Renderer::render_masks`] does, into
+    /// silhouette `k` of `spans` as row spans. By default from the masks.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`].
+    fn render_spans(
+        &mut self,
+        mesh: &RenderMesh,
+        camera: &Camera,
+        X_CO: &[Pose],
+        spans: &mut SpanBatch,
+    ) -> Result<()> {
+        let mut masks = MaskBatch::new();
+        self.render_masks(mesh, camera, X_CO, &mut masks)?;
+        spans.from_masks(&masks);
+        Ok(())
+    }
 }
 
 /// Whether every number of a pose is finite.

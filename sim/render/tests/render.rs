@@ -7,7 +7,7 @@ use std::sync::Arc;
 use approx::assert_relative_eq;
 use workcell_render::{
     Camera, Class, CpuRenderer, Frame, MaskBatch, RenderError, RenderMesh, Renderer, Scene,
-    SceneObject,
+    SceneObject, SpanBatch,
 };
 use workcell_robots::math::{Pose, Rotation, Vector};
 
@@ -187,6 +187,111 @@ fn masks_match_the_index_render_of_the_object_alone() {
         assert_eq!(masks.mask(k), index.as_slice(), "mask {k}");
         assert!(index.contains(&1), "pose {k} in view");
     }
+}
+
+/// Poses in the camera frame, 0.6-1.5 m ahead, turned every way.
+fn poses_ahead(n: u32) -> Vec<Pose> {
+    (0..n)
+        .map(|k| {
+            let a = f64::from(k) * 0.7;
+            Pose::from_parts(
+                Vector::new(0.15 * a.sin(), -0.1 * a.cos(), 0.6 + 0.03 * f64::from(k)),
+                Rotation::from_scaled_axis(Vector::new(a, 0.4 * a + 1.0, 2.0 - a)),
+            )
+        })
+        .collect()
+}
+
+/// A limb as the human model's visuals build one: a bone inside, a flesh cylinder, a sphere
+/// at each end, a finger that sticks out of the sphere (each in the link frame).
+fn limb() -> Vec<(RenderMesh, bool)> {
+    let at = |mesh: RenderMesh, z: f64| {
+        let mut out = RenderMesh::default();
+        out.append(&mesh, &Pose::from_translation(Vector::new(0.0, 0.0, z)));
+        out
+    };
+    let c = [0.8, 0.6, 0.5];
+    vec![
+        (RenderMesh::cylinder_with(0.01, 0.3, c, 6), true),
+        (RenderMesh::cylinder_with(0.05, 0.3, c, 6), true),
+        (at(RenderMesh::capsule_with(0.06, 0.0, c, 6), 0.15), true),
+        (at(RenderMesh::capsule_with(0.045, 0.0, c, 6), -0.15), true),
+        (at(RenderMesh::cuboid([0.01, 0.01, 0.05], c), 0.2), true),
+    ]
+}
+
+#[test]
+fn the_outer_union_of_a_limb_keeps_its_masks_from_fewer_triangles() {
+    let pieces = limb();
+    let mut all = RenderMesh::default();
+    for (piece, _) in &pieces {
+        all.append(piece, &Pose::IDENTITY);
+    }
+    let outer = RenderMesh::outer_union(&pieces);
+    // The bone is wholly inside the flesh; the finger's base is inside the sphere, its tip out.
+    assert!(
+        outer.len() < all.len() - pieces[0].0.len(),
+        "{} of {}",
+        outer.len(),
+        all.len()
+    );
+    assert!(outer.closed);
+    let cam = camera(160, 120, 40.0);
+    let poses = poses_ahead(40);
+    let mut renderer = CpuRenderer::new();
+    let (mut a, mut b) = (MaskBatch::new(), MaskBatch::new());
+    renderer.render_masks(&all, &cam, &poses, &mut a).unwrap();
+    renderer.render_masks(&outer, &cam, &poses, &mut b).unwrap();
+    for k in 0..poses.len() {
+        assert!(a.mask(k).contains(&1), "pose {k} in view");
+        assert_eq!(a.mask(k), b.mask(k), "mask {k}");
+    }
+}
+
+#[test]
+fn a_piece_that_is_not_convex_hides_nothing() {
+    let mut pieces = limb();
+    for (_, convex) in &mut pieces {
+        *convex = false;
+    }
+    let outer = RenderMesh::outer_union(&pieces);
+    assert_eq!(
+        outer.len(),
+        pieces.iter().map(|(m, _)| m.len()).sum::<usize>()
+    );
+}
+
+#[test]
+fn spans_are_the_first_and_last_pixel_of_each_row_of_the_mask() {
+    let cam = camera(96, 80, 45.0);
+    let mut limb_mesh = RenderMesh::default();
+    for (piece, _) in limb() {
+        limb_mesh.append(&piece, &Pose::IDENTITY);
+    }
+    let poses = poses_ahead(24);
+    let mut renderer = CpuRenderer::new();
+    let mut masks = MaskBatch::new();
+    let mut spans = SpanBatch::new();
+    for mesh in [RenderMesh::capsule(0.05, 0.3, [0.5; 3]), limb_mesh] {
+        renderer
+            .render_masks(&mesh, &cam, &poses, &mut masks)
+            .unwrap();
+        renderer
+            .render_spans(&mesh, &cam, &poses, &mut spans)
+            .unwrap();
+        let mut expected = SpanBatch::new();
+        expected.from_masks(&masks);
+        assert_eq!(spans, expected);
+        assert!(spans.spans.iter().any(|s| s[0] <= s[1]), "some row covered");
+    }
+    // By hand: rows with nothing, one pixel, and a gap (the span runs across it).
+    let mut mask = MaskBatch::new();
+    mask.resize(5, 3, 1);
+    mask.data
+        .copy_from_slice(&[0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 0]);
+    let mut from = SpanBatch::new();
+    from.from_masks(&mask);
+    assert_eq!(from.spans(0), &[SpanBatch::EMPTY, [2, 2], [1, 3]]);
 }
 
 #[test]
