@@ -33,8 +33,8 @@
 //! ([`RenderMesh::outer_union`]: the human model's bones and the caps between its limb
 //! segments left out, 652 of 2,544 triangles kept, the same masks). A part's row is nearly
 //! always one run, and a span sums in two lookups of the row's prefix sums. Both took the
-//! tracked fit from 15-17 to 8-10 ms a frame on the cell's camera (`workcell
-//! bench-perception --depth`).
+//! tracked fit from 18.3 to 10.6-11.0 ms a frame on the cell's camera, the global search
+//! from 289 to 121-134 ms (`workcell bench-perception --depth --frames 900`).
 //!
 //! **The search.** Tracking, a climb from the prediction: each iteration renders the
 //! configurations one step along each joint either way (a central-difference gradient and
