@@ -31,7 +31,7 @@
 //! A part renders as row spans ([`SpanBatch`]: each sample row's first and last covered
 //! sample), from the triangles of its visuals that are not inside another of them
 //! ([`RenderMesh::outer_union`]: the human model's bones and the caps between its limb
-//! segments left out, 652 of 2,544 triangles kept, the same masks). A part's row is nearly
+//! segments left out, 724 of 2,544 triangles kept, the same masks). A part's row is nearly
 //! always one run, and a span sums in two lookups of the row's prefix sums. Both took the
 //! tracked fit from 18.3 to 10.6-11.0 ms a frame on the cell's camera, the global search
 //! from 289 to 121-134 ms (`workcell bench-perception --depth --frames 900`).
@@ -1481,7 +1481,7 @@ mod tests {
                 );
             }
             let outer = arm.meshes[p].as_ref().expect("mesh");
-            // 258 of 504, 264 of 672 and 130 of 1,368 triangles.
+            // 270 of 504, 276 of 672 and 178 of 1,368 triangles.
             assert!(
                 10 * outer.len() < 6 * all.len(),
                 "{} of {}",

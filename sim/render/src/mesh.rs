@@ -6,6 +6,8 @@ use std::sync::Arc;
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{Geometry, Shape, TriMesh};
 
+use crate::cpu::{cross, dot, sub};
+
 /// Segments around the axis of cylinders, capsules and spheres.
 const SEGMENTS: usize = 16;
 
@@ -19,6 +21,11 @@ pub struct RenderMesh {
     /// Whether every triangle is wound counter-clockwise seen from outside a closed surface,
     /// so that back faces may be culled. False for meshes of unknown orientation.
     pub closed: bool,
+}
+
+/// A triangle's normal (unnormalised), out of its counter-clockwise side.
+fn normal([a, b, c]: [[f32; 3]; 3]) -> [f32; 3] {
+    cross(sub(b, a), sub(c, a))
 }
 
 impl RenderMesh {
@@ -55,10 +62,12 @@ impl RenderMesh {
 
     /// The union of `pieces` (each with whether it is convex) for silhouettes and masks:
     /// every triangle of a piece that lies inside another convex piece left out (a bone
-    /// inside the flesh, the cap between two segments of a limb). Such a triangle is never
-    /// on the union's outside, so masks from any view are the same, from fewer triangles
-    /// (the human arm's parts: 2,544 triangles, 652 left). Only the triangles' vertices are
-    /// kept. The result is closed when every piece is.
+    /// inside the flesh, a thinner limb segment's cap inside the next one). Such a triangle
+    /// is never on the union's outside, so masks from any view are the same, from fewer
+    /// triangles (the human arm's parts: 2,544 triangles, 724 left). A triangle in the plane
+    /// of one of the other piece's faces is kept: two boxes that share a face's plane, or a
+    /// visual given twice, would otherwise hide each other's faces on that plane. Only the
+    /// kept triangles' vertices are kept. The result is closed when every piece is.
     #[must_use]
     pub fn outer_union(pieces: &[(RenderMesh, bool)]) -> Self {
         let mut out = Self {
@@ -70,14 +79,13 @@ impl RenderMesh {
             index.clear();
             index.resize(mesh.positions.len(), u32::MAX);
             for (tri, &color) in mesh.triangles.iter().zip(&mesh.colors) {
-                let corner = |c: usize| mesh.positions.get(tri[c] as usize).copied();
-                let (Some(a), Some(b), Some(c)) = (corner(0), corner(1), corner(2)) else {
+                let Some(corners) = mesh.corners(tri) else {
                     continue;
                 };
-                let corners = [a, b, c];
-                let hidden = pieces.iter().enumerate().any(|(j, (other, convex))| {
-                    j != k && *convex && corners.iter().all(|&p| other.contains_convex(p))
-                });
+                let hidden = pieces
+                    .iter()
+                    .enumerate()
+                    .any(|(j, (other, convex))| j != k && *convex && other.hides(corners));
                 if hidden {
                     continue;
                 }
@@ -96,23 +104,34 @@ impl RenderMesh {
         out
     }
 
-    /// Whether `p` is inside or on this mesh taken as a convex solid: behind every face's
-    /// plane (faces counter-clockwise seen from outside), within 1 um.
-    fn contains_convex(&self, p: [f32; 3]) -> bool {
-        let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-        self.triangles.iter().all(|t| {
-            let corner = |c: usize| self.positions.get(t[c] as usize).copied();
-            let (Some(a), Some(b), Some(c)) = (corner(0), corner(1), corner(2)) else {
+    /// The corners of triangle `t`; `None` when an index is out of range.
+    fn corners(&self, t: &[u32; 3]) -> Option<[[f32; 3]; 3]> {
+        let corner = |c: usize| self.positions.get(t[c] as usize).copied();
+        Some([corner(0)?, corner(1)?, corner(2)?])
+    }
+
+    /// Whether this mesh, taken as a convex solid (faces counter-clockwise seen from
+    /// outside), holds triangle `t` (of another solid) where it is never on their union's
+    /// outside: every corner behind or on every face's plane (within 1 um), and where all
+    /// three lie on a face's plane, `t` faces the other way (the two solids meet there, one
+    /// on each side, like two segments of a limb). Facing the same way, the two solids lie
+    /// on the same side and `t` may be on the outside (two boxes on one floor).
+    fn hides(&self, t: [[f32; 3]; 3]) -> bool {
+        const TOLERANCE_M: f32 = 1e-6;
+        let t_normal = normal(t);
+        self.triangles.iter().all(|face| {
+            let Some(face) = self.corners(face) else {
                 return true;
             };
-            let (u, v, d) = (sub(b, a), sub(c, a), sub(p, a));
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
-            let length = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            n[0] * d[0] + n[1] * d[1] + n[2] * d[2] <= 1e-6 * length
+            let n = normal(face);
+            let length = dot(n, n).sqrt();
+            if length == 0.0 {
+                return true;
+            }
+            let distance = t.map(|p| dot(n, sub(p, face[0])) / length);
+            let behind = distance.iter().all(|&d| d <= TOLERANCE_M);
+            let on_plane = distance.iter().all(|&d| d.abs() <= TOLERANCE_M);
+            behind && (!on_plane || dot(n, t_normal) < 0.0)
         })
     }
 

@@ -248,6 +248,46 @@ fn the_outer_union_of_a_limb_keeps_its_masks_from_fewer_triangles() {
     }
 }
 
+/// Pieces whose faces share a plane: a cube on the floor of a taller box with the same
+/// footprint, and a sphere given twice. Neither hides the other's faces on that plane.
+#[test]
+fn faces_in_a_shared_plane_stay() {
+    let c = [0.5; 3];
+    let at = |mesh: RenderMesh, z: f64| {
+        let mut out = RenderMesh::default();
+        out.append(&mesh, &Pose::from_translation(Vector::new(0.0, 0.0, z)));
+        out
+    };
+    let sphere = at(RenderMesh::capsule_with(0.04, 0.0, c, 6), 0.3);
+    let pieces = vec![
+        (at(RenderMesh::cuboid([0.1, 0.1, 0.1], c), 0.1), true),
+        (at(RenderMesh::cuboid([0.1, 0.1, 0.2], c), 0.2), true),
+        (sphere.clone(), true),
+        (sphere, true),
+    ];
+    let mut all = RenderMesh::default();
+    for (piece, _) in &pieces {
+        all.append(piece, &Pose::IDENTITY);
+    }
+    let outer = RenderMesh::outer_union(&pieces);
+    // The cube's top (inside the box) goes; its floor, in the box's floor's plane, stays.
+    assert!(outer.len() < all.len(), "{} of {}", outer.len(), all.len());
+    // Seen from below, along the boxes' axis, and from the side.
+    let cam = camera(96, 80, 45.0);
+    let below = Rotation::from_scaled_axis(Vector::new(0.0, -std::f64::consts::FRAC_PI_2, 0.0));
+    let poses: Vec<Pose> = std::iter::once(Pose::from_parts(Vector::new(0.0, 0.0, 1.0), below))
+        .chain(poses_ahead(12))
+        .collect();
+    let mut renderer = CpuRenderer::new();
+    let (mut a, mut b) = (MaskBatch::new(), MaskBatch::new());
+    renderer.render_masks(&all, &cam, &poses, &mut a).unwrap();
+    renderer.render_masks(&outer, &cam, &poses, &mut b).unwrap();
+    for k in 0..poses.len() {
+        assert!(a.mask(k).contains(&1), "pose {k} in view");
+        assert_eq!(a.mask(k), b.mask(k), "mask {k}");
+    }
+}
+
 #[test]
 fn a_piece_that_is_not_convex_hides_nothing() {
     let mut pieces = limb();
