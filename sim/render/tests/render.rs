@@ -202,14 +202,37 @@ fn poses_ahead(n: u32) -> Vec<Pose> {
         .collect()
 }
 
+/// `mesh` moved `z` along its z axis.
+fn at(mesh: RenderMesh, z: f64) -> RenderMesh {
+    let mut out = RenderMesh::default();
+    out.append(&mesh, &Pose::from_translation(Vector::new(0.0, 0.0, z)));
+    out
+}
+
+/// The pieces appended into one mesh, and their outer union.
+fn all_and_outer(pieces: &[(RenderMesh, bool)]) -> (RenderMesh, RenderMesh) {
+    let mut all = RenderMesh::default();
+    for (piece, _) in pieces {
+        all.append(piece, &Pose::IDENTITY);
+    }
+    (all, RenderMesh::outer_union(pieces))
+}
+
+/// `a` and `b` cover the same pixels at every pose, and each pose shows something.
+fn assert_same_masks(a: &RenderMesh, b: &RenderMesh, cam: &Camera, poses: &[Pose]) {
+    let mut renderer = CpuRenderer::new();
+    let (mut ma, mut mb) = (MaskBatch::new(), MaskBatch::new());
+    renderer.render_masks(a, cam, poses, &mut ma).unwrap();
+    renderer.render_masks(b, cam, poses, &mut mb).unwrap();
+    for k in 0..poses.len() {
+        assert!(ma.mask(k).contains(&1), "pose {k} in view");
+        assert_eq!(ma.mask(k), mb.mask(k), "mask {k}");
+    }
+}
+
 /// A limb as the human model's visuals build one: a bone inside, a flesh cylinder, a sphere
 /// at each end, a finger that sticks out of the sphere (each in the link frame).
 fn limb() -> Vec<(RenderMesh, bool)> {
-    let at = |mesh: RenderMesh, z: f64| {
-        let mut out = RenderMesh::default();
-        out.append(&mesh, &Pose::from_translation(Vector::new(0.0, 0.0, z)));
-        out
-    };
     let c = [0.8, 0.6, 0.5];
     vec![
         (RenderMesh::cylinder_with(0.01, 0.3, c, 6), true),
@@ -223,11 +246,7 @@ fn limb() -> Vec<(RenderMesh, bool)> {
 #[test]
 fn the_outer_union_of_a_limb_keeps_its_masks_from_fewer_triangles() {
     let pieces = limb();
-    let mut all = RenderMesh::default();
-    for (piece, _) in &pieces {
-        all.append(piece, &Pose::IDENTITY);
-    }
-    let outer = RenderMesh::outer_union(&pieces);
+    let (all, outer) = all_and_outer(&pieces);
     // The bone is wholly inside the flesh; the finger's base is inside the sphere, its tip out.
     assert!(
         outer.len() < all.len() - pieces[0].0.len(),
@@ -238,14 +257,7 @@ fn the_outer_union_of_a_limb_keeps_its_masks_from_fewer_triangles() {
     assert!(outer.closed);
     let cam = camera(160, 120, 40.0);
     let poses = poses_ahead(40);
-    let mut renderer = CpuRenderer::new();
-    let (mut a, mut b) = (MaskBatch::new(), MaskBatch::new());
-    renderer.render_masks(&all, &cam, &poses, &mut a).unwrap();
-    renderer.render_masks(&outer, &cam, &poses, &mut b).unwrap();
-    for k in 0..poses.len() {
-        assert!(a.mask(k).contains(&1), "pose {k} in view");
-        assert_eq!(a.mask(k), b.mask(k), "mask {k}");
-    }
+    assert_same_masks(&all, &outer, &cam, &poses);
 }
 
 /// Pieces whose faces share a plane: a cube on the floor of a taller box with the same
@@ -253,11 +265,6 @@ fn the_outer_union_of_a_limb_keeps_its_masks_from_fewer_triangles() {
 #[test]
 fn faces_in_a_shared_plane_stay() {
     let c = [0.5; 3];
-    let at = |mesh: RenderMesh, z: f64| {
-        let mut out = RenderMesh::default();
-        out.append(&mesh, &Pose::from_translation(Vector::new(0.0, 0.0, z)));
-        out
-    };
     let sphere = at(RenderMesh::capsule_with(0.04, 0.0, c, 6), 0.3);
     let pieces = vec![
         (at(RenderMesh::cuboid([0.1, 0.1, 0.1], c), 0.1), true),
@@ -265,11 +272,7 @@ fn faces_in_a_shared_plane_stay() {
         (sphere.clone(), true),
         (sphere, true),
     ];
-    let mut all = RenderMesh::default();
-    for (piece, _) in &pieces {
-        all.append(piece, &Pose::IDENTITY);
-    }
-    let outer = RenderMesh::outer_union(&pieces);
+    let (all, outer) = all_and_outer(&pieces);
     // The cube's top (inside the box) goes; its floor, in the box's floor's plane, stays.
     assert!(outer.len() < all.len(), "{} of {}", outer.len(), all.len());
     // Seen from below, along the boxes' axis, and from the side.
@@ -278,14 +281,7 @@ fn faces_in_a_shared_plane_stay() {
     let poses: Vec<Pose> = std::iter::once(Pose::from_parts(Vector::new(0.0, 0.0, 1.0), below))
         .chain(poses_ahead(12))
         .collect();
-    let mut renderer = CpuRenderer::new();
-    let (mut a, mut b) = (MaskBatch::new(), MaskBatch::new());
-    renderer.render_masks(&all, &cam, &poses, &mut a).unwrap();
-    renderer.render_masks(&outer, &cam, &poses, &mut b).unwrap();
-    for k in 0..poses.len() {
-        assert!(a.mask(k).contains(&1), "pose {k} in view");
-        assert_eq!(a.mask(k), b.mask(k), "mask {k}");
-    }
+    assert_same_masks(&all, &outer, &cam, &poses);
 }
 
 #[test]
