@@ -195,16 +195,15 @@ impl Calibration {
     #[must_use]
     pub fn measured(network: bool, depth: bool) -> Self {
         let (scale, floor_m) = match (network, depth) {
-            // The validation split (docs/perception.md): true masks with depth, 3,828
-            // frames, 99 % within 1.97 cm (the renders as row spans); without, the mirror's
-            // misses (35.8 cm, measured before the climb's coarser last step and the search
-            // of poor tracks).
+            // The validation split (docs/perception.md), the renders as row spans: true
+            // masks with depth, 3,828 frames, 99 % within 1.97 cm; without, the mirror's
+            // misses, 38.5 cm.
             (false, true) => (0.0, 0.0197),
-            (false, false) => (0.5, 0.3090),
-            // ProcNet's masks with depth, 3,776 frames: 99 % within 5.15 cm; without, 41 cm
-            // (as measured before, like true masks without depth).
+            (false, false) => (0.0, 0.3851),
+            // ProcNet's masks with depth, 3,776 frames: 99 % within 5.15 cm; without (3,806
+            // frames), 40.6 cm.
             (true, true) => (0.0, 0.0515),
-            (true, false) => (0.0, 0.4144),
+            (true, false) => (0.0, 0.4059),
         };
         Self { scale, floor_m }
     }
