@@ -78,15 +78,13 @@ fn closed_loop_scenarios_stay_within_their_bounds() {
         std::fs::read_to_string(scenarios().join("expectations.toml")).expect("expectations");
     let expectations: Expectations = toml::from_str(&text).expect("expectations parse");
     assert!(expectations.case.len() >= 6);
-    // Each distinct episode once, the first case that names it running it.
-    let mut keys: Vec<EpisodeKey> = Vec::new();
-    let mut jobs: Vec<(usize, usize)> = Vec::new();
+    // Each distinct episode once: its key, and the case and episode that run it.
+    let mut jobs: Vec<(EpisodeKey, usize, usize)> = Vec::new();
     for (c, case) in expectations.case.iter().enumerate() {
         for e in 0..case.episodes {
             let key = EpisodeKey::of(case, e);
-            if !keys.contains(&key) {
-                keys.push(key);
-                jobs.push((c, e));
+            if jobs.iter().all(|(k, _, _)| *k != key) {
+                jobs.push((key, c, e));
             }
         }
     }
@@ -96,17 +94,17 @@ fn closed_loop_scenarios_stay_within_their_bounds() {
         let handles: Vec<_> = (0..workers)
             .map(|w| {
                 let cases = &expectations.case;
-                let chunk: Vec<(usize, (usize, usize))> = jobs
+                let chunk: Vec<(usize, usize, usize)> = jobs
                     .iter()
-                    .copied()
                     .enumerate()
                     .skip(w)
                     .step_by(workers)
+                    .map(|(j, &(_, c, e))| (j, c, e))
                     .collect();
                 scope.spawn(move || {
                     chunk
                         .into_iter()
-                        .map(|(j, (c, e))| (j, episode(&cases[c], e)))
+                        .map(|(j, c, e)| (j, episode(&cases[c], e)))
                         .collect::<Vec<_>>()
                 })
             })
@@ -129,7 +127,10 @@ fn closed_loop_scenarios_stay_within_their_bounds() {
             let runs: Vec<EpisodeMetrics> = (0..case.episodes)
                 .map(|e| {
                     let key = EpisodeKey::of(case, e);
-                    let j = keys.iter().position(|k| *k == key).expect("a run per key");
+                    let j = jobs
+                        .iter()
+                        .position(|(k, _, _)| *k == key)
+                        .expect("a run per key");
                     metrics[j].clone()
                 })
                 .collect();
