@@ -63,7 +63,7 @@ mod model;
 mod search;
 
 pub use articulated::{
-    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmMasks, ArticulatedArm, Calibration,
+    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmGain, ArmMasks, ArticulatedArm, Calibration,
     FITTED_PARTS,
 };
 pub use config::PoseConfig;

@@ -404,7 +404,7 @@ fn frame_result(
         pose_ms: 0.0,
         mask_ms: 0.0,
         renders: 0,
-        truth_gain: f64::NAN,
+        truth_gain: [f64::NAN; 4],
     }
 }
 

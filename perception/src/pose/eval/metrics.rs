@@ -96,8 +96,9 @@ pub struct FrameResult {
     /// Time of the mask source (the network), ms.
     pub mask_ms: f64,
     pub renders: usize,
-    /// The articulated fit's gain at the true joint positions (NaN for the paper's method).
-    pub truth_gain: f64,
+    /// The articulated fit's gain at the true joint positions: all parts, then the upper
+    /// arm's, the forearm's and the hand's shares (NaN for the paper's method).
+    pub truth_gain: [f64; 4],
 }
 
 impl FrameResult {

@@ -153,7 +153,7 @@ pub fn evaluate_pose(
             let labels = &seq.labels[t];
             let camera = Camera::from(&labels.camera);
             let t0 = Instant::now();
-            let mut truth_gain = f64::NAN;
+            let mut truth_gain = [f64::NAN; 4];
             let (found, mask_ms, pose_ms) = match &mut estimator {
                 Estimator::Articulated(fitter) => {
                     let mut masks = source.arm(&seq, t)?;
@@ -165,9 +165,10 @@ pub fn evaluate_pose(
                     let outcome = fitter.fit(&camera, &masks)?;
                     let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
                     if labels.human_q.len() == fitter.arm().dof() {
-                        truth_gain = fitter
-                            .gain_at(&camera, &masks, &labels.human_q)?
-                            .unwrap_or(f64::NAN);
+                        if let Some(g) = fitter.gain_at(&camera, &masks, &labels.human_q)? {
+                            let [upper, forearm, hand] = g.parts;
+                            truth_gain = [g.total, upper, forearm, hand];
+                        }
                     }
                     let found = outcome.map(|fit| Found {
                         X_CO: fit.X_CO(),
