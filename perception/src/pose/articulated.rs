@@ -42,9 +42,8 @@
 //! the best one is taken and the step grows by 1.5, or halves when none is better, down to
 //! [`ArmFitConfig::min_step_rad`]. Without a track, or when every tracked hypothesis ends
 //! below [`ArmFitConfig::search_below_gain`], a global search renders a grid over the joints'
-//! ranges and climbs the best few distinct cells ([`ArmFit::reacquired`]), and the next few
-//! when none of them reaches a pose ([`ArmFitConfig::search_retries`]); the tracked climbs
-//! compete with them. A track that explains the masks poorly has often followed a
+//! ranges and climbs the best few distinct cells ([`ArmFit::reacquired`]); the tracked
+//! climbs compete with them. A track that explains the masks poorly has often followed a
 //! wrong optimum on masks the network misread: on the validation split with ProcNet's masks
 //! and depth, searching below a gain of 0.55 (6 % of frames) took the 99th percentile of the
 //! forearm's error from 6.0 to 4.9 cm.
@@ -90,9 +89,6 @@ pub struct ArmFitConfig {
     pub grid: usize,
     /// Grid cells climbed by the global search. Default 10.
     pub refine: usize,
-    /// When none of the `refine` cells climbs to a pose (a gain of `min_gain`), the global
-    /// search climbs the next `refine` distinct cells, up to this many times. Default 1.
-    pub search_retries: usize,
     /// Climb iterations at most. Default 40.
     pub max_iterations: usize,
     /// First step of the climb, rad. Default 0.05.
@@ -154,7 +150,6 @@ impl Default for ArmFitConfig {
             min_gain: 0.3,
             grid: 12,
             refine: 10,
-            search_retries: 1,
             max_iterations: 40,
             initial_step_rad: 0.05,
             min_step_rad: 0.005,
@@ -1203,10 +1198,9 @@ impl<R: Renderer> ArmFitter<R> {
         order.sort_by(|&a, &b| scores[b].objective.total_cmp(&scores[a].objective));
         // Cells at least 1.5 cells apart in some joint.
         let cell: Vec<f64> = limits.iter().map(|[lo, hi]| (hi - lo) / n as f64).collect();
-        let batch = c.refine.max(1);
         let mut starts: Vec<Vec<f64>> = Vec::new();
         for i in order {
-            if starts.len() >= batch * (1 + c.search_retries) {
+            if starts.len() >= c.refine.max(1) {
                 break;
             }
             let q = &grid[i];
@@ -1220,17 +1214,10 @@ impl<R: Renderer> ArmFitter<R> {
                 starts.push(q.clone());
             }
         }
-        // Batch by batch, until one of them climbs to a pose.
-        let mut climbs = Vec::new();
-        for batch in starts.chunks(batch) {
-            for start in batch {
-                climbs.push(self.climb(target, start.clone(), None)?);
-            }
-            if climbs.iter().any(|climb| climb.score.gain >= c.min_gain) {
-                break;
-            }
-        }
-        Ok(climbs)
+        starts
+            .into_iter()
+            .map(|s| self.climb(target, s, None))
+            .collect()
     }
 }
 
@@ -1770,46 +1757,5 @@ mod tests {
         );
         let small = ArmMasks { width: 64, ..empty };
         assert!(fitter.fit(&camera, &small).is_err());
-    }
-
-    /// When none of the global search's first cells climbs to a pose, the next ones are
-    /// climbed: with a coarse grid and one cell a batch, the arm is lost without the retry
-    /// and found with it.
-    #[test]
-    fn the_search_climbs_more_cells_when_none_reaches_a_pose() {
-        let (arm, camera) = setup();
-        let truth = [0.64, 2.4, 2.09];
-        let masks =
-            ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
-        let config = |search_retries| ArmFitConfig {
-            grid: 3,
-            refine: 1,
-            search_retries,
-            ..ArmFitConfig::default()
-        };
-        let mut once = ArmFitter::new(CpuRenderer::new(), arm.clone(), config(0));
-        assert_eq!(
-            once.fit(&camera, &masks).expect("fit"),
-            Err(NoPose::PoorFit)
-        );
-        let mut retried = ArmFitter::new(CpuRenderer::new(), arm.clone(), config(8));
-        let fit = retried.fit(&camera, &masks).expect("fit").expect("a pose");
-        assert!(fit.reacquired);
-        let err = distance_cm(&arm, &camera, &fit.q, &truth);
-        assert!(err < 1.0, "{err:.2} cm off, q {:?}", fit.q);
-
-        // Where the first batch finds the arm, the retries render nothing more.
-        let easy = [0.5, 0.9, 1.0];
-        let masks =
-            ArmMasks::from_classes(&classes(&arm, &camera, &easy), 128, 128).expect("masks");
-        let fits = [0, 8].map(|search_retries| {
-            let config = ArmFitConfig {
-                search_retries,
-                ..ArmFitConfig::default()
-            };
-            let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
-            fitter.fit(&camera, &masks).expect("fit").expect("a pose")
-        });
-        assert_eq!(fits[0], fits[1]);
     }
 }
