@@ -647,14 +647,39 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             assert!(pose_out.join(file).exists(), "{masks}: {file} missing");
         }
         let csv = std::fs::read_to_string(pose_out.join("pose_frames.csv")).expect("csv");
+        let header: Vec<&str> = csv.lines().next().expect("header").split(',').collect();
         assert!(
-            csv.starts_with("sequence,frame,")
-                && csv
-                    .lines()
-                    .next()
-                    .is_some_and(|h| h.ends_with(",ends_cm,truth_gain,sigma_m,spread_m")),
+            header.starts_with(&["sequence", "frame"])
+                && header.ends_with(&[
+                    "ends_cm",
+                    "truth_gain",
+                    "sigma_m",
+                    "spread_m",
+                    "truth_gain_upper_arm",
+                    "truth_gain_forearm",
+                    "truth_gain_hand"
+                ]),
             "{csv}"
         );
+        // The parts' shares of the truth's gain add up to it (each written to 4 decimals).
+        let column = |name: &str| header.iter().position(|h| *h == name).expect(name);
+        let total = column("truth_gain");
+        let parts = ["upper_arm", "forearm", "hand"].map(|p| column(&format!("truth_gain_{p}")));
+        let mut checked = 0;
+        for line in csv.lines().skip(1) {
+            let row: Vec<f64> = line
+                .split(',')
+                .map(|v| v.parse().unwrap_or(f64::NAN))
+                .collect();
+            if method == "articulated" {
+                let sum: f64 = parts.iter().map(|&i| row[i]).sum();
+                assert!((sum - row[total]).abs() < 2.5e-4, "{line}");
+                checked += 1;
+            } else {
+                assert!(row[total].is_nan() && parts.iter().all(|&i| row[i].is_nan()));
+            }
+        }
+        assert!(method != "articulated" || checked > 0, "{csv}");
     }
     refused(
         &["eval", "pose", "--method", "pnp", "--dataset", data_s],

@@ -164,11 +164,11 @@ pub fn evaluate_pose(
                     let t1 = Instant::now();
                     let outcome = fitter.fit(&camera, &masks)?;
                     let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
-                    if labels.human_q.len() == fitter.arm().dof() {
-                        if let Some(g) = fitter.gain_at(&camera, &masks, &labels.human_q)? {
-                            let [upper, forearm, hand] = g.parts;
-                            truth_gain = [g.total, upper, forearm, hand];
-                        }
+                    if labels.human_q.len() == fitter.arm().dof()
+                        && let Some(g) = fitter.gain_at(&camera, &masks, &labels.human_q)?
+                    {
+                        let [upper, forearm, hand] = g.parts;
+                        truth_gain = [g.total, upper, forearm, hand];
                     }
                     let found = outcome.map(|fit| Found {
                         X_CO: fit.X_CO(),
