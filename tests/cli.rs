@@ -680,6 +680,18 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             }
         }
         assert!(method != "articulated" || checked > 0, "{csv}");
+        // The contact sheet of the frames without a pose, written when there are any.
+        let why = column("no_pose");
+        let without = csv
+            .lines()
+            .skip(1)
+            .filter(|l| l.split(',').nth(why).is_some_and(|v| !v.is_empty()))
+            .count();
+        assert_eq!(
+            pose_out.join("no_pose.png").exists(),
+            without > 0,
+            "{masks}: {without} frames without a pose"
+        );
     }
     refused(
         &["eval", "pose", "--method", "pnp", "--dataset", data_s],

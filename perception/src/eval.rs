@@ -487,7 +487,7 @@ impl FrameRecord {
 
 /// A CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line break, as a
 /// camera's name from a scenario file may.
-fn csv_field(s: &str) -> std::borrow::Cow<'_, str> {
+pub(crate) fn csv_field(s: &str) -> std::borrow::Cow<'_, str> {
     if s.contains([',', '"', '\n', '\r']) {
         format!("\"{}\"", s.replace('"', "\"\"")).into()
     } else {
@@ -797,7 +797,7 @@ pub fn evaluate(
 }
 
 /// Planar `[3, n]` floats in [0, 1] to interleaved bytes.
-fn interleave(planar: &[f32], n: usize) -> Vec<u8> {
+pub(crate) fn interleave(planar: &[f32], n: usize) -> Vec<u8> {
     (0..n)
         .flat_map(|p| [0, 1, 2].map(|ch| to_byte(planar[ch * n + p])))
         .collect()

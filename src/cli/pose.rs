@@ -13,6 +13,8 @@ use workcell::perception::pose::eval::{
 use workcell::perception::pose::{ArmFitConfig, Calibration, PoseConfig};
 use workcell::perception::{Backend, ProcNet, backend};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
+use workcell::render::dataset::{PredictionPanel, prediction_sheet};
+use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::Dataset;
 
 #[derive(Debug, clap::Args)]
@@ -58,7 +60,8 @@ pub struct EvalPoseArgs {
     /// cell's shoulder.
     #[arg(long)]
     pub no_anchor: bool,
-    /// Folder for pose_eval.md, pose_frames.csv and pose_error_vs_distance.{svg,png}.
+    /// Folder for pose_eval.md, pose_frames.csv, pose_error_vs_distance.{svg,png} and, when
+    /// some frames have no pose, no_pose.png (a contact sheet of them).
     #[arg(long, default_value = "out/pose")]
     pub out: PathBuf,
 }
@@ -211,6 +214,12 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         write(&format!("pose_frames{suffix}.csv"), &ev.to_csv())?;
         written.push(format!("pose_eval{suffix}.md"));
         written.push(format!("pose_frames{suffix}.csv"));
+        if !ev.no_pose.is_empty() {
+            let name = format!("no_pose{suffix}.png");
+            let (w, h, rgb) = no_pose_sheet(&ev, kind);
+            write_png(&args.out.join(&name), w, h, PixelKind::Rgb, &rgb)?;
+            written.push(name);
+        }
         evaluations.push(ev);
     }
     if several {
@@ -236,6 +245,59 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         png.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// Frames on the contact sheet of frames without a pose.
+const NO_POSE_SHEET_FRAMES: usize = 24;
+
+/// The contact sheet of frames without a pose (`no_pose.png`): per frame the input, the true
+/// arm parts, the parts in the masks the fit read, and the forearm's agreement; titled with
+/// the truth's gain on those masks and each part's share of it (a part's share below zero:
+/// the masks call it background where it is).
+fn no_pose_sheet(ev: &PoseEvaluation, kind: &str) -> (u32, u32, Vec<u8>) {
+    let sample = ev.no_pose_sample(NO_POSE_SHEET_FRAMES);
+    let titles: Vec<String> = sample
+        .iter()
+        .map(|f| {
+            let Some(r) = ev.frames.get(f.index) else {
+                return String::new();
+            };
+            let [total, upper, forearm, hand] = r.truth_gain;
+            let gains = if total.is_finite() {
+                format!(" - truth gain {total:.2} ({upper:.2} {forearm:.2} {hand:.2})")
+            } else {
+                String::new()
+            };
+            format!(
+                "seq {} frame {} - {} / {}, {:.0} % hidden{gains}",
+                r.sequence,
+                r.frame,
+                r.distance_class,
+                r.occlusion_level,
+                100.0 * r.occlusion
+            )
+        })
+        .collect();
+    let panels: Vec<PredictionPanel<'_>> = sample
+        .iter()
+        .zip(&titles)
+        .map(|(f, title)| PredictionPanel {
+            title,
+            width: f.width,
+            height: f.height,
+            rgb: &f.rgb,
+            truth: &f.truth,
+            predicted: &f.masks,
+        })
+        .collect();
+    let without = ev.frames.iter().filter(|f| f.outcome.is_err()).count();
+    let title = format!(
+        "{} of {without} {} frames without a pose, {kind} masks - truth gain: all (upper arm, \
+         forearm, hand)",
+        panels.len(),
+        ev.split
+    );
+    prediction_sheet(&title, &panels, 2)
 }
 
 /// Mean position error in 0.5 m bins of camera distance, with the frames without a pose in

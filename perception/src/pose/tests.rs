@@ -432,6 +432,7 @@ fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
         sequences: 1,
         method: String::new(),
         frames,
+        no_pose: Vec::new(),
     };
     let a = eval(vec![
         frame(0, Some(1.0)),
@@ -472,6 +473,7 @@ fn a_group_without_a_pose_shows_no_angles() {
         sequences: 1,
         method: String::new(),
         frames: vec![frame(1, "medium"), frame(2, "medium")],
+        no_pose: Vec::new(),
     };
     let s = eval.summary(Some("short"), Some("medium"));
     assert_eq!((s.frames, s.no_pose), (2, 2));
@@ -490,4 +492,89 @@ fn a_group_without_a_pose_shows_no_angles() {
         md.contains("| short | medium | - | - | - | - | - | 0 |"),
         "{md}"
     );
+}
+
+/// The contact sheet's sample of frames without a pose takes each sequence's first before
+/// any sequence's second, and keeps the split's order.
+#[test]
+fn the_no_pose_sample_spreads_over_the_sequences() {
+    use super::eval::{NoPoseFrame, PoseEvaluation};
+    // Sequence 7 has four frames without a pose, sequences 8 and 9 one each.
+    let sequences = [7, 7, 7, 7, 8, 9];
+    let frames = sequences
+        .iter()
+        .enumerate()
+        .map(|(i, &sequence)| super::eval::FrameResult {
+            sequence,
+            ..frame_result(i + 1, "heavy", Err(NoPose::PoorFit))
+        })
+        .collect();
+    let no_pose = (0..sequences.len())
+        .map(|index| NoPoseFrame {
+            index,
+            rgb: vec![0; 3],
+            truth: vec![0],
+            masks: vec![0],
+            width: 1,
+            height: 1,
+        })
+        .collect();
+    let eval = PoseEvaluation {
+        masks: String::new(),
+        split: "test".into(),
+        sequences: 3,
+        method: String::new(),
+        frames,
+        no_pose,
+    };
+    let sample = |n| -> Vec<usize> { eval.no_pose_sample(n).iter().map(|f| f.index).collect() };
+    assert_eq!(sample(3), [0, 4, 5]);
+    assert_eq!(sample(4), [0, 1, 4, 5]);
+    assert_eq!(sample(24), [0, 1, 2, 3, 4, 5]);
+    assert!(sample(0).is_empty());
+}
+
+/// Every reason for no pose stays one field of the per-frame CSV, commas and all.
+#[test]
+fn the_csv_quotes_reasons_with_commas() {
+    use super::eval::PoseEvaluation;
+    let reasons = [
+        NoPose::Empty,
+        NoPose::NotAProbability,
+        NoPose::SeveralBlobs { blobs: 3 },
+        NoPose::PoorFit,
+    ];
+    let eval = PoseEvaluation {
+        masks: String::new(),
+        split: "test".into(),
+        sequences: 1,
+        method: String::new(),
+        frames: reasons
+            .iter()
+            .enumerate()
+            .map(|(i, why)| frame_result(i + 1, "heavy", Err(*why)))
+            .collect(),
+        no_pose: Vec::new(),
+    };
+    let csv = eval.to_csv();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let why = header
+        .iter()
+        .position(|h| *h == "no_pose")
+        .expect("no_pose column");
+    for (line, reason) in lines.zip(reasons) {
+        // Split on the commas outside quotes; a quoted field loses its quotes.
+        let (mut fields, mut field, mut quoted) = (Vec::new(), String::new(), false);
+        for c in line.chars() {
+            match c {
+                '"' => quoted = !quoted,
+                ',' if !quoted => fields.push(std::mem::take(&mut field)),
+                c => field.push(c),
+            }
+        }
+        fields.push(field);
+        assert_eq!(fields.len(), header.len(), "{line}");
+        assert_eq!(fields[why], reason.to_string(), "{line}");
+    }
 }

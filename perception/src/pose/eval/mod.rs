@@ -73,6 +73,26 @@ impl PoseMethod {
     }
 }
 
+/// Frames without a pose kept per sequence for the contact sheet ([`PoseEvaluation::no_pose`]).
+pub const NO_POSE_KEPT_PER_SEQUENCE: usize = 4;
+
+/// A scored frame without a pose, kept for the contact sheet of why: the input, the true arm
+/// parts and the arm parts of the masks the estimator read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoPoseFrame {
+    /// Its index in [`PoseEvaluation::frames`].
+    pub index: usize,
+    /// Interleaved RGB bytes, `width x height`.
+    pub rgb: Vec<u8>,
+    /// The true arm parts without the occluder (`Class as u8`; every other class 0).
+    pub truth: Vec<u8>,
+    /// The arm parts of the masks: the most probable part above the fit's threshold, else 0.
+    /// The forearm alone for the paper's method.
+    pub masks: Vec<u8>,
+    pub width: usize,
+    pub height: usize,
+}
+
 /// A split's pose evaluation.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PoseEvaluation {
@@ -82,6 +102,52 @@ pub struct PoseEvaluation {
     /// [`PoseMethod::describe`].
     pub method: String,
     pub frames: Vec<FrameResult>,
+    /// The first [`NO_POSE_KEPT_PER_SEQUENCE`] frames of each sequence without a pose.
+    pub no_pose: Vec<NoPoseFrame>,
+}
+
+impl PoseEvaluation {
+    /// Up to `n` of the kept frames without a pose, spread over the sequences: each
+    /// sequence's first, then each one's second, and so on; in split order.
+    #[must_use]
+    pub fn no_pose_sample(&self, n: usize) -> Vec<&NoPoseFrame> {
+        let sequence = |f: &NoPoseFrame| self.frames.get(f.index).map(|r| r.sequence);
+        let mut rank = Vec::with_capacity(self.no_pose.len());
+        for (i, f) in self.no_pose.iter().enumerate() {
+            let before = self.no_pose[..i]
+                .iter()
+                .filter(|g| sequence(g) == sequence(f))
+                .count();
+            rank.push((before, f.index, f));
+        }
+        rank.sort_by_key(|&(before, index, _)| (before, index));
+        let mut chosen: Vec<&NoPoseFrame> = rank.into_iter().take(n).map(|r| r.2).collect();
+        chosen.sort_by_key(|f| f.index);
+        chosen
+    }
+}
+
+/// The arm parts of `classes` (every other class 0).
+fn arm_parts_of(classes: &[u8]) -> Vec<u8> {
+    let parts = super::FITTED_PARTS.map(|p| Class::of_part(p) as u8);
+    classes
+        .iter()
+        .map(|&c| if parts.contains(&c) { c } else { 0 })
+        .collect()
+}
+
+/// Per pixel the most probable of the masks' arm parts above `threshold`, else 0.
+fn arm_parts_in(masks: &super::ArmMasks, threshold: f32) -> Vec<u8> {
+    let n = masks.width * masks.height;
+    (0..n)
+        .map(|i| {
+            (0..3)
+                .map(|p| (p, masks.parts[p][i]))
+                .filter(|&(_, v)| v > threshold)
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .map_or(0, |(p, _)| Class::of_part(super::FITTED_PARTS[p]) as u8)
+        })
+        .collect()
 }
 
 /// The estimator of either method.
@@ -141,8 +207,15 @@ pub fn evaluate_pose(
             config.clone(),
         ))),
     };
+    // Mask values above this are a part's support, for the contact sheet.
+    let threshold = match method {
+        PoseMethod::Paper { config, .. } => config.threshold,
+        PoseMethod::Articulated { config, .. } => config.threshold,
+    };
     let mut frames = Vec::new();
+    let mut no_pose = Vec::new();
     for (k, entry) in entries.iter().enumerate() {
+        let mut kept = 0;
         let seq = dataset.load(entry)?;
         source.start();
         match &mut estimator {
@@ -154,6 +227,8 @@ pub fn evaluate_pose(
             let camera = Camera::from(&labels.camera);
             let t0 = Instant::now();
             let mut truth_gain = [f64::NAN; 4];
+            // The masks' arm parts, for the contact sheet when there is no pose.
+            let mut read = None;
             let (found, mask_ms, pose_ms) = match &mut estimator {
                 Estimator::Articulated(fitter) => {
                     let mut masks = source.arm(&seq, t)?;
@@ -169,6 +244,9 @@ pub fn evaluate_pose(
                     {
                         let [upper, forearm, hand] = g.parts;
                         truth_gain = [g.total, upper, forearm, hand];
+                    }
+                    if outcome.is_err() && kept < NO_POSE_KEPT_PER_SEQUENCE {
+                        read = Some(arm_parts_in(&masks, threshold));
                     }
                     let found = outcome.map(|fit| Found {
                         X_CO: fit.X_CO(),
@@ -193,6 +271,19 @@ pub fn evaluate_pose(
                     let t1 = Instant::now();
                     let outcome = estimator.estimate(&camera, &mask)?;
                     let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
+                    if outcome.is_err() && kept < NO_POSE_KEPT_PER_SEQUENCE {
+                        read = Some(
+                            mask.iter()
+                                .map(|&v| {
+                                    if v > threshold {
+                                        Class::Forearm as u8
+                                    } else {
+                                        0
+                                    }
+                                })
+                                .collect(),
+                        );
+                    }
                     let found = outcome.map(|e| Found {
                         X_CO: e.X_CO,
                         reacquired: e.reacquired,
@@ -231,6 +322,18 @@ pub fn evaluate_pose(
                     matches!(estimator, Estimator::Paper(_)),
                 )
             });
+            if let (Err(_), Some(masks)) = (&outcome, read) {
+                let n = (seq.width * seq.height) as usize;
+                no_pose.push(NoPoseFrame {
+                    index: frames.len(),
+                    rgb: crate::eval::interleave(seq.rgb_frame(t), n),
+                    truth: arm_parts_of(seq.class_frame(t)),
+                    masks,
+                    width: seq.width as usize,
+                    height: seq.height as usize,
+                });
+                kept += 1;
+            }
             frames.push(FrameResult {
                 sequence: entry.index,
                 frame: t,
@@ -266,6 +369,7 @@ pub fn evaluate_pose(
             PoseMethod::Articulated { .. } => method.describe(),
         },
         frames,
+        no_pose,
     })
 }
 
