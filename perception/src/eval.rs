@@ -433,6 +433,21 @@ pub struct ScoredFrame {
     pub height: usize,
 }
 
+impl ScoredFrame {
+    /// The frame on a contact sheet ([`prediction_sheet`](workcell_render::dataset::prediction_sheet)).
+    #[must_use]
+    pub fn panel<'a>(&'a self, title: &'a str) -> workcell_render::dataset::PredictionPanel<'a> {
+        workcell_render::dataset::PredictionPanel {
+            title,
+            width: self.width,
+            height: self.height,
+            rgb: &self.rgb,
+            truth: &self.truth,
+            predicted: &self.predicted,
+        }
+    }
+}
+
 /// Frames per span of the table by time in the sequence.
 pub const TIME_SPAN: usize = 10;
 

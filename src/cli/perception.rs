@@ -469,14 +469,7 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
             .worst
             .iter()
             .zip(&titles)
-            .map(|(f, title)| PredictionPanel {
-                title,
-                width: f.width,
-                height: f.height,
-                rgb: &f.rgb,
-                truth: &f.truth,
-                predicted: &f.predicted,
-            })
+            .map(|(f, title)| f.panel(title))
             .collect();
         let title = format!(
             "{} worst of {} {} frames - {}",

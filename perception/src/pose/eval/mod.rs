@@ -93,6 +93,22 @@ pub struct NoPoseFrame {
     pub height: usize,
 }
 
+impl NoPoseFrame {
+    /// The frame on a contact sheet ([`prediction_sheet`](workcell_render::dataset::prediction_sheet)):
+    /// the masks' arm parts in place of a prediction.
+    #[must_use]
+    pub fn panel<'a>(&'a self, title: &'a str) -> workcell_render::dataset::PredictionPanel<'a> {
+        workcell_render::dataset::PredictionPanel {
+            title,
+            width: self.width,
+            height: self.height,
+            rgb: &self.rgb,
+            truth: &self.truth,
+            predicted: &self.masks,
+        }
+    }
+}
+
 /// A split's pose evaluation.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PoseEvaluation {
