@@ -413,28 +413,21 @@ impl FramePrediction {
     }
 }
 
-/// A frame kept for the contact sheet of the worst predictions.
-#[derive(Debug, Clone)]
-pub struct ScoredFrame {
-    pub sequence: usize,
-    pub frame: usize,
-    pub distance_class: String,
-    pub occlusion_level: String,
-    /// The forearm's Dice loss on this frame.
-    pub forearm_dice: f64,
+/// A frame's images on a contact sheet ([`prediction_sheet`](workcell_render::dataset::prediction_sheet)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SheetImages {
     /// Stored-size frame, interleaved RGB bytes.
     pub rgb: Vec<u8>,
     /// The true class of each pixel (`Class as u8`).
     pub truth: Vec<u8>,
-    /// The predicted class (`Class as u8`): the most probable class above one half, else the
-    /// background.
+    /// The predicted class (`Class as u8`).
     pub predicted: Vec<u8>,
     pub width: usize,
     pub height: usize,
 }
 
-impl ScoredFrame {
-    /// The frame on a contact sheet ([`prediction_sheet`](workcell_render::dataset::prediction_sheet)).
+impl SheetImages {
+    /// The frame as a panel of the sheet.
     #[must_use]
     pub fn panel<'a>(&'a self, title: &'a str) -> workcell_render::dataset::PredictionPanel<'a> {
         workcell_render::dataset::PredictionPanel {
@@ -446,6 +439,20 @@ impl ScoredFrame {
             predicted: &self.predicted,
         }
     }
+}
+
+/// A frame kept for the contact sheet of the worst predictions.
+#[derive(Debug, Clone)]
+pub struct ScoredFrame {
+    pub sequence: usize,
+    pub frame: usize,
+    pub distance_class: String,
+    pub occlusion_level: String,
+    /// The forearm's Dice loss on this frame.
+    pub forearm_dice: f64,
+    /// Its images; the prediction is the most probable class above one half, else the
+    /// background.
+    pub images: SheetImages,
 }
 
 /// Frames per span of the table by time in the sequence.
@@ -770,11 +777,13 @@ pub fn evaluate(
                         distance_class: entry.distance_class.clone(),
                         occlusion_level: entry.occlusion_level.clone(),
                         forearm_dice: loss,
-                        rgb: interleave(seq.rgb_frame(t), w * h),
-                        truth,
-                        predicted,
-                        width: w,
-                        height: h,
+                        images: SheetImages {
+                            rgb: interleave(seq.rgb_frame(t), w * h),
+                            truth,
+                            predicted,
+                            width: w,
+                            height: h,
+                        },
                     });
                     ev.worst
                         .sort_by(|a, b| b.forearm_dice.total_cmp(&a.forearm_dice));

@@ -469,7 +469,7 @@ pub fn eval_segmentation(args: &EvalSegmentationArgs) -> Result<ExitCode> {
             .worst
             .iter()
             .zip(&titles)
-            .map(|(f, title)| f.panel(title))
+            .map(|(f, title)| f.images.panel(title))
             .collect();
         let title = format!(
             "{} worst of {} {} frames - {}",

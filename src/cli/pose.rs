@@ -281,7 +281,7 @@ fn no_pose_sheet(ev: &PoseEvaluation, kind: &str) -> (u32, u32, Vec<u8>) {
     let panels: Vec<PredictionPanel<'_>> = sample
         .iter()
         .zip(&titles)
-        .map(|(f, title)| f.panel(title))
+        .map(|(f, title)| f.images.panel(title))
         .collect();
     let without = ev.frames.iter().filter(|f| f.outcome.is_err()).count();
     let title = format!(

@@ -512,11 +512,13 @@ fn the_no_pose_sample_spreads_over_the_sequences() {
     let no_pose = (0..sequences.len())
         .map(|index| NoPoseFrame {
             index,
-            rgb: vec![0; 3],
-            truth: vec![0],
-            masks: vec![0],
-            width: 1,
-            height: 1,
+            images: crate::eval::SheetImages {
+                rgb: vec![0; 3],
+                truth: vec![0],
+                predicted: vec![0],
+                width: 1,
+                height: 1,
+            },
         })
         .collect();
     let eval = PoseEvaluation {

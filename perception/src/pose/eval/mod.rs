@@ -76,37 +76,15 @@ impl PoseMethod {
 /// Frames without a pose kept per sequence for the contact sheet ([`PoseEvaluation::no_pose`]).
 pub const NO_POSE_KEPT_PER_SEQUENCE: usize = 4;
 
-/// A scored frame without a pose, kept for the contact sheet of why: the input, the true arm
-/// parts and the arm parts of the masks the estimator read.
+/// A scored frame without a pose, kept for the contact sheet of why.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NoPoseFrame {
     /// Its index in [`PoseEvaluation::frames`].
     pub index: usize,
-    /// Interleaved RGB bytes, `width x height`.
-    pub rgb: Vec<u8>,
-    /// The true arm parts without the occluder (`Class as u8`; every other class 0).
-    pub truth: Vec<u8>,
-    /// The arm parts of the masks: the most probable part above the fit's threshold, else 0.
-    /// The forearm alone for the paper's method.
-    pub masks: Vec<u8>,
-    pub width: usize,
-    pub height: usize,
-}
-
-impl NoPoseFrame {
-    /// The frame on a contact sheet ([`prediction_sheet`](workcell_render::dataset::prediction_sheet)):
-    /// the masks' arm parts in place of a prediction.
-    #[must_use]
-    pub fn panel<'a>(&'a self, title: &'a str) -> workcell_render::dataset::PredictionPanel<'a> {
-        workcell_render::dataset::PredictionPanel {
-            title,
-            width: self.width,
-            height: self.height,
-            rgb: &self.rgb,
-            truth: &self.truth,
-            predicted: &self.masks,
-        }
-    }
+    /// The input; the true arm parts without the occluder (every other class 0); in place of
+    /// a prediction, the arm parts of the masks the estimator read (the most probable part
+    /// above the fit's threshold, else 0; the forearm alone for the paper's method).
+    pub images: crate::eval::SheetImages,
 }
 
 /// A split's pose evaluation.
@@ -342,11 +320,13 @@ pub fn evaluate_pose(
                 let n = (seq.width * seq.height) as usize;
                 no_pose.push(NoPoseFrame {
                     index: frames.len(),
-                    rgb: crate::eval::interleave(seq.rgb_frame(t), n),
-                    truth: arm_parts_of(seq.class_frame(t)),
-                    masks,
-                    width: seq.width as usize,
-                    height: seq.height as usize,
+                    images: crate::eval::SheetImages {
+                        rgb: crate::eval::interleave(seq.rgb_frame(t), n),
+                        truth: arm_parts_of(seq.class_frame(t)),
+                        predicted: masks,
+                        width: seq.width as usize,
+                        height: seq.height as usize,
+                    },
                 });
                 kept += 1;
             }
