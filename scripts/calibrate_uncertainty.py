@@ -6,14 +6,16 @@ The fit reports, per frame, the radius (`Calibration::radius` in perception/src/
     max(scale * sigma + floor, spread)
 
 sigma: the curvature of its score, mapped to metres at the forearm's centre and wrist;
-spread: how far apart the hypotheses the masks cannot tell apart put them. This script reads
-the per-frame CSV of
+spread: how far apart the hypotheses the masks cannot tell apart put them; floor: one per
+band of the share of the forearm's region that the depth image shows hidden by something in
+front of the arm (`hidden_share`; bands from 0, 25, 50 and 75 %, `HIDDEN_BANDS`), each band's
+floor at least the band before's. This script reads the per-frame CSV of
 
     workcell eval pose --split validation [--masks procnet] [--depth] --out DIR
 
-(its `sigma_m`, `spread_m` and `ends_cm` columns: the error to cover is the farther of the
-forearm's centre and wrist) and, for each scale on a grid, finds the smallest floor that puts
-the coverage target of the frames within the radius. It prints the table and the pair with
+(its `sigma_m`, `spread_m`, `hidden_share` and `ends_cm` columns: the error to cover is the
+farther of the forearm's centre and wrist) and, for each scale on a grid, finds the smallest
+floors that put the coverage target of each band's frames within the radius. It prints the table and the pair with
 the smallest mean radius; given a second CSV (the test split) it reports the coverage there
 too, which is the honest figure: the pair was chosen on the first.
 
@@ -28,10 +30,21 @@ import statistics
 import sys
 
 SCALES = [0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 10.0, 15.0, 20.0]
+# Where each band of the hidden share starts after the first (perception's HIDDEN_BANDS).
+HIDDEN_BANDS = [0.25, 0.5, 0.75]
+
+
+def hidden_of(row):
+    """The row's hidden share: 0 where the CSV has none (no depth, or an older CSV)."""
+    try:
+        h = float(row.get("hidden_share") or 0.0)
+    except ValueError:
+        return 0.0
+    return h if h == h else 0.0
 
 
 def load(path):
-    """(error m, sigma m, spread m) of every frame with a pose."""
+    """(error m, sigma m, spread m, hidden share) of every frame with a pose."""
     try:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))
@@ -48,6 +61,7 @@ def load(path):
             float(r["ends_cm"]) / 100.0,
             float(r["sigma_m"]),
             float(r["spread_m"]),
+            hidden_of(r),
         )
         for r in rows
         if r["no_pose"] == "" and r["ends_cm"] != ""
@@ -58,11 +72,24 @@ def quantile(sorted_values, q):
     return sorted_values[min(len(sorted_values) - 1, int(q * len(sorted_values)))]
 
 
+def band(hidden):
+    """The band of a hidden share: 0 below the first of HIDDEN_BANDS, then 1, 2, 3."""
+    return sum(1 for b in HIDDEN_BANDS if hidden >= b)
+
+
+def floor_at(calibration, hidden):
+    """The floor for a hidden share: the band's, never below a less hidden band's."""
+    scale, floor, *rest = calibration
+    floors = [floor] + list(rest[0] if rest else [])
+    return max(floors[: band(hidden) + 1])
+
+
 def radius(frame, calibration):
-    """The radius the fit reports for `frame` under `calibration` (scale, floor)."""
-    _, sigma, spread = frame
-    scale, floor = calibration
-    return max(scale * sigma + floor, spread)
+    """The radius the fit reports for `frame` (error, sigma, spread[, hidden]) under
+    `calibration` (scale, floor[, hidden floors])."""
+    sigma, spread = frame[1], frame[2]
+    hidden = frame[3] if len(frame) > 3 else 0.0
+    return max(calibration[0] * sigma + floor_at(calibration, hidden), spread)
 
 
 def smallest_floor(frames, scale, target):
@@ -70,8 +97,18 @@ def smallest_floor(frames, scale, target):
     if not frames:
         return 0.0
     # A frame is covered by its spread alone, or needs error - scale * sigma of floor.
-    need = sorted(0.0 if e <= s else e - scale * u for e, u, s in frames)
+    need = sorted(0.0 if f[0] <= f[2] else f[0] - scale * f[1] for f in frames)
     return max(0.0, quantile(need, target))
+
+
+def band_floors(frames, scale, target):
+    """(scale, floor, hidden floors): each band's smallest floor for `target` of its own
+    frames, at least the band before's (a band without frames takes the band before's)."""
+    floors = []
+    for b in range(len(HIDDEN_BANDS) + 1):
+        own = [f for f in frames if band(f[3] if len(f) > 3 else 0.0) == b]
+        floors.append(max([smallest_floor(own, scale, target)] + floors[-1:]))
+    return (scale, floors[0], tuple(floors[1:]))
 
 
 def coverage(frames, calibration):
@@ -82,7 +119,7 @@ def calibrate(frames, target):
     """Per scale, (scale, floor) and its mean radius; and the row of smallest mean radius."""
     rows = []
     for a in SCALES:
-        calibration = (a, smallest_floor(frames, a, target))
+        calibration = band_floors(frames, a, target)
         rows.append((calibration, statistics.mean(radius(f, calibration) for f in frames)))
     return rows, min(rows, key=lambda r: r[1])
 
@@ -106,22 +143,35 @@ def main():
     )
     rows, best = calibrate(val, args.target)
     print(
-        "| scale | floor (cm) | mean radius (cm) | 95th pct radius (cm) | validation coverage |"
-        + (" test coverage |" if test else "")
+        "| scale | floor (cm) | floors hidden 25/50/75 % (cm) | mean radius (cm) "
+        "| 95th pct radius (cm) | validation coverage |" + (" test coverage |" if test else "")
     )
-    print("|---|---|---|---|---|" + ("---|" if test else ""))
+    print("|---|---|---|---|---|---|" + ("---|" if test else ""))
     for calibration, mean in rows:
-        a, floor = calibration
+        a, floor, hidden = calibration
         radii = sorted(radius(f, calibration) for f in val)
         row = (
-            f"| {a:g} | {100 * floor:.2f} | {100 * mean:.2f} | {100 * quantile(radii, 0.95):.2f} "
+            f"| {a:g} | {100 * floor:.2f} | {' / '.join(f'{100 * h:.2f}' for h in hidden)} "
+            f"| {100 * mean:.2f} | {100 * quantile(radii, 0.95):.2f} "
             f"| {100 * coverage(val, calibration):.2f} % |"
         )
         if test:
             row += f" {100 * coverage(test, calibration):.2f} % of {len(test)} |"
         print(row)
-    (a, floor), mean = best
-    print(f"\nsmallest mean radius: scale {a:g}, floor {floor:.4f} m (mean {100 * mean:.2f} cm)")
+    (a, floor, hidden), mean = best
+    print(
+        f"\nsmallest mean radius: scale {a:g}, floor {floor:.4f} m, hidden floors "
+        f"{', '.join(f'{h:.4f}' for h in hidden)} m (mean {100 * mean:.2f} cm)"
+    )
+    print("\ncoverage per band of the hidden share (validation" + (", test)" if test else ")"))
+    for b in range(len(HIDDEN_BANDS) + 1):
+        cells = []
+        for frames in [val] + ([test] if test else []):
+            own = [f for f in frames if band(f[3]) == b]
+            cells.append(
+                f"{100 * coverage(own, best[0]):.2f} % of {len(own)}" if own else "no frames"
+            )
+        print(f"  from {100 * ([0.0] + HIDDEN_BANDS)[b]:.0f} %: " + "; ".join(cells))
 
 
 if __name__ == "__main__":

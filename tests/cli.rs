@@ -657,7 +657,8 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
                     "spread_m",
                     "truth_gain_upper_arm",
                     "truth_gain_forearm",
-                    "truth_gain_hand"
+                    "truth_gain_hand",
+                    "hidden_share"
                 ]),
             "{csv}"
         );
@@ -665,6 +666,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         let column = |name: &str| header.iter().position(|h| *h == name).expect(name);
         let total = column("truth_gain");
         let parts = ["upper_arm", "forearm", "hand"].map(|p| column(&format!("truth_gain_{p}")));
+        let (hidden, position) = (column("hidden_share"), column("position_cm"));
         let mut checked = 0;
         for line in csv.lines().skip(1) {
             let row: Vec<f64> = line
@@ -674,9 +676,15 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             if method == "articulated" {
                 let sum: f64 = parts.iter().map(|&i| row[i]).sum();
                 assert!((sum - row[total]).abs() < 2.5e-4, "{line}");
+                // A share of the region the depth image shows hidden, for frames with a pose.
+                assert!(
+                    row[position].is_nan() || (0.0..=1.0).contains(&row[hidden]),
+                    "{line}"
+                );
                 checked += 1;
             } else {
                 assert!(row[total].is_nan() && parts.iter().all(|&i| row[i].is_nan()));
+                assert!(row[hidden].is_nan(), "{line}");
             }
         }
         assert!(method != "articulated" || checked > 0, "{csv}");

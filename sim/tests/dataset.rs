@@ -172,8 +172,8 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
                 assert_eq!(labels.source, "camera:front");
                 assert_eq!((native.width, native.height), (640, 480));
             }
-            // Depth: 16-bit mm, and the forearm's pixels lie within a forearm's length of
-            // its link frame's depth.
+            // Depth: 16-bit mm; the forearm's pixels lie within a forearm's length of its
+            // link frame's depth, except under the occluder, which is seen at its own depth.
             let depth_png = dataset
                 .root
                 .join(&s.entry.dir)
@@ -195,11 +195,18 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
             for p in (0..n).filter(|&p| classes[p] == forearm && interior(p)) {
                 let mm = u16::from_be_bytes([bytes[2 * p], bytes[2 * p + 1]]);
                 let d = f64::from(mm) / 1000.0;
-                assert!(
-                    (d - label.X_CP.xyz_m[2]).abs() < 0.35,
-                    "depth {d} vs {:?}",
-                    label.X_CP
-                );
+                if occluder[p] == 1 {
+                    assert_eq!(
+                        mm,
+                        (1000.0 * workcell_sim::render::occlusion::OCCLUDER_DEPTH_M) as u16
+                    );
+                } else {
+                    assert!(
+                        (d - label.X_CP.xyz_m[2]).abs() < 0.35,
+                        "depth {d} vs {:?}",
+                        label.X_CP
+                    );
+                }
             }
             // The stored forearm is the forearm rendered at its label's pose by the frame's
             // camera (the region's camera): labels, crop and resampling agree.

@@ -10,7 +10,7 @@ use workcell::perception::pose::eval::{
     GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, PoseMethod, VisibleMasks,
     compare_markdown, evaluate_pose,
 };
-use workcell::perception::pose::{ArmFitConfig, Calibration, PoseConfig};
+use workcell::perception::pose::{ArmFitConfig, Calibration, HIDDEN_BANDS, PoseConfig};
 use workcell::perception::{Backend, ProcNet, backend};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
 use workcell::render::dataset::{PredictionPanel, prediction_sheet};
@@ -188,9 +188,23 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             (_, Some(c)) => format!(
                 "\nThe bound is the one calibrated for these masks (`Calibration::measured`): \
                  {:.2} cm plus {} times the curvature's spread, the hypotheses' spread where it \
-                 is larger.\n",
+                 is larger{}.\n",
                 100.0 * c.floor_m,
-                c.scale
+                c.scale,
+                if c.hidden_floors_m.iter().any(|&f| f > c.floor_m) {
+                    format!(
+                        "; where the depth image shows at least {} of the forearm's region \
+                         hidden, {} cm instead",
+                        HIDDEN_BANDS
+                            .map(|b| format!("{:.0} %", 100.0 * b))
+                            .join(", "),
+                        c.hidden_floors_m
+                            .map(|f| format!("{:.2}", 100.0 * f))
+                            .join(", ")
+                    )
+                } else {
+                    String::new()
+                }
             ),
             (_, None) => "\nThese masks have no calibration: the bound is the curvature's spread \
                           alone, or the hypotheses' where it is larger \

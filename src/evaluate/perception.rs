@@ -56,7 +56,8 @@ pub struct PerceptionConfig {
     /// and depth chosen (`workcell_perception::pose::Calibration::measured`). Default -1.
     pub uncertainty_scale: f64,
     /// For `procnet`: the uncertainty's floor, m (`ArmFitConfig::uncertainty_floor_m`);
-    /// negative takes the calibrated one. Default -1.
+    /// negative takes the calibrated one. The floors where the depth image shows the
+    /// forearm hidden are the calibrated ones, never below this. Default -1.
     pub uncertainty_floor_m: f64,
     /// The camera delivers nothing from this time on, s (a failed camera; perception
     /// switched off mid-episode); negative for never. `procnet` ages its last estimate out

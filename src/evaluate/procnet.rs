@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 use workcell_perception::pose::{ArmFitConfig, ArmMasks, Calibration};
 use workcell_perception::{ArmTracker, Backend, NoEstimate, ProcNet};
 use workcell_safety::{HumanEstimate, HumanGeometry};
-use workcell_sim::render::occlusion::{Occluder, OccluderKind, fit_occluder};
+use workcell_sim::render::occlusion::{OCCLUDER_DEPTH_M, Occluder, OccluderKind, fit_occluder};
 use workcell_sim::render::{Camera, Class, CpuRenderer, Frame, Renderer};
 use workcell_sim::{CellModel, CellScene, Scenario};
 
@@ -99,6 +99,7 @@ impl ProcNetCamera {
             } else {
                 measured.floor_m
             },
+            hidden_floors_m: measured.hidden_floors_m,
         }
         .apply(ArmFitConfig::default());
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
@@ -192,7 +193,8 @@ impl ProcNetCamera {
     }
 
     /// A black disc over the forearm's pixels, sized so that it hides the configured
-    /// fraction of them: black in the frame, background in `classes` (what is seen).
+    /// fraction of them: black in the frame, at [`OCCLUDER_DEPTH_M`] in its depth image,
+    /// background in `classes` (what is seen).
     fn occlude(&mut self, classes: &mut [u8]) {
         let w = self.camera.width;
         let forearm: Vec<u8> = classes
@@ -221,6 +223,7 @@ impl ProcNetCamera {
         let mask = occluder.mask(w, self.camera.height);
         for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m != 0) {
             self.frame.rgb[3 * p..3 * p + 3].fill(0);
+            self.frame.depth_m[p] = OCCLUDER_DEPTH_M;
             classes[p] = Class::Background as u8;
         }
     }
@@ -512,8 +515,8 @@ mod tests {
         assert!(perception.counts().no_frame >= 20);
     }
 
-    /// The artificial occluder hides the configured share of the forearm's pixels and
-    /// blackens them in the frame.
+    /// The artificial occluder hides the configured share of the forearm's pixels,
+    /// blackens them in the frame and puts its own depth in the depth image there.
     #[test]
     fn the_occluder_hides_its_share_of_the_forearm() {
         let (scenario, model) = cell();
@@ -546,5 +549,12 @@ mod tests {
             .filter(|(p, _)| perception.frame.rgb[3 * p..3 * p + 3] == [0, 0, 0])
             .count();
         assert!(black >= before - forearm(&classes));
+        let at_occluder = perception
+            .frame
+            .depth_m
+            .iter()
+            .filter(|&&z| z == OCCLUDER_DEPTH_M)
+            .count();
+        assert!(at_occluder >= before - forearm(&classes), "{at_occluder}");
     }
 }

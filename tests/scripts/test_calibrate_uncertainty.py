@@ -35,12 +35,35 @@ class Calibrate(unittest.TestCase):
         # scale 0 needs the 99th percentile of the errors.
         frames = [(2 * k / 1000.0, k / 1000.0, 0.0) for k in range(1, 201)]
         rows, best = calibrate_uncertainty.calibrate(frames, 0.99)
-        self.assertEqual(best[0], (2.0, 0.0))
+        self.assertEqual(best[0], (2.0, 0.0, (0.0, 0.0, 0.0)))
         self.assertEqual(calibrate_uncertainty.coverage(frames, best[0]), 1.0)
         unscaled = [r for r in rows if r[0][0] == 0.0][0]
         # Index int(0.99 * 200) = 198: the 199th error, 0.398 m.
         self.assertAlmostEqual(unscaled[0][1], 0.398)
         self.assertLess(best[1], unscaled[1])
+
+    def test_each_band_of_the_hidden_share_gets_its_own_floor(self):
+        # 200 frames barely hidden with errors up to 2 cm, 200 over half hidden with errors
+        # up to 20 cm: one floor for all would be about 20 cm.
+        seen = [(k / 10_000.0, 0.0, 0.0, 0.1) for k in range(1, 201)]
+        hidden = [(k / 1_000.0, 0.0, 0.0, 0.6) for k in range(1, 201)]
+        calibration = calibrate_uncertainty.band_floors(seen + hidden, 0.0, 0.99)
+        # Index int(0.99 * 200) = 198 of each band's sorted errors: the 199th.
+        self.assertAlmostEqual(calibration[1], 0.0199)
+        # The band from 25 % has no frames and takes the floor before it; 75 % the 50 %'s.
+        self.assertAlmostEqual(calibration[2][0], 0.0199)
+        self.assertAlmostEqual(calibration[2][1], 0.199)
+        self.assertAlmostEqual(calibration[2][2], 0.199)
+        self.assertAlmostEqual(calibrate_uncertainty.radius((0.0, 0.0, 0.0, 0.8), calibration), 0.199)
+        self.assertAlmostEqual(calibrate_uncertainty.radius((0.0, 0.0, 0.0, 0.0), calibration), 0.0199)
+        for frames in (seen, hidden):
+            self.assertGreaterEqual(calibrate_uncertainty.coverage(frames, calibration), 0.99)
+
+    def test_a_less_hidden_bands_floor_is_the_least(self):
+        # A more hidden band with smaller errors still gets the floor of the band before.
+        frames = [(0.05, 0.0, 0.0, 0.1)] * 100 + [(0.01, 0.0, 0.0, 0.9)] * 100
+        calibration = calibrate_uncertainty.band_floors(frames, 0.0, 0.99)
+        self.assertEqual(calibration[2], (0.05, 0.05, 0.05))
 
 
 if __name__ == "__main__":

@@ -59,10 +59,15 @@
 //! displacements that cost two mask pixels, correlated joints included: far away, moving the
 //! arm along the line of sight takes both shoulder angles), mapped through the forearm's
 //! kinematics to metres at its centre and its far end (scaled by
-//! [`ArmFitConfig::uncertainty_scale`], plus [`ArmFitConfig::uncertainty_floor_m`]); and the
-//! farthest the surviving hypotheses put the forearm's centre or wrist from the best's.
-//! [`ArmFit::uncertainty_m`] is the larger. Calibrated ([`Calibration`]), 99 % of a split's
-//! frames have their forearm's centre and wrist within it.
+//! [`ArmFitConfig::uncertainty_scale`], plus a floor); and the farthest the surviving
+//! hypotheses put the forearm's centre or wrist from the best's. [`ArmFit::uncertainty_m`] is
+//! the larger. The floor grows with how much of the forearm's region the depth image shows
+//! hidden by something in front of the arm ([`ArmFit::hidden_share`]: pixels nearer than the
+//! fitted arm, such as the paper's black occluder, which the datasets and the closed loop put
+//! at `workcell_render::occlusion::OCCLUDER_DEPTH_M`): the masks hold less of a hidden
+//! forearm. Calibrated ([`Calibration`]), 99 % of a split's frames have their forearm's
+//! centre and wrist within it. The depth term skips pixels nearer than any point the arm can
+//! reach ([`ArticulatedArm::nearest_depth_m`]): they say nothing of the arm's depth.
 
 use std::sync::Arc;
 
@@ -131,6 +136,10 @@ pub struct ArmFitConfig {
     /// Added to the scaled curvature part, m: the error that no curvature shows (masks
     /// that put the arm a little off everywhere). Default 0.
     pub uncertainty_floor_m: f64,
+    /// The floor instead where the depth image shows something in front of the arm over a
+    /// quarter, a half or three quarters of the forearm's region ([`ArmFit::hidden_share`];
+    /// [`Calibration::floor_at`]), m. Default 0 (the floor alone).
+    pub uncertainty_hidden_floors_m: [f64; 3],
     /// The global search runs, beside the tracked hypotheses, when their best gain is below
     /// this: a track that explains the masks this poorly has likely followed a wrong
     /// optimum. Default 0.55.
@@ -168,6 +177,7 @@ impl Default for ArmFitConfig {
             newton_steps: 3,
             uncertainty_scale: 1.0,
             uncertainty_floor_m: 0.0,
+            uncertainty_hidden_floors_m: [0.0; 3],
             search_below_gain: 0.55,
             depth_sigma_m: 0.03,
             depth_weight: 0.05,
@@ -179,33 +189,53 @@ impl Default for ArmFitConfig {
 /// depth is left out of the score (0.9: within 26 degrees).
 const END_ON_COS: f64 = 0.9;
 
-/// The uncertainty's calibration for one source of masks: `scale` and `floor_m` of
-/// [`ArmFitConfig`], fitted on the validation split so that 99 % of its frames have the
-/// forearm's centre and wrist within the bound (`scripts/calibrate_uncertainty.py`, on the
-/// per-frame CSV of `workcell eval pose --split validation`; docs/perception.md).
+/// A depth this much nearer than the nearest the arm can reach (or, for
+/// [`ArmFit::hidden_share`], than the fitted arm) shows something in front of it, m: a margin
+/// for the depth camera's noise.
+pub const HIDDEN_MARGIN_M: f64 = 0.05;
+
+/// The uncertainty's calibration for one source of masks: `scale`, `floor_m` and
+/// `hidden_floors_m` of [`ArmFitConfig`], fitted on the validation split so that 99 % of its
+/// frames have the forearm's centre and wrist within the bound, in each band of
+/// [`ArmFit::hidden_share`] (`scripts/calibrate_uncertainty.py`, on the per-frame CSV of
+/// `workcell eval pose --split validation`; docs/perception.md).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Calibration {
     pub scale: f64,
     pub floor_m: f64,
+    /// The floors where a quarter, a half, three quarters of the forearm's region is
+    /// hidden ([`Calibration::floor_at`]).
+    pub hidden_floors_m: [f64; 3],
 }
+
+/// Where [`ArmFit::hidden_share`] starts each band of [`Calibration::hidden_floors_m`].
+pub const HIDDEN_BANDS: [f64; 3] = [0.25, 0.5, 0.75];
 
 impl Calibration {
     /// The calibration measured for masks from the shipped ProcNet (`network`) or from the
     /// renderer (true masks), with or without depth.
     #[must_use]
     pub fn measured(network: bool, depth: bool) -> Self {
-        let (scale, floor_m) = match (network, depth) {
+        let (scale, floor_m, hidden_floors_m) = match (network, depth) {
             // The validation split (docs/perception.md), the renders as row spans: true
-            // masks with depth, 3,828 frames, 99 % within 1.97 cm; without, the mirror's
-            // misses, 38.5 cm.
-            (false, true) => (0.0, 0.0197),
-            (false, false) => (0.0, 0.3851),
-            // ProcNet's masks with depth, 3,776 frames: 99 % within 5.15 cm; without (3,806
-            // frames), 40.6 cm.
-            (true, true) => (0.0, 0.0515),
-            (true, false) => (0.0, 0.4059),
+            // masks with depth, 3,828 frames, 99 % within half the curvature's spread plus
+            // 1.68 cm where under half the forearm's region is hidden (1,584 frames), 1.74 cm
+            // up to three quarters (437), 33.8 cm beyond (1,807: the mirror, where the
+            // occluder hides the forearm's depth); without depth, the mirror's misses, 38.5 cm.
+            (false, true) => (0.5, 0.0168, [0.0168, 0.0174, 0.3381]),
+            (false, false) => (0.0, 0.3851, [0.0; 3]),
+            // ProcNet's masks with depth, 3,786 frames: 99 % within 3.22 cm where under a
+            // quarter of the forearm's region is hidden (1,212 frames), 5.92 cm up to three
+            // quarters (804), 31.5 cm beyond (1,770: wrong optima under the paper's heavy
+            // occlusion); without depth (3,806 frames), 40.6 cm.
+            (true, true) => (0.0, 0.0322, [0.0592, 0.0592, 0.3154]),
+            (true, false) => (0.0, 0.4059, [0.0; 3]),
         };
-        Self { scale, floor_m }
+        Self {
+            scale,
+            floor_m,
+            hidden_floors_m,
+        }
     }
 
     /// `config` with this calibration.
@@ -214,17 +244,28 @@ impl Calibration {
         ArmFitConfig {
             uncertainty_scale: self.scale,
             uncertainty_floor_m: self.floor_m,
+            uncertainty_hidden_floors_m: self.hidden_floors_m,
             ..config
         }
     }
 
     /// The radius of a fit whose curvature spreads the forearm's centre and wrist by
-    /// `sigma_m` and whose hypotheses lie `spread_m` apart, under this calibration (what
-    /// [`ArmFit::uncertainty_m`] reports): `scale sigma + floor`, or the spread where that
-    /// is larger.
+    /// `sigma_m`, whose hypotheses lie `spread_m` apart and whose forearm's region is
+    /// `hidden_share` hidden, under this calibration (what [`ArmFit::uncertainty_m`]
+    /// reports): `scale sigma + floor`, or the spread where that is larger.
     #[must_use]
-    pub fn radius(&self, sigma_m: f64, spread_m: f64) -> f64 {
-        (self.scale * sigma_m + self.floor_m).max(spread_m)
+    pub fn radius(&self, sigma_m: f64, spread_m: f64, hidden_share: f64) -> f64 {
+        (self.scale * sigma_m + self.floor_at(hidden_share)).max(spread_m)
+    }
+
+    /// The floor for a forearm's region `hidden_share` hidden: `floor_m` below the first of
+    /// [`HIDDEN_BANDS`], else the band's floor, never below a less hidden band's.
+    #[must_use]
+    pub fn floor_at(&self, hidden_share: f64) -> f64 {
+        let bands = HIDDEN_BANDS.iter().filter(|&&b| hidden_share >= b).count();
+        self.hidden_floors_m[..bands]
+            .iter()
+            .fold(self.floor_m, |a, &b| a.max(b))
     }
 
     /// The calibration `config` carries.
@@ -233,6 +274,7 @@ impl Calibration {
         Self {
             scale: config.uncertainty_scale,
             floor_m: config.uncertainty_floor_m,
+            hidden_floors_m: config.uncertainty_hidden_floors_m,
         }
     }
 }
@@ -248,6 +290,10 @@ pub struct ArticulatedArm {
     models: [Option<RigidModel>; 3],
     limits: Vec<[f64; 2]>,
     forearm: RigidModel,
+    /// The shoulder (the upper arm's link origin), world frame, and the radius about it
+    /// that holds every point of the three parts whatever the joints, m.
+    shoulder_W: Vector,
+    reach_m: f64,
 }
 
 impl ArticulatedArm {
@@ -301,7 +347,27 @@ impl ArticulatedArm {
                 let (lo, hi) = (lo.max(-std::f64::consts::PI), hi.min(std::f64::consts::PI));
                 if lo <= hi { [lo, hi] } else { [0.0, 0.0] }
             })
-            .collect();
+            .collect::<Vec<_>>();
+        // The reach: each part's farthest box corner from its link's origin, plus the
+        // distances between consecutive parts' origins, which their joints leave unchanged
+        // (a URDF joint sits at its child link's origin, fixed in its parent's frame).
+        let middle: Vec<f64> = limits.iter().map(|[lo, hi]| 0.5 * (lo + hi)).collect();
+        let k = human.fk(*X_WH, &middle)?;
+        let origin = |i: usize| k.link_pose(links[i]).translation;
+        let (mut chain, mut reach_m) = (0.0, 0.0f64);
+        for (i, model) in models.iter().enumerate() {
+            if i > 0 {
+                chain += (origin(i) - origin(i - 1)).length();
+            }
+            if let Some(model) = model {
+                let far = model
+                    .corners_O
+                    .iter()
+                    .map(|c| c.length())
+                    .fold(0.0, f64::max);
+                reach_m = reach_m.max(chain + far);
+            }
+        }
         Ok(Self {
             human: human.clone(),
             X_WH: *X_WH,
@@ -310,7 +376,17 @@ impl ArticulatedArm {
             models,
             limits,
             forearm,
+            shoulder_W: origin(0),
+            reach_m,
         })
+    }
+
+    /// The nearest camera-frame depth any point of the arm can have for a camera at
+    /// `X_WC`, m: the shoulder's depth less the arm's reach. A depth image that shows a
+    /// surface nearer than this shows something in front of the arm.
+    #[must_use]
+    pub fn nearest_depth_m(&self, X_WC: &Pose) -> f64 {
+        X_WC.inverse().transform_point(self.shoulder_W).z - self.reach_m
     }
 
     /// The arm of the human a dataset shows.
@@ -475,6 +551,12 @@ pub struct ArmFit {
     /// The radius to inflate the forearm by, m ([`Calibration::radius`] of the config's
     /// calibration).
     pub uncertainty_m: f64,
+    /// How much of the forearm's region the depth image shows hidden by something in front
+    /// of the arm: in the region scored, the pixels nearer than the fitted arm's nearest
+    /// point (less [`HIDDEN_MARGIN_M`]) over those and the forearm mask's pixels elsewhere
+    /// (0 without depth). The masks carry less of a forearm the more of it is hidden, and
+    /// the calibration's floor grows with it.
+    pub hidden_share: f64,
     /// The global search ran (first frame, the track lost, or its gain below
     /// [`ArmFitConfig::search_below_gain`]).
     pub reacquired: bool,
@@ -519,6 +601,9 @@ struct Target {
     camera: Camera,
     inside: Arc<[Vec<bool>; 3]>,
     depth_m: Option<Arc<Vec<f32>>>,
+    /// Depths below this show something in front of the arm ([`HIDDEN_MARGIN_M`] nearer
+    /// than [`ArticulatedArm::nearest_depth_m`]); minus infinity without depth.
+    hidden_below_m: f32,
 }
 
 impl Target {
@@ -718,6 +803,7 @@ impl<R: Renderer> ArmFitter<R> {
             .collect();
         let sigma_m = self.position_sigma(&climb.q, &covariance, &target.X_WC)?;
         let X_CL = self.arm.part_poses(&climb.q, &target.X_WC)?;
+        let hidden_share = self.hidden_share(&target, &X_CL);
         let forearm = self.arm.forearm.mesh.clone();
         self.renderer
             .render_masks(&forearm, camera, &[X_CL[1]], &mut self.batch)?;
@@ -730,7 +816,8 @@ impl<R: Renderer> ArmFitter<R> {
             part_gain: climb.score.part_gain,
             sigma_q,
             spread_m,
-            uncertainty_m: Calibration::of(&c).radius(sigma_m, spread_m),
+            uncertainty_m: Calibration::of(&c).radius(sigma_m, spread_m, hidden_share),
+            hidden_share,
             sigma_m,
             reacquired,
             renders: self.renders,
@@ -958,6 +1045,15 @@ impl<R: Renderer> ArmFitter<R> {
         let mass: f64 = parts.iter().flatten().map(|&v| f64::from(v)).sum();
         let inv = (1.0 / mass.max(1.0)) as f32;
         let alpha = c.distance_weight as f32;
+        let depth_m = masks
+            .depth_m
+            .as_ref()
+            .filter(|d| d.len() == w * h)
+            .map(|d| crop(d));
+        let hidden_below_m = match depth_m {
+            Some(_) => (self.arm.nearest_depth_m(&camera.X_WC) - HIDDEN_MARGIN_M) as f32,
+            None => f32::NEG_INFINITY,
+        };
         let signed: [Vec<f32>; 3] = std::array::from_fn(|p| {
             parts[p]
                 .iter()
@@ -978,11 +1074,6 @@ impl<R: Renderer> ArmFitter<R> {
         });
         let roi = crop_camera(camera, x0, y0, rw, rh);
         let ss = ss.max(1);
-        let depth_m = masks
-            .depth_m
-            .as_ref()
-            .filter(|d| d.len() == w * h)
-            .map(|d| crop(d));
         Ok(Some(Target {
             fine: roi.resized(roi.width * ss, roi.height * ss)?,
             X_WC: camera.X_WC,
@@ -992,6 +1083,7 @@ impl<R: Renderer> ArmFitter<R> {
             camera: roi,
             inside: Arc::new(inside),
             depth_m: depth_m.map(Arc::new),
+            hidden_below_m,
         }))
     }
 
@@ -1048,10 +1140,42 @@ impl<R: Renderer> ArmFitter<R> {
         Ok(scores)
     }
 
+    /// [`ArmFit::hidden_share`] of the arm at `poses`: the region's pixels whose depth is
+    /// more than [`HIDDEN_MARGIN_M`] nearer than the arm's nearest box corner, over those and
+    /// the forearm mask's pixels elsewhere; 0 without depth.
+    fn hidden_share(&self, target: &Target, poses: &[Pose; 3]) -> f64 {
+        let Some(depth) = &target.depth_m else {
+            return 0.0;
+        };
+        let nearest = self
+            .arm
+            .models
+            .iter()
+            .zip(poses)
+            .filter_map(|(m, X)| m.as_ref().map(|m| (m, X)))
+            .flat_map(|(m, X)| m.corners_O.iter().map(move |&c| X.transform_point(c).z))
+            .fold(f64::INFINITY, f64::min);
+        let below = (nearest - HIDDEN_MARGIN_M) as f32;
+        let (mut hidden, mut forearm) = (0usize, 0usize);
+        for (&z, &inside) in depth.iter().zip(target.inside[1].iter()) {
+            if z > 0.0 && z < below {
+                hidden += 1;
+            } else if inside {
+                forearm += 1;
+            }
+        }
+        if hidden == 0 {
+            0.0
+        } else {
+            hidden as f64 / (hidden + forearm) as f64
+        }
+    }
+
     /// The depth disagreement of the parts at `poses`: per part seen side-on (its axis more
     /// than 26 degrees from the line of sight, [`END_ON_COS`]), five points along its axis, each moved
     /// towards the camera by the part's half width (the side the camera sees); those that
-    /// land on their part's mask compare their depth with the image's, as
+    /// land on their part's mask where the image shows no surface in front of the arm
+    /// ([`Target::hidden_below_m`]) compare their depth with the image's, as
     /// `min((dz / sigma)^2, 9)`; the mean over them, times [`ArmFitConfig::depth_weight`],
     /// summed over the parts. A part seen end-on shows its near end at every point, not its
     /// side: the axis points would be compared with depths up to half its length nearer.
@@ -1078,10 +1202,12 @@ impl<R: Renderer> ArmFitter<R> {
                     continue;
                 }
                 let i = v as usize * w + u as usize;
-                let z = f64::from(depth[i]);
-                if !(target.inside[p][i] && z.is_finite() && z > 0.0) {
+                let z = depth[i];
+                if !(target.inside[p][i] && z.is_finite() && z > 0.0 && z >= target.hidden_below_m)
+                {
                     continue;
                 }
+                let z = f64::from(z);
                 let surface = p_C.z - model.half_width_m;
                 sum += ((z - surface) / sigma).powi(2).min(9.0);
                 n += 1;
@@ -1719,6 +1845,123 @@ mod tests {
             let err = distance_cm(&arm, &camera, &fit.q, &truth);
             assert!(err < 2.0, "{truth:?}: {err:.1} cm off, q {:?}", fit.q);
         }
+    }
+
+    /// Every point of every part lies within the reach of the shoulder, whatever the
+    /// joints, and some configurations come near the reach's edge.
+    #[test]
+    fn the_reach_holds_the_arm_in_any_configuration() {
+        let (arm, _) = setup();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut farthest = 0.0f64;
+        for _ in 0..200 {
+            let q: Vec<f64> = arm
+                .limits()
+                .iter()
+                .map(|&[lo, hi]| rng.random_range(lo..=hi))
+                .collect();
+            let poses = arm.part_poses(&q, &Pose::IDENTITY).expect("poses");
+            for (p, mesh) in arm.meshes.iter().enumerate() {
+                let Some(mesh) = mesh else { continue };
+                for v in &mesh.positions {
+                    let v = Vector::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+                    let d = (poses[p].transform_point(v) - arm.shoulder_W).length();
+                    assert!(
+                        d <= arm.reach_m + 1e-6,
+                        "{d} m past a reach of {}",
+                        arm.reach_m
+                    );
+                    farthest = farthest.max(d);
+                }
+            }
+        }
+        // The upper arm (0.3255 m to the elbow) and the forearm (0.2555 m to the wrist)
+        // with the hand: about 0.8 m.
+        assert!((0.7..0.9).contains(&arm.reach_m), "{}", arm.reach_m);
+        assert!(
+            farthest > 0.9 * arm.reach_m,
+            "{farthest} of {}",
+            arm.reach_m
+        );
+    }
+
+    /// A black occluder that a depth camera sees in front of the arm over half the
+    /// forearm: the fit reports that share hidden (half), none when the depth image sees
+    /// through the occluder, still finds the arm (the depth term skips the occluder), and
+    /// its bound is the calibration's floor for a forearm half hidden.
+    #[test]
+    fn an_occluder_in_front_is_measured_and_widens_the_bound() {
+        let (arm, camera) = setup();
+        let truth = [0.5, 0.9, 1.0];
+        let (classes, depth) = observe(&arm, &camera, &truth);
+        let forearm = Class::Forearm as u8;
+        let pixels: Vec<usize> = (0..classes.len())
+            .filter(|&i| classes[i] == forearm)
+            .collect();
+        let centre = pixels.iter().fold([0.0, 0.0], |[x, y], &i| {
+            [x + (i % 128) as f64, y + (i / 128) as f64]
+        });
+        let centre = centre.map(|c| c / pixels.len() as f64);
+        let dist = |i: usize| ((i % 128) as f64 - centre[0]).hypot((i / 128) as f64 - centre[1]);
+        let mut radii: Vec<f64> = pixels.iter().map(|&i| dist(i)).collect();
+        radii.sort_by(f64::total_cmp);
+        let radius = radii[radii.len() / 2];
+        // The network calls the black disc background; the depth camera sees the disc.
+        let (mut hidden_classes, mut occluded_depth) = (classes.clone(), depth.clone());
+        let mut hidden = 0usize;
+        for &i in pixels.iter().filter(|&&i| dist(i) <= radius) {
+            hidden_classes[i] = Class::Background as u8;
+            occluded_depth[i] = 0.25;
+            hidden += 1;
+        }
+        let share = hidden as f64 / pixels.len() as f64;
+        assert!(
+            (0.45..0.6).contains(&share),
+            "{hidden} of {} hidden",
+            pixels.len()
+        );
+        let mut masks = ArmMasks::from_classes(&hidden_classes, 128, 128).expect("masks");
+        let calibration = Calibration {
+            scale: 0.0,
+            floor_m: 0.01,
+            hidden_floors_m: [0.1, 0.2, 0.3],
+        };
+        let config = calibration.apply(ArmFitConfig::default());
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
+        masks.depth_m = Some(depth);
+        let seen_through = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+        assert_eq!(seen_through.hidden_share, 0.0);
+        masks.depth_m = Some(occluded_depth);
+        fitter.reset();
+        let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+        // Hidden pixels over themselves and the forearm's mask elsewhere.
+        assert!(
+            (fit.hidden_share - share).abs() < 1e-9,
+            "{} vs {share}",
+            fit.hidden_share
+        );
+        let err = distance_cm(&arm, &camera, &fit.q, &truth);
+        assert!(err < 2.0, "{err:.2} cm off, q {:?}", fit.q);
+        assert_eq!(fit.uncertainty_m, 0.2_f64.max(fit.spread_m));
+    }
+
+    /// The floor grows band by band with the hidden share, and never falls below a less
+    /// hidden band's.
+    #[test]
+    fn the_floor_follows_the_hidden_share() {
+        let c = Calibration {
+            scale: 2.0,
+            floor_m: 0.05,
+            hidden_floors_m: [0.04, 0.2, 0.1],
+        };
+        let floors: Vec<f64> = [0.0, 0.24, 0.25, 0.5, 0.74, 0.75, 1.0]
+            .iter()
+            .map(|&h| c.floor_at(h))
+            .collect();
+        assert_eq!(floors, [0.05, 0.05, 0.05, 0.2, 0.2, 0.2, 0.2]);
+        assert!((c.radius(0.01, 0.0, 0.5) - 0.22).abs() < 1e-12);
+        assert_eq!(c.radius(0.01, 0.5, 0.5), 0.5);
+        assert_eq!(Calibration::of(&c.apply(ArmFitConfig::default())), c);
     }
 
     #[test]

@@ -401,6 +401,7 @@ fn frame_result(
         uncertainty_m: 0.0,
         sigma_m: f64::NAN,
         spread_m: f64::NAN,
+        hidden_share: f64::NAN,
         pose_ms: 0.0,
         mask_ms: 0.0,
         renders: 0,

@@ -8,6 +8,12 @@
 
 use serde::{Deserialize, Serialize};
 
+/// The camera-frame depth of an artificial occluder, m: a black object a quarter metre in
+/// front of the lens. A depth camera sees the object there, not the scene behind it, so a
+/// fit that reads depth can tell a hidden part from one that is absent, and cannot see
+/// through the occluder.
+pub const OCCLUDER_DEPTH_M: f32 = 0.25;
+
 /// The shape of an artificial occluder.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

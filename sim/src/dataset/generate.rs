@@ -14,7 +14,9 @@ use workcell_render::dataset::{
     SequenceEntry, Split, frame_files, sequence_dir,
 };
 use workcell_render::image::{PixelKind, depth_mm_bytes, encode_png, write_atomic};
-use workcell_render::occlusion::{Occluder, OccluderKind, PartPixels, fit_occluder};
+use workcell_render::occlusion::{
+    OCCLUDER_DEPTH_M, Occluder, OccluderKind, PartPixels, fit_occluder,
+};
 use workcell_render::roi::{Roi, RoiKind, mask_width, perfect_dice_loss, resample};
 use workcell_render::{Backend, Camera, Class, Frame, MaskBatch, RenderError, Renderer};
 
@@ -46,7 +48,8 @@ pub struct GeneratedFrame {
     pub occluder: Vec<u8>,
     /// 1 where the forearm rendered alone covers.
     pub amodal_forearm: Vec<u8>,
-    /// Depth along the optical axis, m (0 where nothing is seen).
+    /// Depth along the optical axis, m (0 where nothing is seen; [`OCCLUDER_DEPTH_M`] under
+    /// the occluder).
     pub depth_m: Vec<f32>,
     pub labels: FrameLabels,
 }
@@ -793,10 +796,12 @@ impl Generator {
         let classes = shot.classes.clone();
         let mut rgb = shot.rgb.clone();
         let mut visible = classes.clone();
+        let mut depth_m = shot.depth_m.clone();
         for p in 0..n {
             if occluder_mask[p] != 0 {
                 rgb[3 * p..3 * p + 3].fill(0);
                 visible[p] = 0;
+                depth_m[p] = OCCLUDER_DEPTH_M;
             }
         }
         let X_CW = camera.X_WC.inverse();
@@ -853,7 +858,7 @@ impl Generator {
             visible,
             occluder: occluder_mask,
             amodal_forearm: amodal.clone(),
-            depth_m: shot.depth_m.clone(),
+            depth_m,
             labels,
         })
     }

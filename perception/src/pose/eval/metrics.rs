@@ -91,6 +91,10 @@ pub struct FrameResult {
     /// method and for frames without a pose): what the calibration's radius is made of.
     pub sigma_m: f64,
     pub spread_m: f64,
+    /// The articulated fit's share of the forearm's region hidden by something in front of
+    /// the arm ([`crate::pose::ArmFit::hidden_share`]; NaN as `sigma_m`): the calibration's
+    /// floor depends on it.
+    pub hidden_share: f64,
     /// Time of the pose search (not the network), ms.
     pub pose_ms: f64,
     /// Time of the mask source (the network), ms.

@@ -160,6 +160,8 @@ struct Found {
     /// The articulated fit's curvature and hypotheses' spreads, m (NaN for the paper's).
     sigma_m: f64,
     spread_m: f64,
+    /// The articulated fit's [`crate::pose::ArmFit::hidden_share`] (NaN for the paper's).
+    hidden_share: f64,
     renders: usize,
 }
 
@@ -250,6 +252,7 @@ pub fn evaluate_pose(
                         uncertainty_m: fit.uncertainty_m,
                         sigma_m: fit.sigma_m,
                         spread_m: fit.spread_m,
+                        hidden_share: fit.hidden_share,
                         renders: fit.renders,
                     });
                     (found, mask_ms, pose_ms)
@@ -286,6 +289,7 @@ pub fn evaluate_pose(
                         uncertainty_m: e.uncertainty_m,
                         sigma_m: f64::NAN,
                         spread_m: f64::NAN,
+                        hidden_share: f64::NAN,
                         renders: e.renders,
                     });
                     (found, mask_ms, pose_ms)
@@ -303,11 +307,11 @@ pub fn evaluate_pose(
             let truth = Pose::from(&part.X_CP);
             let (mut reacquired, mut fm, mut gain, mut unc, mut renders) =
                 (false, 0.0, 0.0, 0.0, 0);
-            let (mut sigma_m, mut spread_m) = (f64::NAN, f64::NAN);
+            let (mut sigma_m, mut spread_m, mut hidden_share) = (f64::NAN, f64::NAN, f64::NAN);
             let outcome = found.map(|e| {
                 (reacquired, fm, gain, unc, renders) =
                     (e.reacquired, e.f_m, e.gain, e.uncertainty_m, e.renders);
-                (sigma_m, spread_m) = (e.sigma_m, e.spread_m);
+                (sigma_m, spread_m, hidden_share) = (e.sigma_m, e.spread_m, e.hidden_share);
                 // The hand tells the articulated fit's wrist from its elbow: no twin.
                 pose_error_with(
                     &model,
@@ -344,6 +348,7 @@ pub fn evaluate_pose(
                 uncertainty_m: unc,
                 sigma_m,
                 spread_m,
+                hidden_share,
                 pose_ms,
                 mask_ms,
                 renders,
