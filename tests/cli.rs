@@ -226,7 +226,7 @@ fn dataset_generate_then_show_writes_a_contact_sheet() {
     assert!(stats.status.success(), "{}", text(&stats.stderr));
     let table = text(&stats.stdout);
     assert!(
-        table.contains("workcell-dataset/2 (12 sequences, 24 frames of 32x32 px, flesh human)"),
+        table.contains("workcell-dataset/3 (12 sequences, 24 frames of 32x32 px, flesh human)"),
         "{table}"
     );
     for row in ["paper          short    all", "camera:front"] {

@@ -65,6 +65,7 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
     let (fa, fb) = (files(&a), files(&b));
     assert_eq!(fa.len(), 2 + 12 * (1 + 3 * 7));
     assert!(fa == fb, "two runs of one configuration differ");
+    format_2_depth_is_read_with_the_occluder_in_front(&b);
 
     let dataset = Dataset::open(&a).unwrap();
     let m = &dataset.manifest;
@@ -162,7 +163,9 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
             // The stored frame's camera sees the region of interest of the native camera
             // at the stored size (workcell_render::roi::Roi::camera).
             let labels = &s.labels[t];
-            let roi = labels.roi.expect("format 2 frames record their region");
+            let roi = labels
+                .roi
+                .expect("frames from format 2 on record their region");
             let native = Camera::from(&roi.native);
             let expected = roi.roi.camera(&native, 64).unwrap();
             assert_eq!(Camera::from(&labels.camera), expected);
@@ -351,4 +354,50 @@ fn bad_dataset_configurations_name_the_key() {
     std::fs::write(&path, "scenario = \"nowhere.toml\"").unwrap();
     let err = Generator::from_file(&path).unwrap_err();
     assert!(err.to_string().contains("nowhere.toml"), "{err}");
+}
+
+/// A format 2 dataset stored the scene behind the occluder in its depth images: it is read
+/// with the occluder put back in front, and the same images under format 3 as stored.
+fn format_2_depth_is_read_with_the_occluder_in_front(root: &Path) {
+    use workcell_sim::render::dataset::{SEES_THROUGH_OCCLUDER, frame_files};
+    use workcell_sim::render::image::{depth_mm_bytes, encode_png};
+    use workcell_sim::render::occlusion::OCCLUDER_DEPTH_M;
+    let dataset = Dataset::open(root).unwrap();
+    let (w, h) = (dataset.manifest.width_px, dataset.manifest.height_px);
+    // A frame with an occluder; its depth image replaced by a wall at 2 m seen through it.
+    let (entry, f, occluder) = dataset
+        .manifest
+        .sequences
+        .iter()
+        .flat_map(|e| (0..e.frames).map(move |f| (e, f)))
+        .find_map(|(e, f)| {
+            let path = root.join(&e.dir).join(&frame_files(f)[3]);
+            let (_, _, _, mask) = workcell_sim::render::image::read_png(&path).unwrap();
+            let covered: Vec<bool> = mask.iter().map(|&v| v >= 128).collect();
+            covered
+                .iter()
+                .any(|&c| c)
+                .then_some((e.clone(), f, covered))
+        })
+        .expect("a frame with an occluder");
+    let wall = vec![2.0f32; (w * h) as usize];
+    std::fs::write(
+        root.join(&entry.dir).join(&frame_files(f)[6]),
+        encode_png(w, h, PixelKind::Gray16, &depth_mm_bytes(&wall)).unwrap(),
+    )
+    .unwrap();
+    assert!(dataset.depth(&entry, f).unwrap().iter().all(|&d| d == 2.0));
+    let manifest = root.join("manifest.json");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    assert!(text.contains(workcell_sim::render::dataset::FORMAT));
+    std::fs::write(
+        &manifest,
+        text.replace(workcell_sim::render::dataset::FORMAT, SEES_THROUGH_OCCLUDER),
+    )
+    .unwrap();
+    let old = Dataset::open(root).unwrap();
+    let depth = old.depth(&entry, f).unwrap();
+    for (d, covered) in depth.iter().zip(&occluder) {
+        assert_eq!(*d, if *covered { OCCLUDER_DEPTH_M } else { 2.0 });
+    }
 }

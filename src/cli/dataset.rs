@@ -45,7 +45,7 @@ pub struct StatsArgs {
     /// A dataset folder.
     pub dir: PathBuf,
     /// For datasets of format 1 (whole frames): the network input the ceiling is measured
-    /// at (the shipped network reads 64x64). Format 2 datasets record theirs.
+    /// at (the shipped network reads 64x64). Datasets from format 2 on record theirs.
     #[arg(long, default_value_t = 64)]
     pub input: u32,
 }

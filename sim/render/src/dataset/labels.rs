@@ -9,11 +9,16 @@ use crate::roi::{Roi, RoiKind};
 use workcell_robots::HumanLook;
 
 /// The layout version written into manifests.
-pub const FORMAT: &str = "workcell-dataset/2";
+pub const FORMAT: &str = "workcell-dataset/3";
 
 /// Formats this version reads: 1 (whole 128x128 frames, skeletal human, no regions of
-/// interest or depth) and 2.
-pub const READS: [&str; 2] = ["workcell-dataset/1", FORMAT];
+/// interest or depth), 2 (depth images that show the scene behind the occluder,
+/// [`SEES_THROUGH_OCCLUDER`]) and 3 (the occluder in the depth image too).
+pub const READS: [&str; 3] = ["workcell-dataset/1", SEES_THROUGH_OCCLUDER, FORMAT];
+
+/// The format whose depth images show the scene behind the artificial occluder:
+/// [`crate::dataset::Dataset::depth`] puts the occluder back in front.
+pub const SEES_THROUGH_OCCLUDER: &str = "workcell-dataset/2";
 
 /// A pose as stored: position, roll-pitch-yaw (URDF convention) and the quaternion.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -245,7 +250,7 @@ pub struct Manifest {
     /// datasets written before it was recorded: regenerate them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub human: Option<HumanLabel>,
-    /// Size of the stored frames (the network's input in format 2).
+    /// Size of the stored frames (the network's input from format 2 on).
     pub width_px: u32,
     pub height_px: u32,
     pub sequences: Vec<SequenceEntry>,

@@ -4,9 +4,12 @@ use std::path::{Path, PathBuf};
 
 use crate::Class;
 use crate::dataset::frame_files;
-use crate::dataset::labels::{FrameLabels, Manifest, READS, SequenceEntry, Split};
+use crate::dataset::labels::{
+    FrameLabels, Manifest, READS, SEES_THROUGH_OCCLUDER, SequenceEntry, Split,
+};
 use crate::error::{RenderError, Result};
 use crate::image::{PixelKind, read_png};
+use crate::occlusion::OCCLUDER_DEPTH_M;
 
 /// An opened dataset: its manifest and root folder.
 #[derive(Debug, Clone)]
@@ -199,7 +202,12 @@ impl Dataset {
     /// # Errors
     /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file.
     pub fn amodal_forearm(&self, entry: &SequenceEntry, f: usize) -> Result<Vec<u8>> {
-        let path = self.sequence_dir(entry)?.join(&frame_files(f)[4]);
+        self.mask(entry, f, 4)
+    }
+
+    /// The grey mask `k` of [`frame_files`] of frame `f` (1 where it is set).
+    fn mask(&self, entry: &SequenceEntry, f: usize, k: usize) -> Result<Vec<u8>> {
+        let path = self.sequence_dir(entry)?.join(&frame_files(f)[k]);
         let (w, h, kind, data) = read_png(&path)?;
         if (w, h, kind)
             != (
@@ -214,8 +222,10 @@ impl Dataset {
     }
 
     /// The depth of frame `f` of a sequence: the camera-frame z of the surface each pixel
-    /// shows, m (0 where nothing is). Format 2 datasets store it; it is read on demand, not
-    /// by [`Dataset::load`], whose frames a training run holds in memory.
+    /// shows, m (0 where nothing is; [`OCCLUDER_DEPTH_M`] under the artificial occluder).
+    /// Formats 2 and 3 store it; it is read on demand, not by [`Dataset::load`], whose frames
+    /// a training run holds in memory. Format 2 stored the scene behind the occluder, which
+    /// no depth camera sees: its depth is read with the occluder put back in front.
     ///
     /// # Errors
     /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file: missing (a format 1
@@ -235,10 +245,18 @@ impl Dataset {
                 "not a 16-bit depth image of the manifest's size",
             ));
         }
-        Ok(data
+        let mut depth: Vec<f32> = data
             .chunks_exact(2)
             .map(|b| f32::from(u16::from_be_bytes([b[0], b[1]])) / 1000.0)
-            .collect())
+            .collect();
+        if self.manifest.format == SEES_THROUGH_OCCLUDER {
+            for (d, o) in depth.iter_mut().zip(self.mask(entry, f, 3)?) {
+                if o != 0 {
+                    *d = OCCLUDER_DEPTH_M;
+                }
+            }
+        }
+        Ok(depth)
     }
 
     /// The folder of a sequence (refusing one that leaves the dataset).

@@ -25,7 +25,7 @@ mod stats;
 
 pub use labels::{
     CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, READS, RoiLabel,
-    SequenceEntry, Split,
+    SEES_THROUGH_OCCLUDER, SequenceEntry, Split,
 };
 pub use load::{Dataset, MAX_SEQUENCE_FRAMES, MAX_SEQUENCES, Sequence};
 pub use sheet::{PredictionPanel, contact_sheet, prediction_sheet};
@@ -38,7 +38,7 @@ pub fn sequence_dir(index: usize) -> String {
 }
 
 /// The file names of frame `f`: rgb, class, visible, occluder, amodal PNGs, the labels and
-/// the depth PNG (16-bit, mm; format 2).
+/// the depth PNG (16-bit, mm; from format 2 on).
 #[must_use]
 pub fn frame_files(f: usize) -> [String; 7] {
     [
