@@ -15,9 +15,10 @@ floor at least the band before's. This script reads the per-frame CSV of
 
 (its `sigma_m`, `spread_m`, `hidden_share` and `ends_cm` columns: the error to cover is the
 farther of the forearm's centre and wrist) and, for each scale on a grid, finds the smallest
-floors that put the coverage target of each band's frames within the radius. It prints the table and the pair with
-the smallest mean radius; given a second CSV (the test split) it reports the coverage there
-too, which is the honest figure: the pair was chosen on the first.
+floors that put the coverage target of each band's frames within the radius. It prints the
+table and the calibration with the smallest mean radius; given a second CSV (the test split)
+it reports the coverage there too, which is the honest figure: the calibration was chosen on
+the first.
 
     scripts/calibrate_uncertainty.py VALIDATION.csv [TEST.csv] [--target 0.99]
 
@@ -77,19 +78,22 @@ def band(hidden):
     return sum(1 for b in HIDDEN_BANDS if hidden >= b)
 
 
-def floor_at(calibration, hidden):
-    """The floor for a hidden share: the band's, never below a less hidden band's."""
-    scale, floor, *rest = calibration
-    floors = [floor] + list(rest[0] if rest else [])
-    return max(floors[: band(hidden) + 1])
+def band_of(frame):
+    """The band of a frame (error, sigma, spread[, hidden]); no hidden share is band 0."""
+    return band(frame[3] if len(frame) > 3 else 0.0)
+
+
+def floor_at(calibration, frame):
+    """The floor for `frame` under `calibration` (scale, floor[, hidden floors]): its band's,
+    never below a less hidden band's."""
+    floors = [calibration[1]] + list(calibration[2] if len(calibration) > 2 else [])
+    return max(floors[: band_of(frame) + 1])
 
 
 def radius(frame, calibration):
     """The radius the fit reports for `frame` (error, sigma, spread[, hidden]) under
     `calibration` (scale, floor[, hidden floors])."""
-    sigma, spread = frame[1], frame[2]
-    hidden = frame[3] if len(frame) > 3 else 0.0
-    return max(calibration[0] * sigma + floor_at(calibration, hidden), spread)
+    return max(calibration[0] * frame[1] + floor_at(calibration, frame), frame[2])
 
 
 def smallest_floor(frames, scale, target):
@@ -106,7 +110,7 @@ def band_floors(frames, scale, target):
     frames, at least the band before's (a band without frames takes the band before's)."""
     floors = []
     for b in range(len(HIDDEN_BANDS) + 1):
-        own = [f for f in frames if band(f[3] if len(f) > 3 else 0.0) == b]
+        own = [f for f in frames if band_of(f) == b]
         floors.append(max([smallest_floor(own, scale, target)] + floors[-1:]))
     return (scale, floors[0], tuple(floors[1:]))
 
@@ -167,7 +171,7 @@ def main():
     for b in range(len(HIDDEN_BANDS) + 1):
         cells = []
         for frames in [val] + ([test] if test else []):
-            own = [f for f in frames if band(f[3]) == b]
+            own = [f for f in frames if band_of(f) == b]
             cells.append(
                 f"{100 * coverage(own, best[0]):.2f} % of {len(own)}" if own else "no frames"
             )
