@@ -723,7 +723,18 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
     refused(
         &["eval", "pose", "--masks", "oracle", "--dataset", data_s],
-        "gt, visible, procnet, baseline",
+        "gt, gt@N, visible, procnet, baseline",
+    );
+    for bad in ["gt@0", "gt@sixteen", "gt@"] {
+        refused(
+            &["eval", "pose", "--masks", bad, "--dataset", data_s],
+            "gt@N takes a network input side N of 4 to 4096",
+        );
+    }
+    // A network input larger than the stored frames is no perfect network's.
+    refused(
+        &["eval", "pose", "--masks", "gt@64", "--dataset", data_s],
+        "a network input of 64x64 for 32x32 frames",
     );
     refused(
         &["eval", "pose", "--masks", "gt,gt", "--dataset", data_s],
@@ -814,7 +825,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         "eval",
         "pose",
         "--masks",
-        "gt,baseline",
+        "gt,gt@16,baseline",
         "--weights",
         base_weights.to_str().expect("utf-8"),
         "--dataset",
@@ -831,6 +842,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
     for file in [
         "pose_eval_gt.md",
+        "pose_eval_gt16.md",
         "pose_eval_baseline.md",
         "pose_frames_baseline.csv",
         "pose_compare.md",

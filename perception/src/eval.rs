@@ -1054,7 +1054,7 @@ const WORST_SEQUENCES: usize = 5;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use workcell_render::dataset::SequenceEntry;
+    use crate::test_util::one_frame_entry;
 
     #[test]
     fn a_channel_predicted_black_everywhere_is_reported_dead() {
@@ -1264,19 +1264,7 @@ mod tests {
         let grey = 0.8f32;
         let plane = [grey, 0.0, grey, 0.0];
         let sequence = |visible: Vec<u8>| Sequence {
-            entry: SequenceEntry {
-                index: 0,
-                dir: "seq_00000".into(),
-                seed: 1,
-                attempts: 1,
-                distance_class: "short".into(),
-                occlusion_level: "heavy".into(),
-                source: "paper".into(),
-                split: Split::Test,
-                frames: 1,
-                mean_forearm_occlusion: Some(0.5),
-                frames_without_forearm: 0,
-            },
+            entry: one_frame_entry("heavy", 0.5),
             width: 2,
             height: 2,
             rgb: plane.repeat(3),

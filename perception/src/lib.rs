@@ -20,6 +20,8 @@ pub mod model;
 pub mod nn;
 pub mod ops;
 pub mod pose;
+#[cfg(test)]
+mod test_util;
 pub mod train;
 pub mod weights;
 

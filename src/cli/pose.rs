@@ -7,8 +7,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use workcell::perception::pose::eval::{
-    GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, PoseMethod, VisibleMasks,
-    compare_markdown, evaluate_pose,
+    GroundTruthAtSize, GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, PoseMethod,
+    VisibleMasks, compare_markdown, evaluate_pose,
 };
 use workcell::perception::pose::{ArmFitConfig, Calibration, HIDDEN_BANDS, PoseConfig};
 use workcell::perception::{Backend, ProcNet, backend};
@@ -27,7 +27,9 @@ pub struct EvalPoseArgs {
     pub split: String,
     /// Where the masks come from (the forearm's for --method paper, every arm part's for
     /// articulated): `gt` (the dataset's classes without the occluder: the pose search's own
-    /// error), `visible` (only the pixels the occluder leaves),
+    /// error), `gt@N` (the true masks averaged down to an NxN network input and back: what
+    /// a perfect network of that input size would give), `visible` (only the pixels the
+    /// occluder leaves),
     /// `procnet` or `baseline` (the network of --weights; `baseline` is the feed-forward
     /// stand-in for the paper's PoseCNN). Several, comma-separated, are evaluated in turn
     /// and compared side by side (pose_compare.md).
@@ -71,6 +73,16 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
     Ok(match kind {
         "gt" => Box::new(GroundTruthMasks),
         "visible" => Box::new(VisibleMasks),
+        _ if kind.starts_with("gt@") => {
+            let size = kind["gt@".len()..]
+                .parse::<usize>()
+                .ok()
+                .filter(|s| (4..=4096).contains(s))
+                .with_context(|| {
+                    format!("--masks {kind:?}: gt@N takes a network input side N of 4 to 4096")
+                })?;
+            Box::new(GroundTruthAtSize { size })
+        }
         "procnet" | "baseline" => {
             // The shipped ProcNet and baseline, both 64x64 networks of the cpu preset.
             let weights = args.weights.clone().unwrap_or_else(|| {
@@ -94,7 +106,7 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
                 net,
             })
         }
-        other => anyhow::bail!("unknown --masks {other:?} (gt, visible, procnet, baseline)"),
+        other => anyhow::bail!("unknown --masks {other:?} (gt, gt@N, visible, procnet, baseline)"),
     })
 }
 
@@ -220,7 +232,8 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         );
         say_inline!("{md}");
         let suffix = if several {
-            format!("_{kind}")
+            // `gt@64` writes pose_eval_gt64.md: no `@` in file names.
+            format!("_{}", kind.replace('@', ""))
         } else {
             String::new()
         };

@@ -20,7 +20,7 @@ mod sources;
 
 pub use metrics::{FrameResult, PoseError, Summary, pose_error, pose_error_with};
 pub use report::{PAPER_AVERAGE, PAPER_TABLE2, compare_markdown};
-pub use sources::{GroundTruthMasks, MaskSource, NetworkMasks, VisibleMasks};
+pub use sources::{GroundTruthAtSize, GroundTruthMasks, MaskSource, NetworkMasks, VisibleMasks};
 
 use std::time::Instant;
 

@@ -3,7 +3,10 @@
 use workcell_render::Class;
 use workcell_render::dataset::Sequence;
 
-use crate::error::Result;
+use crate::config::DATASET_CLASSES;
+use crate::data::one_hot;
+use crate::error::{PerceptionError, Result};
+use crate::image::resample;
 use crate::infer::ProcNet;
 use crate::pose::ArmMasks;
 
@@ -41,6 +44,65 @@ impl MaskSource for GroundTruthMasks {
     fn arm(&mut self, sequence: &Sequence, t: usize) -> Result<ArmMasks> {
         let (w, h) = (sequence.width as usize, sequence.height as usize);
         ArmMasks::from_classes(sequence.class_frame(t), w, h)
+    }
+}
+
+/// The dataset's classes as a perfect network reading `size x size` frames would give them:
+/// each class's plane averaged down to the network's input (as the training targets are)
+/// and resampled back to the frame, as [`NetworkMasks`] resamples a network's output. What
+/// bounds every network of this input size.
+#[derive(Debug, Clone, Copy)]
+pub struct GroundTruthAtSize {
+    pub size: usize,
+}
+
+impl GroundTruthAtSize {
+    /// Every class's plane at the network's resolution and back, `[classes, height, width]`.
+    fn planes(&self, sequence: &Sequence, t: usize) -> Result<Vec<Vec<f32>>> {
+        let (w, h) = (sequence.width as usize, sequence.height as usize);
+        let s = self.size;
+        if s == 0 || s > w.min(h) {
+            return Err(PerceptionError::Input {
+                message: format!("a network input of {s}x{s} for {w}x{h} frames"),
+            });
+        }
+        let ids = DATASET_CLASSES.map(|c| c as u8);
+        let small = resample(
+            &one_hot(sequence.class_frame(t), &ids),
+            ids.len(),
+            w,
+            h,
+            s,
+            s,
+        );
+        Ok(small
+            .chunks_exact(s * s)
+            .map(|plane| resample(plane, 1, s, s, w, h))
+            .collect())
+    }
+}
+
+impl MaskSource for GroundTruthAtSize {
+    fn name(&self) -> String {
+        format!("ground truth at {0}x{0}", self.size)
+    }
+    fn start(&mut self) {}
+    fn forearm(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
+        let i = DATASET_CLASSES
+            .iter()
+            .position(|&c| c == Class::Forearm)
+            .unwrap_or_default();
+        Ok(self.planes(sequence, t)?.swap_remove(i))
+    }
+    fn arm(&mut self, sequence: &Sequence, t: usize) -> Result<ArmMasks> {
+        let (w, h) = (sequence.width as usize, sequence.height as usize);
+        let planes = self.planes(sequence, t)?;
+        let refs: Vec<(Class, &[f32])> = DATASET_CLASSES
+            .iter()
+            .zip(&planes)
+            .map(|(&c, p)| (c, p.as_slice()))
+            .collect();
+        ArmMasks::from_planes(w, h, &refs)
     }
 }
 
@@ -106,5 +168,74 @@ impl MaskSource for NetworkMasks {
         let planes = self.net.planes(sequence.rgb_frame(t), w, h)?;
         let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
         ArmMasks::from_planes(w, h, &refs)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_util::one_frame_entry;
+
+    /// One 4x4 frame: the forearm in the top-left 2x2 block and one pixel of the block beside
+    /// it, the upper arm in the bottom row, background elsewhere.
+    fn sequence() -> Sequence {
+        let (b, u, f) = (
+            Class::Background as u8,
+            Class::UpperArm as u8,
+            Class::Forearm as u8,
+        );
+        #[rustfmt::skip]
+        let classes = vec![
+            f, f, f, b,
+            f, f, b, b,
+            b, b, b, b,
+            u, u, u, u,
+        ];
+        Sequence {
+            entry: one_frame_entry("light", 0.0),
+            width: 4,
+            height: 4,
+            rgb: vec![0.5; 3 * 16],
+            visible: classes.clone(),
+            classes,
+            occluder: vec![0; 16],
+            amodal_forearm: vec![0; 16],
+            labels: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn at_the_frames_size_the_true_masks_are_the_class_image() {
+        let s = sequence();
+        let exact = GroundTruthMasks.arm(&s, 0).expect("masks");
+        let same = GroundTruthAtSize { size: 4 }.arm(&s, 0).expect("masks");
+        assert_eq!(exact, same);
+    }
+
+    #[test]
+    fn at_half_size_each_block_is_its_share_of_the_class() {
+        let s = sequence();
+        let mut source = GroundTruthAtSize { size: 2 };
+        // Block means: forearm [1, 1/4; 0, 0], upper arm [0, 0; 1/2, 1/2]. Back at 4x4 the
+        // bilinear samples of the top-left corner pixel and of the row between the blocks
+        // (pixel centres at 1/4 and 3/4 of a block) are known.
+        let forearm = source.forearm(&s, 0).expect("forearm");
+        assert!((forearm[0] - 1.0).abs() < 1e-6, "{forearm:?}");
+        assert!((forearm[3] - 0.25).abs() < 1e-6, "{forearm:?}");
+        // Pixel (1, 1) lies a quarter of a block from the centre of the forearm's block
+        // towards the blocks beside and below: 1 * 9/16 + 1/4 * 3/16 + 0 + 0.
+        assert!(
+            (forearm[5] - (9.0 / 16.0 + 0.75 / 16.0)).abs() < 1e-6,
+            "{forearm:?}"
+        );
+        let arm = source.arm(&s, 0).expect("masks");
+        assert!((arm.parts[0][15] - 0.5).abs() < 1e-6, "{:?}", arm.parts[0]);
+        // The background is one less the likeliest class, as for a network's planes.
+        for i in 0..16 {
+            let most = arm.parts.iter().map(|p| p[i]).fold(0.0f32, f32::max);
+            assert!((arm.background[i] - (1.0 - most)).abs() < 1e-6);
+        }
+        assert!(GroundTruthAtSize { size: 8 }.arm(&s, 0).is_err());
+        assert!(GroundTruthAtSize { size: 0 }.forearm(&s, 0).is_err());
     }
 }
