@@ -216,9 +216,8 @@ mod tests {
     fn at_half_size_each_block_is_its_share_of_the_class() {
         let s = sequence();
         let mut source = GroundTruthAtSize { size: 2 };
-        // Block means: forearm [1, 1/4; 0, 0], upper arm [0, 0; 1/2, 1/2]. Back at 4x4 the
-        // bilinear samples of the top-left corner pixel and of the row between the blocks
-        // (pixel centres at 1/4 and 3/4 of a block) are known.
+        // Block means: forearm [1, 1/4; 0, 0], upper arm [0, 0; 1/2, 1/2]. Back at 4x4 each
+        // pixel is the bilinear sample at its centre: a corner pixel is its block's mean.
         let forearm = source.forearm(&s, 0).expect("forearm");
         assert!((forearm[0] - 1.0).abs() < 1e-6, "{forearm:?}");
         assert!((forearm[3] - 0.25).abs() < 1e-6, "{forearm:?}");
