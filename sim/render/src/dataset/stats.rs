@@ -46,8 +46,8 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 }
 
 /// The table of `dataset`, one row per (source, distance class, region kind) and one `all`
-/// row per (source, distance class). Datasets from format 2 on carry each frame's width and ceiling
-/// in their labels (measured on the forearm's mask at the camera's own resolution); for
+/// row per (source, distance class). Datasets from format 2 on carry each frame's width and
+/// ceiling in their labels (measured on the forearm's mask at the camera's own resolution); for
 /// format 1 datasets they are measured on the stored mask, the stored frame standing for the
 /// camera and a network input of `input_px` (the shipped network's 64).
 /// `progress` is called after each sequence with the number done.
