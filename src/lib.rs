@@ -6,6 +6,7 @@ pub use workcell_robots as robots;
 pub use workcell_safety as safety;
 pub use workcell_sim as sim;
 
+pub mod crop;
 mod error;
 pub mod evaluate;
 pub mod plot;

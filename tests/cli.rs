@@ -264,6 +264,87 @@ fn dataset_generate_then_show_writes_a_contact_sheet() {
     );
 }
 
+/// `dataset generate --crop tracker`: the test split of a small configuration read through
+/// the deployed tracker's regions, frame by frame, and its refusals.
+#[test]
+fn dataset_generate_reads_frames_through_the_trackers_region() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/default.toml");
+    let config = |input: u32| {
+        let path = tmp.path().join(format!("data-{input}.toml"));
+        std::fs::write(
+            &path,
+            format!(
+                "scenario = {:?}\nsequences_per_pair = 1\nframes = 3\nwidth_px = 160\nheight_px = 120\ninput_px = {input}\nstart_s = [0.5, 1.0]\nsplits = [0.0, 0.0, 1.0]\n[cell_cameras]\nenabled = false\n",
+                scenario.display().to_string()
+            ),
+        )
+        .expect("config");
+        path.to_str().expect("utf-8").to_string()
+    };
+    let (small, full) = (config(32), config(128));
+    let out = tmp.path().join("tracked");
+    let out_s = out.to_str().expect("utf-8");
+    let run = workcell(&[
+        "dataset", "generate", "--config", &full, "--crop", "tracker", "--splits", "test", "--out",
+        out_s,
+    ]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let said = text(&run.stdout);
+    assert!(said.contains("the tracker read 27 new frames"), "{said}");
+    let stamp = std::fs::read_to_string(out.join("config.toml")).expect("stamp");
+    assert!(stamp.contains("# crop: tracker (ArmTracker, RGB-D, weights procnet-cpu.safetensors"));
+    // Every frame's label names the region the tracker read it through.
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("manifest.json")).expect("manifest"))
+            .expect("json");
+    let sequences = manifest["sequences"].as_array().expect("sequences");
+    assert_eq!(sequences.len(), 9);
+    for s in sequences {
+        let dir = out.join(s["dir"].as_str().expect("dir"));
+        for f in 0..3 {
+            let label: serde_json::Value = serde_json::from_slice(
+                &std::fs::read(dir.join(format!("frame_{f:03}.json"))).expect("label"),
+            )
+            .expect("json");
+            let kind = label["roi"]["kind"].as_str().expect("kind");
+            // Two poses in a row before the region follows the arm: not before frame 2.
+            assert!(
+                kind == "workspace" || (kind == "tracked" && f == 2),
+                "{} frame {f}: {kind}",
+                dir.display()
+            );
+        }
+    }
+    let other = tmp
+        .path()
+        .join("other")
+        .to_str()
+        .expect("utf-8")
+        .to_string();
+    let generate = |extra: &[&str], message: &str| {
+        let mut args = vec!["dataset", "generate", "--config", &full, "--out", &other];
+        args.extend_from_slice(extra);
+        refused(&args, message);
+    };
+    generate(&["--crop", "nearest"], "unknown --crop \"nearest\"");
+    generate(
+        &["--weights", "w.safetensors"],
+        "--weights is a setting of --crop tracker",
+    );
+    generate(&["--splits", "test,holdout"], "unknown split \"holdout\"");
+    generate(
+        &["--crop", "tracker", "--weights", "nowhere.safetensors"],
+        "nowhere.safetensors",
+    );
+    refused(
+        &[
+            "dataset", "generate", "--config", &small, "--crop", "tracker", "--out", &other,
+        ],
+        "stores 32x32 (input_px)",
+    );
+}
+
 #[test]
 fn train_resumes_then_eval_segmentation_prints_the_table() {
     let tmp = tempfile::tempdir().expect("tempdir");

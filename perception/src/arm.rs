@@ -12,8 +12,8 @@
 
 use std::sync::Arc;
 
-use workcell_render::dataset::Dataset;
-use workcell_render::roi::{self, Roi};
+use workcell_render::dataset::{Dataset, HumanLabel};
+use workcell_render::roi::{self, Roi, RoiKind};
 use workcell_render::{Camera, Class, CpuRenderer, RenderMesh};
 use workcell_robots::collision::{LinkCapsule, link_bounding_capsule};
 use workcell_robots::math::{Pose, Vector};
@@ -234,6 +234,15 @@ pub fn dataset_human(dataset: &Dataset) -> Result<(RobotModel, Pose)> {
                 dataset.root.join("manifest.json").display()
             ),
         })?;
+    human_of(human)
+}
+
+/// The human a manifest's label names: its model in the look it was rendered in, and its
+/// base pose.
+///
+/// # Errors
+/// The model does not load.
+pub fn human_of(human: &HumanLabel) -> Result<(RobotModel, Pose)> {
     let mut model = RobotModel::load(&human.model, &PackageMap::from_env())?;
     let look = human.look;
     model.retain_visuals(|g| look.shows(g.name.as_deref()));
@@ -319,7 +328,29 @@ pub struct ArmTracker {
     /// The last estimate's shoulder, elbow and wrist: the next region of interest follows
     /// them.
     joints_W: Option<[Vector; 3]>,
+    /// Frames in a row with a pose: the region follows the arm from [`CONFIRM_POSES`] on.
+    streak: usize,
+    /// The focal length, px, of the last region the network read: a region of another
+    /// scale is another view, and the network's memory of the last one is dropped.
+    last_fx: Option<f64>,
 }
+
+/// A region whose scale differs from the last one's by more than this factor is another view.
+pub const VIEW_JUMP: f64 = 1.25;
+
+/// Whether a region seen at focal length `fx` (px) is another view than the last one, seen
+/// at `last_fx`: its scale differs by more than [`VIEW_JUMP`]. A recurrent network's memory
+/// of the last view is then of other pixels, and it starts afresh.
+#[must_use]
+pub fn view_jump(last_fx: Option<f64>, fx: f64) -> bool {
+    last_fx.is_some_and(|last| (fx / last).ln().abs() > VIEW_JUMP.ln())
+}
+
+/// Poses in a row before the region of interest follows the arm. A network that has just
+/// started on a view can give a confident pose of the wrong arm; a crop around it would
+/// keep the real one out of view for frames on end (measured: docs/perception.md, "The
+/// deployed tracker's own crops").
+pub const CONFIRM_POSES: usize = 2;
 
 /// The side of the region of interest's image the fit reads (the networks' masks are
 /// resampled to it): the size of the datasets' stored regions.
@@ -353,6 +384,8 @@ impl ArmTracker {
             capsules,
             net: None,
             joints_W: None,
+            streak: 0,
+            last_fx: None,
         })
     }
 
@@ -395,6 +428,8 @@ impl ArmTracker {
     pub fn reset(&mut self) {
         self.fitter.reset();
         self.joints_W = None;
+        self.streak = 0;
+        self.last_fx = None;
         if let Some(net) = &mut self.net {
             net.reset();
         }
@@ -402,18 +437,28 @@ impl ArmTracker {
 
     /// The region of `camera`'s image the next frame is read through: around the last
     /// estimate's shoulder, elbow and wrist ([`Roi::of_joints`], the middle of
-    /// [`roi::TRACKED_MARGIN`]) while there is one, else the sphere the forearm can reach
+    /// [`roi::TRACKED_MARGIN`]) once [`CONFIRM_POSES`] frames in a row gave a pose, else
+    /// the sphere the forearm can reach
     /// ([`Roi::of_sphere`]), else the whole frame.
     #[must_use]
     pub fn roi(&self, camera: &Camera) -> Roi {
+        self.region(camera).0
+    }
+
+    /// [`ArmTracker::roi`] and which of the three it is.
+    #[must_use]
+    pub fn region(&self, camera: &Camera) -> (Roi, RoiKind) {
         let margin = 0.5 * (roi::TRACKED_MARGIN[0] + roi::TRACKED_MARGIN[1]);
         self.joints_W
+            .filter(|_| self.streak >= CONFIRM_POSES)
             .and_then(|joints| Roi::of_joints(camera, &joints, margin, roi::TRACKED_MIN_M))
+            .map(|r| (r, RoiKind::Tracked))
             .or_else(|| {
                 let (shoulder, _) = self.arm.shoulder_W?;
                 Roi::of_sphere(camera, shoulder, self.arm.reach_m()?, roi::WORKSPACE_MARGIN)
+                    .map(|r| (r, RoiKind::Workspace))
             })
-            .unwrap_or(Roi::frame(camera.width, camera.height))
+            .unwrap_or((Roi::frame(camera.width, camera.height), RoiKind::Frame))
     }
 
     /// The network's masks of a frame: the region of interest ([`ArmTracker::roi`])
@@ -426,19 +471,65 @@ impl ArmTracker {
         let (w, h) = (camera.width as usize, camera.height as usize);
         check_len("an sRGB frame", rgb.len(), 3 * w * h, camera)?;
         let roi = self.roi(camera);
+        let s = DEFAULT_INPUT_PX;
+        let size = roi.size as usize;
+        let input = resample(&planar_rgb_crop(rgb, w, h, &roi), 3, size, size, s, s);
+        let roi_camera = roi.camera(camera, s as u32)?;
+        Ok(RoiMasks {
+            roi,
+            masks: self.segment_planar(&roi_camera, &input)?,
+            camera: roi_camera,
+        })
+    }
+
+    /// The network's masks of a region already cut out at [`DEFAULT_INPUT_PX`]: `planar`
+    /// sRGB values scaled to [0, 1], `3 x side x side`.
+    fn segment_planar(&mut self, roi_camera: &Camera, planar: &[f32]) -> Result<ArmMasks> {
         let net = self.net.as_mut().ok_or_else(|| PerceptionError::Input {
             message: "this tracker has no network; give it masks with track_masks".into(),
         })?;
         let s = DEFAULT_INPUT_PX;
-        let size = roi.size as usize;
-        let input = resample(&planar_rgb_crop(rgb, w, h, &roi), 3, size, size, s, s);
-        let planes = net.planes(&input, s, s)?;
+        if view_jump(self.last_fx, roi_camera.fx) {
+            net.start_view(planar, s, s)?;
+        }
+        self.last_fx = Some(roi_camera.fx);
+        let planes = net.planes(planar, s, s)?;
         let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
-        Ok(RoiMasks {
-            roi,
-            camera: roi.camera(camera, s as u32)?,
-            masks: ArmMasks::from_planes(s, s, &refs)?,
-        })
+        ArmMasks::from_planes(s, s, &refs)
+    }
+
+    /// One frame already read through the region of interest the tracker asked for
+    /// ([`ArmTracker::roi`]): what a camera that crops on the sensor, or a renderer that
+    /// draws only that region, delivers. `rgb` is interleaved sRGB bytes of `roi_camera`
+    /// (the camera that sees exactly the region at [`DEFAULT_INPUT_PX`] pixels a side,
+    /// [`Roi::camera`]), `depth_m` its depth image.
+    ///
+    /// # Errors
+    /// No network, a camera not [`DEFAULT_INPUT_PX`] square, images of the wrong size, a
+    /// network failure.
+    pub fn track_region(
+        &mut self,
+        roi_camera: &Camera,
+        rgb: &[u8],
+        depth_m: Option<&[f32]>,
+    ) -> Result<ArmOutcome> {
+        let s = DEFAULT_INPUT_PX;
+        if (roi_camera.width as usize, roi_camera.height as usize) != (s, s) {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "a region's camera of {}x{}, not the {s}x{s} the tracker reads",
+                    roi_camera.width, roi_camera.height
+                ),
+            });
+        }
+        check_len("an sRGB frame", rgb.len(), 3 * s * s, roi_camera)?;
+        if let Some(d) = depth_m {
+            check_len("a depth image", d.len(), s * s, roi_camera)?;
+        }
+        let planar = planar_rgb_crop(rgb, s, s, &Roi::frame(s as u32, s as u32));
+        let mut masks = self.segment_planar(roi_camera, &planar)?;
+        masks.depth_m = depth_m.map(<[f32]>::to_vec);
+        self.track_roi(roi_camera, &masks)
     }
 
     /// One frame: interleaved sRGB bytes (`width * height * 3`, row-major from the top left)
@@ -525,6 +616,7 @@ impl ArmTracker {
             Ok(fit) => fit,
             Err(reason) => {
                 self.joints_W = None;
+                self.streak = 0;
                 return Ok(Err(NoEstimate::NoPose(reason)));
             }
         };
@@ -558,6 +650,7 @@ impl ArmTracker {
                     }
                 });
         self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist]);
+        self.streak += 1;
         Ok(Ok(ArmEstimate {
             parts,
             uncertainty_m: fit.uncertainty_m,
@@ -777,6 +870,13 @@ mod tests {
         assert_eq!(tracker.roi(&camera), workspace);
         let q = [0.5, 0.9, 1.1];
         let masks = observe(&human, &tracker, &camera, &q);
+        tracker
+            .track_masks(&camera, &masks)
+            .expect("track")
+            .expect("an estimate");
+        // One pose is not yet a track to follow.
+        assert_eq!(tracker.region(&camera), (workspace, RoiKind::Workspace));
+        assert_eq!(CONFIRM_POSES, 2);
         let estimate = tracker
             .track_masks(&camera, &masks)
             .expect("track")
@@ -796,7 +896,8 @@ mod tests {
         }
         assert!(estimate.uncertainty_m > 0.0 && estimate.uncertainty_m.is_finite());
         // The region now holds the arm's joints and is smaller than the workspace's.
-        let tracked = tracker.roi(&camera);
+        let (tracked, kind) = tracker.region(&camera);
+        assert_eq!(kind, RoiKind::Tracked);
         assert!(tracked.size < workspace.size, "{tracked:?}");
         let [u, v] = camera
             .project(camera.X_WC.inverse() * estimate.X_WF.translation)
@@ -814,19 +915,23 @@ mod tests {
         assert_eq!(tracker.roi(&camera), workspace);
     }
 
+    /// A tracker of the built-in human at the origin with the shipped network.
+    fn shipped_tracker() -> ArmTracker {
+        let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("weights/procnet-cpu.safetensors");
+        let net = ProcNet::load(&weights, crate::Backend::Flex).expect("shipped weights");
+        ArmTracker::new(&human(), &Pose::IDENTITY, ArmFitConfig::default())
+            .expect("tracker")
+            .with_network(net)
+            .expect("forearm class")
+    }
+
     /// A network reads the frame's region of interest at [`DEFAULT_INPUT_PX`]: the shipped
     /// weights on a 640x480 frame see the reach sphere's square, and its masks come back with
     /// that square's camera.
     #[test]
     fn the_network_reads_the_region_of_interest() {
-        let human = human();
-        let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("weights/procnet-cpu.safetensors");
-        let net = ProcNet::load(&weights, crate::Backend::Flex).expect("shipped weights");
-        let mut tracker = ArmTracker::new(&human, &Pose::IDENTITY, ArmFitConfig::default())
-            .expect("tracker")
-            .with_network(net)
-            .expect("forearm class");
+        let mut tracker = shipped_tracker();
         let camera = camera_at(tracker.arm(), Vector::new(2.5, 0.5, 0.2), [640, 480], 45.0);
         let roi = tracker.roi(&camera);
         let out = tracker
@@ -840,5 +945,44 @@ mod tests {
             assert_eq!(plane.len(), s * s);
             assert!(plane.iter().all(|v| (0.0..=1.0).contains(v)));
         }
+    }
+
+    /// A region already cut out ([`ArmTracker::track_region`]): the network keeps its memory
+    /// while the region keeps its scale, and starts afresh, with one read of the new view,
+    /// when the scale jumps (the workspace crop to the tracked one and back).
+    #[test]
+    fn a_region_of_another_scale_starts_the_network_afresh() {
+        let mut tracker = shipped_tracker();
+        let camera = camera_at(tracker.arm(), Vector::new(2.5, 0.5, 0.2), [640, 480], 45.0);
+        let s = DEFAULT_INPUT_PX;
+        let wide = Roi::square([320.0, 240.0], 400.0)
+            .camera(&camera, s as u32)
+            .expect("camera");
+        let near = Roi::square([320.0, 240.0], 380.0)
+            .camera(&camera, s as u32)
+            .expect("camera");
+        let zoomed = Roi::square([300.0, 220.0], 200.0)
+            .camera(&camera, s as u32)
+            .expect("camera");
+        let rgb = vec![90u8; 3 * s * s];
+        let frames = |t: &ArmTracker| t.network().map(ProcNet::frames);
+        for (camera, expected) in [
+            (&wide, 1),
+            (&near, 2),
+            (&zoomed, 2),
+            (&zoomed, 3),
+            (&wide, 2),
+        ] {
+            let outcome = tracker.track_region(camera, &rgb, None).expect("tracked");
+            assert!(outcome.is_err(), "a grey frame shows no arm");
+            assert_eq!(frames(&tracker), Some(expected), "{camera:?}");
+        }
+        // Images of another size than the region's camera are refused.
+        assert!(tracker.track_region(&wide, &rgb[3..], None).is_err());
+        assert!(tracker.track_region(&wide, &rgb, Some(&[1.0; 5])).is_err());
+        assert!(tracker.track_region(&camera, &rgb, None).is_err());
+        assert!(!view_jump(None, 100.0));
+        assert!(!view_jump(Some(100.0), 124.0) && !view_jump(Some(124.0), 100.0));
+        assert!(view_jump(Some(100.0), 126.0) && view_jump(Some(126.0), 100.0));
     }
 }

@@ -116,6 +116,32 @@ impl ProcNet {
         Ok(resample(forearm, 1, s, s, width, height))
     }
 
+    /// Starts the stream afresh on a new view of the scene (a region of interest of another
+    /// scale, whose pixels the stream's memory is not of): forgets the last view and reads
+    /// `planar` (a frame of any size, as [`ProcNet::planes`] takes it) once, so that the
+    /// next call on the same frame has one frame of memory of this view.
+    ///
+    /// # Errors
+    /// A frame of another size than `width x height`, and as [`ProcNet::segment`]; the
+    /// stream is then left as it was.
+    pub fn start_view(&mut self, planar: &[f32], width: usize, height: usize) -> Result<()> {
+        if planar.len() != 3 * width * height {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "a planar RGB frame of {} values, not 3 x {width} x {height}",
+                    planar.len()
+                ),
+            });
+        }
+        let s = self.config.input_size;
+        let last = self.state.take();
+        if let Err(e) = self.segment(&resample(planar, 3, width, height, s, s)) {
+            self.state = last;
+            return Err(e);
+        }
+        Ok(())
+    }
+
     /// Every class's probabilities of a planar RGB frame of any size, as
     /// [`ProcNet::forearm`] gives the forearm's: one `width x height` plane per class.
     ///

@@ -87,6 +87,36 @@ fn the_state_carries_information_and_reset_forgets_it() {
 }
 
 #[test]
+fn a_new_view_starts_the_stream_with_one_frame_of_it() {
+    let device = Device::flex();
+    let config = tiny(CellKind::Hgru);
+    let s = config.input_size;
+    let mut net = ProcNet::new(
+        config.init(&device, 5).unwrap(),
+        config.clone(),
+        device.clone(),
+    );
+    for t in 0..3 {
+        net.segment(&reference_frame(t, 0, s)).unwrap();
+    }
+    let view = reference_frame(0, 2, s);
+    net.start_view(&view, s, s).unwrap();
+    assert_eq!(net.frames(), 1);
+    let after = net.segment(&view).unwrap();
+    // What a fresh stream answers on the view's frame the second time it reads it.
+    let mut fresh = ProcNet::new(config.init(&device, 5).unwrap(), config, device);
+    fresh.segment(&view).unwrap();
+    let second = fresh.segment(&view).unwrap();
+    assert_eq!(after.probabilities, second.probabilities);
+    // A frame of the wrong size or with a NaN is refused, and the stream is as it was.
+    assert!(net.start_view(&view, s + 1, s).is_err());
+    let mut bad = view.clone();
+    bad[7] = f32::NAN;
+    assert!(net.start_view(&bad, s, s).is_err());
+    assert_eq!(net.frames(), 2);
+}
+
+#[test]
 fn the_feed_forward_baseline_sees_each_frame_alone() {
     let device = Device::flex();
     let config = tiny(CellKind::Hgru).feed_forward_baseline();

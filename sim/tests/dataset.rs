@@ -6,8 +6,11 @@ use std::path::{Path, PathBuf};
 
 use workcell_robots::math::Pose;
 use workcell_sim::SimError;
-use workcell_sim::dataset::{Dataset, DatasetConfig, Generator, Split};
+use workcell_sim::dataset::{
+    CropPolicy, Dataset, DatasetConfig, GeneratedFrame, Generator, Split, Timing,
+};
 use workcell_sim::render::image::PixelKind;
+use workcell_sim::render::roi::{Roi, RoiKind};
 use workcell_sim::render::{Camera, Class, CpuRenderer, MaskBatch, RenderMesh, Renderer};
 
 fn scenario() -> PathBuf {
@@ -312,6 +315,136 @@ fn a_killed_run_leaves_nothing_the_loader_accepts_and_a_rerun_completes_it() {
         .unwrap();
     let err = dataset.load(entry).unwrap_err();
     assert!(err.to_string().contains("frame_001_class.png"), "{err}");
+}
+
+/// A crop policy that reads every frame through the whole camera image, or (`alternate`)
+/// every other frame through the centred square of half its height, and records what it saw.
+struct Scripted {
+    alternate: bool,
+    frame: usize,
+    chosen: Vec<Roi>,
+    seen: Vec<(usize, Roi, RoiKind)>,
+    tx: std::sync::mpsc::Sender<Vec<(usize, Roi, RoiKind, Roi)>>,
+}
+
+impl CropPolicy for Scripted {
+    fn start(&mut self) {
+        self.frame = 0;
+        self.chosen.clear();
+        self.seen.clear();
+    }
+    fn roi(&mut self, native: &Camera) -> (Roi, RoiKind) {
+        let (w, h) = (f64::from(native.width), f64::from(native.height));
+        let (roi, kind) = if self.alternate && self.frame % 2 == 1 {
+            (Roi::square([w / 2.0, h / 2.0], h / 2.0), RoiKind::Tracked)
+        } else {
+            (Roi::frame(native.width, native.height), RoiKind::Frame)
+        };
+        self.chosen.push(roi);
+        (roi, kind)
+    }
+    fn seen(&mut self, frame: &GeneratedFrame) -> Result<(), String> {
+        let label = frame.labels.roi.as_ref().ok_or("no region label")?;
+        self.seen.push((frame.labels.frame, label.roi, label.kind));
+        self.frame += 1;
+        if self.frame == 3 {
+            let record = self
+                .seen
+                .iter()
+                .zip(&self.chosen)
+                .map(|(&(f, roi, kind), &chosen)| (f, roi, kind, chosen))
+                .collect();
+            self.tx.send(record).map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn a_crop_policy_chooses_each_frames_region_and_sees_the_frames_in_order() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = small_config(tmp.path());
+    let config = DatasetConfig {
+        attempts: 1,
+        ..DatasetConfig::from_file(&path).unwrap()
+    };
+    let whole = Generator::new(
+        DatasetConfig {
+            roi: workcell_sim::dataset::RoiConfig {
+                whole_frame: true,
+                ..config.roi.clone()
+            },
+            ..config.clone()
+        },
+        &path,
+    )
+    .unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let policy = |alternate: bool| {
+        let tx = std::sync::Mutex::new(tx.clone());
+        std::sync::Arc::new(move || {
+            let tx = tx.lock().map_err(|e| e.to_string())?.clone();
+            Ok(Box::new(Scripted {
+                alternate,
+                frame: 0,
+                chosen: Vec::new(),
+                seen: Vec::new(),
+                tx,
+            }) as Box<dyn CropPolicy>)
+        })
+    };
+    let cropped = Generator::new(config.clone(), &path)
+        .unwrap()
+        .with_crop("whole frame", policy(false));
+    let mut renderer = CpuRenderer::new();
+    let mut timing = Timing::default();
+    // One draw each (attempts = 1), so both have the same camera, start and occluder: a
+    // policy that always reads the whole frame makes what `roi.whole_frame` makes.
+    for index in [0, 5, 10] {
+        let a = whole.sequence(index, &mut renderer, &mut timing).unwrap();
+        let b = cropped.sequence(index, &mut renderer, &mut timing).unwrap();
+        assert_eq!(a.frames.len(), 3);
+        for (fa, fb) in a.frames.iter().zip(&b.frames) {
+            assert!(fa.rgb == fb.rgb && fa.classes == fb.classes && fa.depth_m == fb.depth_m);
+            assert!(fa.visible == fb.visible && fa.occluder == fb.occluder);
+            assert_eq!(fa.labels, fb.labels);
+        }
+        let record = rx.try_recv().unwrap();
+        let frames: Vec<usize> = record.iter().map(|r| r.0).collect();
+        assert_eq!(frames, [0, 1, 2]);
+    }
+    // Every other frame through a smaller square: each frame's label holds the region the
+    // policy chose, of the kind it named, and the stored camera sees exactly that region.
+    let alternating = Generator::new(config, &path)
+        .unwrap()
+        .with_crop("alternate", policy(true));
+    let s = alternating.sequence(4, &mut renderer, &mut timing).unwrap();
+    let record = rx.try_recv().unwrap();
+    for ((f, roi, kind, chosen), frame) in record.iter().zip(&s.frames) {
+        assert_eq!(*roi, *chosen);
+        assert_eq!(
+            *kind,
+            if f % 2 == 1 {
+                RoiKind::Tracked
+            } else {
+                RoiKind::Frame
+            }
+        );
+        let label = frame.labels.roi.as_ref().unwrap();
+        let native = Camera::from(&label.native);
+        let expected = roi.camera(&native, 64).unwrap();
+        let stored = Camera::from(&frame.labels.camera);
+        let intrinsics = |c: &Camera| (c.width, c.height, c.fx, c.fy, c.cx, c.cy);
+        assert_eq!(intrinsics(&stored), intrinsics(&expected));
+    }
+    assert_eq!(record[1].1.size, 60);
+
+    // A folder made without the policy is another configuration's.
+    let out = tmp.path().join("plain");
+    let plain = Generator::new(alternating.config.clone(), &path).unwrap();
+    plain.generate(&out, &|_| {}).unwrap();
+    let err = alternating.generate(&out, &|_| {}).unwrap_err();
+    assert!(err.to_string().contains("another configuration"), "{err}");
 }
 
 #[test]

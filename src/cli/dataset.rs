@@ -4,7 +4,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
 use anyhow::{Context, Result};
+use workcell::crop::{CropCounts, TrackerCrop};
 use workcell::render::dataset::forearm_stats;
 use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::{Dataset, DatasetConfig, Generator, Split, contact_sheet};
@@ -26,6 +30,21 @@ pub struct GenerateArgs {
     /// dataset is made with one backend throughout.
     #[arg(long, default_value = "cpu")]
     pub backend: workcell::render::Backend,
+    /// Whose region of interest each frame is read through: `dataset` (the configuration's
+    /// `[roi]`: one kind of crop per sequence) or `tracker` (the deployed `ArmTracker`'s,
+    /// chosen frame by frame as it tracks the arm with ProcNet and the depth image: the
+    /// workspace crop until its first pose, then the crop around the arm it found). The
+    /// scenes are the same either way.
+    #[arg(long, default_value = "dataset")]
+    pub crop: String,
+    /// With `--crop tracker`: the tracker's ProcNet weights [default: the shipped
+    /// perception/weights/procnet-cpu.safetensors].
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Make only the sequences of these splits (comma-separated: train, validation, test)
+    /// [default: all].
+    #[arg(long, value_delimiter = ',')]
+    pub splits: Vec<String>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -133,7 +152,51 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
         .config
         .clone()
         .context("--config FILE is required (see configs/dataset.toml)")?;
-    let generator = Generator::from_file(&path)?.with_backend(args.backend);
+    let splits = args
+        .splits
+        .iter()
+        .map(|name| {
+            Split::ALL
+                .into_iter()
+                .find(|s| s.name() == name.trim())
+                .with_context(|| {
+                    format!("--splits: unknown split {name:?} (train, validation, test)")
+                })
+        })
+        .collect::<Result<Vec<Split>>>()?;
+    let mut generator = Generator::from_file(&path)?
+        .with_backend(args.backend)
+        .with_splits(&splits);
+    let counts = Arc::new(CropCounts::default());
+    match args.crop.as_str() {
+        "dataset" => {
+            if args.weights.is_some() {
+                anyhow::bail!("--weights is a setting of --crop tracker");
+            }
+        }
+        "tracker" => {
+            let side = workcell::perception::arm::DEFAULT_INPUT_PX;
+            let stored = generator.config.input_px;
+            if stored as usize != side {
+                anyhow::bail!(
+                    "--crop tracker: the tracker reads its region at {side}x{side} and this \
+                     configuration stores {stored}x{stored} (input_px)"
+                );
+            }
+            let weights = args
+                .weights
+                .clone()
+                .unwrap_or_else(|| PathBuf::from(super::SHIPPED_WEIGHTS));
+            let factory = TrackerCrop::factory(&generator.human(), &weights, counts.clone())
+                .with_context(|| format!("the tracker's network, {}", weights.display()))?;
+            let name = format!(
+                "tracker (ArmTracker, RGB-D, weights {})",
+                weights_stamp(&weights)?
+            );
+            generator = generator.with_crop(&name, factory);
+        }
+        other => anyhow::bail!("unknown --crop {other:?} (dataset, tracker)"),
+    }
     let n = generator.sequence_count();
     let bar = super::progress_bar(
         n as u64,
@@ -169,12 +232,34 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
             100.0 * t.write.as_secs_f64() / total,
         );
     }
+    let read = counts.frames.load(Ordering::Relaxed);
+    if read > 0 {
+        say!(
+            "  the tracker read {read} new frames: a pose in {}, {} through the tracked crop",
+            counts.posed.load(Ordering::Relaxed),
+            counts.tracked.load(Ordering::Relaxed)
+        );
+    }
     let missing: usize = m.sequences.iter().map(|s| s.frames_without_forearm).sum();
     if missing > 0 {
         say!("  {missing} frames show no forearm (out of view after every camera draw)");
     }
     say!("look at it: workcell dataset show {}", args.out.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// What names weights in a dataset's stamp: the file's name and a hash of its bytes, so that
+/// a folder made with other weights is not completed with these.
+fn weights_stamp(path: &std::path::Path) -> Result<String> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    // FNV-1a, 64 bits: a fingerprint, not a defence.
+    let hash = bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    });
+    let name = path
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    Ok(format!("{name}, fnv1a {hash:016x}"))
 }
 
 pub fn show(args: &ShowArgs) -> Result<ExitCode> {

@@ -87,7 +87,7 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
             // The shipped ProcNet and baseline, both 64x64 networks of the cpu preset.
             let weights = args.weights.clone().unwrap_or_else(|| {
                 PathBuf::from(if kind == "procnet" {
-                    "perception/weights/procnet-cpu.safetensors"
+                    super::SHIPPED_WEIGHTS
                 } else {
                     "perception/weights/baseline-cpu-64.safetensors"
                 })

@@ -104,6 +104,46 @@ pub struct Generator {
     pub backend: Backend,
     scenario: Scenario,
     scenario_path: PathBuf,
+    /// Who chooses each frame's region of interest instead of the configuration
+    /// ([`Generator::with_crop`]).
+    crop: Option<CropSource>,
+    /// The splits made; every split when empty ([`Generator::with_splits`]).
+    splits: Vec<Split>,
+}
+
+/// Chooses each frame's region of interest while a sequence is rendered, having seen the
+/// frames before it: what a tracker in front of the camera does. The sequence's scene,
+/// camera and occluder stay those of the configuration; only the crop follows the policy,
+/// and the occluder is fitted to the level's occlusion in the crop the policy chose.
+pub trait CropPolicy: Send {
+    /// A new sequence starts (a tracker forgets the last one).
+    fn start(&mut self);
+    /// The region of the next frame of the camera `native` (its full resolution), and the
+    /// kind of region it is (the frame's label).
+    fn roi(&mut self, native: &Camera) -> (Roi, RoiKind);
+    /// The frame rendered through that region, as it is stored.
+    ///
+    /// # Errors
+    /// The policy's own failure, as a message.
+    fn seen(&mut self, frame: &GeneratedFrame) -> std::result::Result<(), String>;
+}
+
+/// Makes a [`CropPolicy`] per worker thread.
+pub type CropFactory = dyn Fn() -> std::result::Result<Box<dyn CropPolicy>, String> + Send + Sync;
+
+/// A crop policy's factory and the line that names it in the dataset's `config.toml`.
+#[derive(Clone)]
+struct CropSource {
+    name: String,
+    factory: std::sync::Arc<CropFactory>,
+}
+
+impl std::fmt::Debug for CropSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CropSource")
+            .field("name", &self.name)
+            .finish()
+    }
 }
 
 /// The cell at one camera tick.
@@ -203,7 +243,42 @@ impl Generator {
             backend: Backend::Cpu,
             scenario,
             scenario_path,
+            crop: None,
+            splits: Vec::new(),
         })
+    }
+
+    /// The same generator with each frame's region of interest chosen by a policy that
+    /// `factory` makes (one per worker), named `name` in the dataset's `config.toml` (a run
+    /// into a folder made by another policy is refused, as one of another configuration).
+    /// The draws (camera, start, occluder) are the configuration's, so the scenes are those
+    /// of the dataset without the policy.
+    #[must_use]
+    pub fn with_crop(mut self, name: &str, factory: std::sync::Arc<CropFactory>) -> Self {
+        self.crop = Some(CropSource {
+            name: name.to_string(),
+            factory,
+        });
+        self
+    }
+
+    /// The same generator making only the sequences of `splits` (all when empty); the
+    /// others are left out of the folder and its manifest.
+    #[must_use]
+    pub fn with_splits(mut self, splits: &[Split]) -> Self {
+        self.splits = splits.to_vec();
+        self
+    }
+
+    /// The human the sequences show, as the manifest records it (its model, base pose and
+    /// look).
+    #[must_use]
+    pub fn human(&self) -> HumanLabel {
+        HumanLabel {
+            model: Scenario::resolve_model_path(&self.scenario.human.model, &self.scenario_path),
+            X_WH: PoseLabel::from(&self.scenario.human.base.to_pose()),
+            look: self.scenario.human.look,
+        }
     }
 
     /// The same generator rendering with `backend` (the GPU's pixels differ from the CPU's
@@ -349,14 +424,47 @@ impl Generator {
             d_class,
             level,
         };
-        let draw = self.draw(episode, &mut cell, forearm, plan, renderer)?;
+        let mut draw = self.draw(episode, &mut cell, forearm, plan, renderer)?;
         timing.render += t.elapsed();
 
         let t = Instant::now();
         let occlusion = self.occlusion(seed, level);
+        let mut policy = match &self.crop {
+            Some(crop) => {
+                let mut policy = (crop.factory)().map_err(|message| SimError::Dataset {
+                    path: self.scenario_path.clone(),
+                    message: format!("crop policy {}: {message}", crop.name),
+                })?;
+                policy.start();
+                Some(policy)
+            }
+            None => None,
+        };
         let mut out = Vec::with_capacity(c.frames);
         for f in 0..draw.frames.len() {
-            let frame = self.occluded_frame(episode, &mut cell, &draw, &occlusion, f, renderer)?;
+            let kind = match policy.as_mut() {
+                Some(policy) => {
+                    let (roi, kind) = policy.roi(&draw.camera);
+                    if roi != draw.frames[f].roi {
+                        let tick = &episode.ticks[draw.first_tick + f];
+                        cell.set_link_poses(&tick.robot, &tick.human);
+                        draw.frames[f] = self.shot(&cell, &draw.camera, roi, forearm, renderer)?;
+                    }
+                    Some(kind)
+                }
+                None => None,
+            };
+            let mut frame =
+                self.occluded_frame(episode, &mut cell, &draw, &occlusion, f, renderer)?;
+            if let (Some(kind), Some(label)) = (kind, frame.labels.roi.as_mut()) {
+                label.kind = kind;
+            }
+            if let Some(policy) = policy.as_mut() {
+                policy.seen(&frame).map_err(|message| SimError::Dataset {
+                    path: self.scenario_path.clone(),
+                    message: format!("sequence {index}, frame {f}: {message}"),
+                })?;
+            }
             out.push(frame);
         }
         timing.occlusion += t.elapsed();
@@ -878,14 +986,7 @@ impl Generator {
             config: self.config.to_toml(),
             scenario: self.scenario.to_toml(),
             classes: Class::ALL.to_vec(),
-            human: Some(HumanLabel {
-                model: Scenario::resolve_model_path(
-                    &self.scenario.human.model,
-                    &self.scenario_path,
-                ),
-                X_WH: PoseLabel::from(&self.scenario.human.base.to_pose()),
-                look: self.scenario.human.look,
-            }),
+            human: Some(self.human()),
             width_px: self.config.input_px,
             height_px: self.config.input_px,
             sequences,
@@ -914,6 +1015,13 @@ impl Generator {
         let mut config_text = self.config.to_toml() + "\n# scenario\n" + &self.scenario.to_toml();
         if self.backend != Backend::Cpu {
             config_text += &format!("\n# renderer: {}\n", self.backend.name());
+        }
+        if let Some(crop) = &self.crop {
+            config_text += &format!("\n# crop: {}\n", crop.name);
+        }
+        if !self.splits.is_empty() {
+            let names: Vec<&str> = self.splits.iter().map(|s| s.name()).collect();
+            config_text += &format!("\n# splits: {}\n", names.join(", "));
         }
         match std::fs::read_to_string(&stamp) {
             Ok(existing) if existing != config_text => {
@@ -955,6 +1063,10 @@ impl Generator {
                     let mut episode: Option<Result<Episode>> = None;
                     let mut out_e = Vec::with_capacity(per);
                     for index in indices {
+                        if !self.splits.is_empty() && !self.splits.contains(&self.plan(index).2) {
+                            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
+                            continue;
+                        }
                         let kept = self.existing_sequence(out, index);
                         let result = if let Some(entry) = kept {
                             Ok((entry, Timing::default(), false))

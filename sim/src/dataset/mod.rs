@@ -4,6 +4,8 @@
 mod config;
 mod generate;
 
-pub use config::{DatasetConfig, DistanceClass, OcclusionLevel};
-pub use generate::{GeneratedFrame, GeneratedSequence, Generator, Report, Timing};
+pub use config::{DatasetConfig, DistanceClass, OcclusionLevel, RoiConfig};
+pub use generate::{
+    CropFactory, CropPolicy, GeneratedFrame, GeneratedSequence, Generator, Report, Timing,
+};
 pub use workcell_render::dataset::*;

@@ -146,10 +146,28 @@ fn forearm_of(classes: &[u8]) -> Vec<f32> {
         .collect()
 }
 
-/// A segmentation network's forearm probabilities, resampled to the dataset's size.
+/// A segmentation network's forearm probabilities, resampled to the dataset's size. Where a
+/// frame's region of interest changes scale ([`crate::arm::view_jump`], as the deployed
+/// tracker's crop does when it finds or loses the arm), the network starts afresh, as the
+/// tracker's does.
 pub struct NetworkMasks {
     pub net: ProcNet,
     pub name: String,
+}
+
+impl NetworkMasks {
+    /// Starts the network afresh on frame `t` when it is another view than frame `t - 1`
+    /// ([`ProcNet::start_view`]).
+    fn follow_view(&mut self, sequence: &Sequence, t: usize) -> Result<()> {
+        let fx = |t: usize| sequence.labels.get(t).map(|l| l.camera.fx);
+        if let (Some(last), Some(now)) = (t.checked_sub(1).and_then(fx), fx(t))
+            && crate::arm::view_jump(Some(last), now)
+        {
+            let (w, h) = (sequence.width as usize, sequence.height as usize);
+            self.net.start_view(sequence.rgb_frame(t), w, h)?;
+        }
+        Ok(())
+    }
 }
 
 impl MaskSource for NetworkMasks {
@@ -161,10 +179,12 @@ impl MaskSource for NetworkMasks {
     }
     fn forearm(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
         let (w, h) = (sequence.width as usize, sequence.height as usize);
+        self.follow_view(sequence, t)?;
         self.net.forearm(sequence.rgb_frame(t), w, h)
     }
     fn arm(&mut self, sequence: &Sequence, t: usize) -> Result<ArmMasks> {
         let (w, h) = (sequence.width as usize, sequence.height as usize);
+        self.follow_view(sequence, t)?;
         let planes = self.net.planes(sequence.rgb_frame(t), w, h)?;
         let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
         ArmMasks::from_planes(w, h, &refs)
