@@ -1,8 +1,8 @@
 //! The deployed tracker's region of interest in dataset generation: a dataset whose frames
 //! are read through the crop that [`ArmTracker`] asks for, frame by frame, as it tracks the
-//! arm through them with ProcNet and the depth image (the workspace crop until its first
-//! pose, then the crop around the arm it found, and back to the workspace crop when it
-//! loses the arm).
+//! arm through them with ProcNet and the depth image (the workspace crop until two frames
+//! in a row gave a pose, then the crop around the arm it found, and back to the workspace
+//! crop when it loses the arm).
 //!
 //! A stored dataset keeps one kind of crop for a whole sequence; the deployed tracker
 //! switches. Evaluating the tracker's own crops ([`workcell_sim::dataset::CropPolicy`])

@@ -20,7 +20,7 @@ use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{HumanPart, JointKind, LinkId, PackageMap, RobotModel};
 
 use crate::error::{PerceptionError, Result};
-use crate::image::{planar_rgb_crop, resample};
+use crate::image::{planar_rgb, planar_rgb_crop, resample};
 use crate::infer::ProcNet;
 use crate::pose::{
     Anchor, ArmFit, ArmFitConfig, ArmFitter, ArmMasks, ArticulatedArm, FITTED_PARTS, NoPose,
@@ -438,8 +438,7 @@ impl ArmTracker {
     /// The region of `camera`'s image the next frame is read through: around the last
     /// estimate's shoulder, elbow and wrist ([`Roi::of_joints`], the middle of
     /// [`roi::TRACKED_MARGIN`]) once [`CONFIRM_POSES`] frames in a row gave a pose, else
-    /// the sphere the forearm can reach
-    /// ([`Roi::of_sphere`]), else the whole frame.
+    /// the sphere the forearm can reach ([`Roi::of_sphere`]), else the whole frame.
     #[must_use]
     pub fn roi(&self, camera: &Camera) -> Roi {
         self.region(camera).0
@@ -526,7 +525,7 @@ impl ArmTracker {
         if let Some(d) = depth_m {
             check_len("a depth image", d.len(), s * s, roi_camera)?;
         }
-        let planar = planar_rgb_crop(rgb, s, s, &Roi::frame(s as u32, s as u32));
+        let planar = planar_rgb(rgb, s, s);
         let mut masks = self.segment_planar(roi_camera, &planar)?;
         masks.depth_m = depth_m.map(<[f32]>::to_vec);
         self.track_roi(roi_camera, &masks)

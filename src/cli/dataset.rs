@@ -2,10 +2,9 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
-
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::time::Instant;
 
 use anyhow::{Context, Result};
 use workcell::crop::{CropCounts, TrackerCrop};
@@ -33,8 +32,8 @@ pub struct GenerateArgs {
     /// Whose region of interest each frame is read through: `dataset` (the configuration's
     /// `[roi]`: one kind of crop per sequence) or `tracker` (the deployed `ArmTracker`'s,
     /// chosen frame by frame as it tracks the arm with ProcNet and the depth image: the
-    /// workspace crop until its first pose, then the crop around the arm it found). The
-    /// scenes are the same either way.
+    /// workspace crop until two frames in a row gave a pose, then the crop around the arm it
+    /// found). The scenes are the same either way.
     #[arg(long, default_value = "dataset")]
     pub crop: String,
     /// With `--crop tracker`: the tracker's ProcNet weights [default: the shipped
