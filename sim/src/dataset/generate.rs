@@ -128,7 +128,7 @@ pub trait CropPolicy: Send {
     fn seen(&mut self, frame: &GeneratedFrame) -> std::result::Result<(), String>;
 }
 
-/// Makes a [`CropPolicy`] per worker thread.
+/// Makes a fresh [`CropPolicy`] for each sequence.
 pub type CropFactory = dyn Fn() -> std::result::Result<Box<dyn CropPolicy>, String> + Send + Sync;
 
 /// A crop policy's factory and the line that names it in the dataset's `config.toml`.
@@ -249,7 +249,7 @@ impl Generator {
     }
 
     /// The same generator with each frame's region of interest chosen by a policy that
-    /// `factory` makes (one per worker), named `name` in the dataset's `config.toml` (a run
+    /// `factory` makes (a fresh one for each sequence), named `name` in the dataset's `config.toml` (a run
     /// into a folder made by another policy is refused, as one of another configuration).
     /// The draws (camera, start, occluder) are the configuration's, so the scenes are those
     /// of the dataset without the policy.
