@@ -91,11 +91,11 @@ def write(path, meta, tensors):
     os.replace(tmp, path)
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("inputs", nargs="+", help="weight files of one configuration")
     parser.add_argument("--out", required=True, help="the averaged weight file to write")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if len(args.inputs) < 2:
         fail("give at least two weight files")
     if os.path.abspath(args.out) in map(os.path.abspath, args.inputs):
