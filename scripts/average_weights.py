@@ -4,7 +4,8 @@
 Networks fine-tuned from the same weights stay close to one another, and the mean of their
 weights is again a network of the same size and speed (one file, one pass per frame), often
 better than each (weight averaging: stochastic weight averaging, 2018; "model soups", 2022).
-docs/perception.md ("The mean of two cycles' weights") measures it on ProcNet.
+docs/perception.md ("A fourth cycle, and the mean of two cycles' weights") measures it on
+ProcNet.
 
     scripts/average_weights.py A.safetensors B.safetensors [...] --out MEAN.safetensors
 
@@ -43,17 +44,31 @@ def read(path):
         header = json.loads(blob[8 : 8 + n])
     except ValueError as e:
         fail(f"{path}: the header is not JSON: {e}")
+    if not isinstance(header, dict):
+        fail(f"{path}: the header is not a JSON object")
     meta = header.pop("__metadata__", {}) or {}
+    if not isinstance(meta, dict):
+        fail(f"{path}: the metadata is not a JSON object")
     if meta.get("format") != FORMAT:
         fail(f"{path}: format {meta.get('format')!r}, not {FORMAT!r}")
     data = blob[8 + n :]
     tensors = {}
     for name, t in header.items():
+        if not isinstance(t, dict):
+            fail(f"{path}: tensor {name} has no description")
         if t.get("dtype") != "F32":
             fail(f"{path}: tensor {name} is {t.get('dtype')}, not F32")
-        start, end = t["data_offsets"]
+        offsets, shape = t.get("data_offsets"), t.get("shape")
+        whole = lambda xs, k=None: (
+            isinstance(xs, list)
+            and (k is None or len(xs) == k)
+            and all(isinstance(x, int) and x >= 0 for x in xs)
+        )
+        if not whole(offsets, 2) or not whole(shape):
+            fail(f"{path}: tensor {name} has no shape or byte range")
+        start, end = offsets
         count = 1
-        for d in t["shape"]:
+        for d in shape:
             count *= d
         if end - start != 4 * count or end > len(data):
             fail(f"{path}: tensor {name}'s bytes do not match its shape {t['shape']}")
@@ -63,6 +78,14 @@ def read(path):
             values.byteswap()
         tensors[name] = (t["shape"], values)
     return meta, tensors
+
+
+def configuration(path, meta):
+    """The model configuration a file's metadata records."""
+    try:
+        return json.loads(meta["config"])
+    except (KeyError, TypeError, ValueError):
+        fail(f"{path}: no model configuration in the metadata")
 
 
 def write(path, meta, tensors):
@@ -103,10 +126,10 @@ def main(argv=None):
     meta, first = read(args.inputs[0])
     # Sums in double precision, rounded to float32 once.
     mean = {name: (shape, [float(v) for v in values]) for name, (shape, values) in first.items()}
-    config = json.loads(meta.get("config", "null"))
+    config = configuration(args.inputs[0], meta)
     for path in args.inputs[1:]:
         other_meta, other = read(path)
-        if json.loads(other_meta.get("config", "null")) != config:
+        if configuration(path, other_meta) != config:
             fail(f"{path}: another model configuration than {args.inputs[0]}")
         if sorted(other) != sorted(mean):
             fail(f"{path}: other tensors than {args.inputs[0]}")

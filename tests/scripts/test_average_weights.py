@@ -91,6 +91,12 @@ class Average(unittest.TestCase):
         self.refused("at least two", self.path("a"), *out)
         self.refused("is also an input", self.path("a"), self.path("a"), "--out", self.path("a"))
         self.refused("cannot read", self.path("a"), self.path("missing"), *out)
+        safetensors(self.path("noconfig"), {"w": ([2], [1, 2])}, config="{not json")
+        self.refused("no model configuration", self.path("a"), self.path("noconfig"), *out)
+        with open(self.path("bad"), "wb") as f:
+            text = json.dumps({"__metadata__": {"format": "workcell-procnet/1"}, "w": {"dtype": "F32"}})
+            f.write(struct.pack("<Q", len(text)) + text.encode())
+        self.refused("tensor w has no shape or byte range", self.path("a"), self.path("bad"), *out)
         with open(self.path("short"), "wb") as f:
             f.write(struct.pack("<Q", 1000) + b"{}")
         self.refused("a header of 1000 bytes", self.path("a"), self.path("short"), *out)
