@@ -4,7 +4,7 @@
 Networks fine-tuned from the same weights stay close to one another, and the mean of their
 weights is again a network of the same size and speed (one file, one pass per frame), often
 better than each (weight averaging: stochastic weight averaging, 2018; "model soups", 2022).
-docs/perception.md ("A fourth cycle, and the mean of two cycles' weights") measures it on
+docs/perception.md ("A fourth cycle, and means of the cycles' weights") measures it on
 ProcNet.
 
     scripts/average_weights.py A.safetensors B.safetensors [...] --out MEAN.safetensors
