@@ -5,6 +5,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use workcell_render::Class;
+use workcell_render::roi::RoiKind;
 
 use burn::module::Module;
 use burn::optim::grad_clipping::GradientClippingConfig;
@@ -98,6 +99,111 @@ impl Default for AugmentConfig {
     }
 }
 
+/// How often each training sequence is drawn, relative to the others.
+///
+/// A sequence's weight is the product of the factors that its distance class (or camera
+/// row, [`workcell_render::dataset::SequenceEntry::camera_class`]) and its region of interest (the kind of its first
+/// frame's crop: `workspace`, `tracked`, or `frame` for a dataset without crops; a stored sequence keeps one) match, 1 where none
+/// does. With both tables empty every sequence is equally likely, drawn exactly as before
+/// the tables existed.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SamplingConfig {
+    /// Factor per distance class or camera row, e.g. `{ large = 2.0 }`.
+    pub distance: std::collections::BTreeMap<String, f64>,
+    /// Factor per kind of region of interest, e.g. `{ workspace = 2.0 }`.
+    pub roi: std::collections::BTreeMap<String, f64>,
+}
+
+impl SamplingConfig {
+    /// Both tables empty: uniform over the sequences.
+    #[must_use]
+    pub fn is_uniform(&self) -> bool {
+        self.distance.is_empty() && self.roi.is_empty()
+    }
+
+    fn validate(&self) -> Result<()> {
+        for (table, map) in [("distance", &self.distance), ("roi", &self.roi)] {
+            if let Some((key, w)) = map
+                .iter()
+                .find(|(_, w)| !(w.is_finite() && (0.0..=MAX_SAMPLING_FACTOR).contains(*w)))
+            {
+                return Err(PerceptionError::Config {
+                    key: format!("sampling.{table}"),
+                    message: format!("{key} = {w}: each in [0, {MAX_SAMPLING_FACTOR}]"),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Each sequence's weight, given its distance class and the kind of its region of
+    /// interest (`None` where it is not known).
+    ///
+    /// # Errors
+    /// [`PerceptionError::Config`] for a key that no sequence has (a misspelt class would
+    /// otherwise change nothing, silently), or when every weight is 0.
+    pub fn weights(&self, sequences: &[(String, Option<String>)]) -> Result<Vec<f64>> {
+        for (table, map, present) in [
+            (
+                "distance",
+                &self.distance,
+                sequences.iter().map(|(d, _)| d.as_str()).collect::<Vec<_>>(),
+            ),
+            (
+                "roi",
+                &self.roi,
+                sequences.iter().filter_map(|(_, r)| r.as_deref()).collect(),
+            ),
+        ] {
+            if let Some(key) = map.keys().find(|k| !present.contains(&k.as_str())) {
+                let mut have: Vec<&str> = present.clone();
+                have.sort_unstable();
+                have.dedup();
+                return Err(PerceptionError::Config {
+                    key: format!("sampling.{table}"),
+                    message: format!(
+                        "no training sequence has {table} {key:?} (they have {have:?})"
+                    ),
+                });
+            }
+        }
+        let weights: Vec<f64> = sequences
+            .iter()
+            .map(|(distance, roi)| {
+                let d = self.distance.get(distance).copied().unwrap_or(1.0);
+                let r = roi
+                    .as_ref()
+                    .and_then(|r| self.roi.get(r))
+                    .copied()
+                    .unwrap_or(1.0);
+                d * r
+            })
+            .collect();
+        if !weights.iter().any(|w| *w > 0.0) {
+            return Err(PerceptionError::Config {
+                key: "sampling".into(),
+                message: "every training sequence has weight 0: nothing would be drawn".into(),
+            });
+        }
+        Ok(weights)
+    }
+}
+
+/// Draws an index with probability proportional to `cumulative`'s increments (a running sum
+/// of non-negative weights whose last element is positive).
+fn draw_weighted(rng: &mut impl Rng, cumulative: &[f64]) -> usize {
+    let total = cumulative.last().copied().unwrap_or(0.0);
+    let u = rng.random::<f64>() * total;
+    // The first index whose running sum exceeds u: never one of weight 0.
+    cumulative
+        .partition_point(|&c| c <= u)
+        .min(cumulative.len().saturating_sub(1))
+}
+
+/// The largest sampling factor.
+pub const MAX_SAMPLING_FACTOR: f64 = 1e3;
+
 /// The most steps a run may ask for.
 pub const MAX_STEPS: usize = 10_000_000;
 /// The longest training window, frames.
@@ -156,6 +262,9 @@ pub struct TrainConfig {
     /// pixel); about the frames' mean brightness. Ignored without the prediction loss, and
     /// when the run starts from `init_weights` or a checkpoint.
     pub frame_prediction_bias: Option<f32>,
+    /// How often each training sequence is drawn (uniform unless set).
+    #[serde(skip_serializing_if = "SamplingConfig::is_uniform")]
+    pub sampling: SamplingConfig,
     /// The network (starts from the `cpu` preset; override any key).
     pub model: ProcNetConfig,
 }
@@ -182,6 +291,7 @@ impl Default for TrainConfig {
             validation_sequences: 24,
             init_weights: None,
             frame_prediction_bias: None,
+            sampling: SamplingConfig::default(),
             model: ProcNetConfig::cpu(),
         }
     }
@@ -236,6 +346,7 @@ impl TrainConfig {
             })
         };
         self.model.validate()?;
+        self.sampling.validate()?;
         if !(1..=MAX_STEPS).contains(&self.steps) {
             return bad("steps", format!("1..={MAX_STEPS}, got {}", self.steps));
         }
@@ -656,6 +767,42 @@ impl Trainer {
                 ),
             });
         }
+        // Running sums of the sequences' sampling weights (none: uniform, as before).
+        let cumulative: Option<Vec<f64>> = if cfg.sampling.is_uniform() {
+            None
+        } else {
+            let keys = usable
+                .iter()
+                .map(|s| {
+                    let roi = if cfg.sampling.roi.is_empty() {
+                        None
+                    } else {
+                        dataset
+                            .labels(&s.entry)?
+                            .first()
+                            .map(|f| f.roi.map_or(RoiKind::Frame, |r| r.kind).name().to_string())
+                    };
+                    Ok((s.entry.camera_class(), roi))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let weights = cfg.sampling.weights(&keys)?;
+            let total: f64 = weights.iter().sum();
+            let favoured = weights.iter().filter(|w| **w > 1.0).count();
+            tracing::info!(
+                sequences = weights.len(),
+                weighted_up = favoured,
+                "sampling by distance class and region of interest"
+            );
+            Some(
+                weights
+                    .iter()
+                    .scan(0.0, |sum, w| {
+                        *sum += w / total;
+                        Some(*sum)
+                    })
+                    .collect(),
+            )
+        };
 
         let device: Device = cfg.backend.device()?.autodiff();
         let mut model = cfg.model.init(&device, cfg.seed)?;
@@ -724,7 +871,10 @@ impl Trainer {
             );
             let mut picks: Vec<(&SequenceTensors, usize, Augment)> = (0..cfg.batch)
                 .map(|_| {
-                    let seq = usable[rng.random_range(0..usable.len())];
+                    let seq = usable[match &cumulative {
+                        Some(c) => draw_weighted(&mut rng, c),
+                        None => rng.random_range(0..usable.len()),
+                    }];
                     let start = rng.random_range(0..=seq.frames - cfg.window);
                     let aug = if cfg.augment.flip
                         || cfg.augment.max_shift_px > 0
@@ -1013,6 +1163,9 @@ mod tests {
             ("burn_in = 1000000", "burn_in"),
             ("frame_prediction_bias = nan", "frame_prediction_bias"),
             ("frame_prediction_bias = -0.5", "frame_prediction_bias"),
+            ("[sampling]\ndistance = { large = -1.0 }", "sampling.distance"),
+            ("[sampling]\nroi = { workspace = nan }", "sampling.roi"),
+            ("[sampling]\nroi = { workspace = 1e300 }", "sampling.roi"),
         ] {
             let config: TrainConfig = match toml::from_str(toml) {
                 Ok(c) => c,
@@ -1052,5 +1205,85 @@ mod tests {
         // 0 or more than there are: all of them.
         assert_eq!(pick(0).len(), 8);
         assert_eq!(pick(100).len(), 8);
+    }
+
+    fn keys(rows: &[(&str, Option<&str>)]) -> Vec<(String, Option<String>)> {
+        rows.iter()
+            .map(|(d, r)| ((*d).to_string(), r.map(str::to_string)))
+            .collect()
+    }
+
+    #[test]
+    fn a_sequence_weighs_the_product_of_the_factors_it_matches() {
+        let sampling: SamplingConfig =
+            toml::from_str("distance = { large = 2.0, short = 0.5 }\nroi = { workspace = 3.0 }")
+                .expect("parses");
+        let w = sampling
+            .weights(&keys(&[
+                ("large", Some("workspace")),
+                ("large", Some("tracked")),
+                ("medium", Some("workspace")),
+                ("medium", Some("tracked")),
+                ("short", None),
+            ]))
+            .expect("valid");
+        assert_eq!(w, vec![6.0, 2.0, 3.0, 1.0, 0.5]);
+        // No tables: every sequence 1.
+        let uniform = SamplingConfig::default();
+        assert!(uniform.is_uniform());
+        assert_eq!(
+            uniform
+                .weights(&keys(&[("large", Some("workspace")), ("short", None)]))
+                .expect("valid"),
+            vec![1.0, 1.0]
+        );
+    }
+
+    #[test]
+    fn sampling_keys_no_sequence_has_and_all_zero_weights_are_refused() {
+        let seqs = keys(&[("large", Some("workspace")), ("short", Some("tracked"))]);
+        for (toml, words) in [
+            ("distance = { larg = 2.0 }", ["sampling.distance", "\"larg\""]),
+            ("roi = { frame = 2.0 }", ["sampling.roi", "\"frame\""]),
+            ("distance = { large = 0.0, short = 0.0 }", ["sampling", "weight 0"]),
+        ] {
+            let sampling: SamplingConfig = toml::from_str(toml).expect("parses");
+            let err = sampling.weights(&seqs).expect_err(toml).to_string();
+            for w in words {
+                assert!(err.contains(w), "{toml}: {err}");
+            }
+        }
+    }
+
+    #[test]
+    fn weighted_draws_follow_the_weights() {
+        // Weights 1, 0, 3, 4 (sum 8): running sums 1/8, 1/8, 4/8, 1.
+        let cumulative = [0.125, 0.125, 0.5, 1.0];
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let n = 80_000;
+        let mut counts = [0usize; 4];
+        for _ in 0..n {
+            counts[draw_weighted(&mut rng, &cumulative)] += 1;
+        }
+        assert_eq!(counts[1], 0, "a weight of 0 is never drawn");
+        for (i, p) in [(0, 0.125), (2, 0.375), (3, 0.5)] {
+            // Five binomial standard deviations: fails by chance about once in 1.7 million.
+            let sd = (n as f64 * p * (1.0 - p)).sqrt();
+            let err = (counts[i] as f64 - n as f64 * p).abs();
+            assert!(err < 5.0 * sd, "index {i}: {} draws, expected {}", counts[i], n as f64 * p);
+        }
+        // Leading weights of 0 are never drawn either.
+        assert_eq!(draw_weighted(&mut rng, &[0.0, 0.0, 1.0]), 2);
+    }
+
+    #[test]
+    fn a_recipe_without_sampling_keeps_its_identity() {
+        // Runs written before `sampling` existed resume: the default is not serialised.
+        let text = TrainConfig::default().to_toml();
+        assert!(!text.contains("sampling"), "{text}");
+        let mut weighted = TrainConfig::default();
+        weighted.sampling.roi.insert("workspace".into(), 2.0);
+        let back: TrainConfig = toml::from_str(&weighted.to_toml()).expect("round trip");
+        assert_eq!(back, weighted);
     }
 }
