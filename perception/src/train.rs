@@ -148,7 +148,10 @@ impl SamplingConfig {
             (
                 "distance",
                 &self.distance,
-                sequences.iter().map(|(d, _)| d.as_str()).collect::<Vec<_>>(),
+                sequences
+                    .iter()
+                    .map(|(d, _)| d.as_str())
+                    .collect::<Vec<_>>(),
             ),
             (
                 "roi",
@@ -1163,7 +1166,10 @@ mod tests {
             ("burn_in = 1000000", "burn_in"),
             ("frame_prediction_bias = nan", "frame_prediction_bias"),
             ("frame_prediction_bias = -0.5", "frame_prediction_bias"),
-            ("[sampling]\ndistance = { large = -1.0 }", "sampling.distance"),
+            (
+                "[sampling]\ndistance = { large = -1.0 }",
+                "sampling.distance",
+            ),
             ("[sampling]\nroi = { workspace = nan }", "sampling.roi"),
             ("[sampling]\nroi = { workspace = 1e300 }", "sampling.roi"),
         ] {
@@ -1243,9 +1249,15 @@ mod tests {
     fn sampling_keys_no_sequence_has_and_all_zero_weights_are_refused() {
         let seqs = keys(&[("large", Some("workspace")), ("short", Some("tracked"))]);
         for (toml, words) in [
-            ("distance = { larg = 2.0 }", ["sampling.distance", "\"larg\""]),
+            (
+                "distance = { larg = 2.0 }",
+                ["sampling.distance", "\"larg\""],
+            ),
             ("roi = { frame = 2.0 }", ["sampling.roi", "\"frame\""]),
-            ("distance = { large = 0.0, short = 0.0 }", ["sampling", "weight 0"]),
+            (
+                "distance = { large = 0.0, short = 0.0 }",
+                ["sampling", "weight 0"],
+            ),
         ] {
             let sampling: SamplingConfig = toml::from_str(toml).expect("parses");
             let err = sampling.weights(&seqs).expect_err(toml).to_string();
@@ -1270,7 +1282,12 @@ mod tests {
             // Five binomial standard deviations: fails by chance about once in 1.7 million.
             let sd = (n as f64 * p * (1.0 - p)).sqrt();
             let err = (counts[i] as f64 - n as f64 * p).abs();
-            assert!(err < 5.0 * sd, "index {i}: {} draws, expected {}", counts[i], n as f64 * p);
+            assert!(
+                err < 5.0 * sd,
+                "index {i}: {} draws, expected {}",
+                counts[i],
+                n as f64 * p
+            );
         }
         // Leading weights of 0 are never drawn either.
         assert_eq!(draw_weighted(&mut rng, &[0.0, 0.0, 1.0]), 2);
