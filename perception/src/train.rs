@@ -102,10 +102,11 @@ impl Default for AugmentConfig {
 /// How often each training sequence is drawn, relative to the others.
 ///
 /// A sequence's weight is the product of the factors that its distance class (or camera
-/// row, [`workcell_render::dataset::SequenceEntry::camera_class`]) and its region of interest (the kind of its first
-/// frame's crop: `workspace`, `tracked`, or `frame` for a dataset without crops; a stored sequence keeps one) match, 1 where none
-/// does. With both tables empty every sequence is equally likely, drawn exactly as before
-/// the tables existed.
+/// row, [`workcell_render::dataset::SequenceEntry::camera_class`]) and its region of
+/// interest match, 1 where none does. The region of interest is the kind of its first
+/// frame's crop (`workspace`, `tracked`, or `frame` for a dataset without crops; a stored
+/// sequence keeps one). With both tables empty every sequence is equally likely, drawn
+/// exactly as before the tables existed.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SamplingConfig {
