@@ -146,6 +146,13 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
             "from half resolution (the paper's)"
         }
     );
+    if !config.sampling.is_uniform() {
+        say!(
+            "training sequences drawn unevenly (factors multiply): distance {:?}, region of interest {:?}",
+            config.sampling.distance,
+            config.sampling.roi
+        );
+    }
     backend::set_threads(config.threads);
     let trainer = Trainer::new(config, &args.out)?;
     let progress = super::progress_bar(
