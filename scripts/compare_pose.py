@@ -32,7 +32,6 @@ class Run:
 
     def __init__(self, path):
         self.path = path
-        self.frames = 0
         self.no_pose = 0
         self.misses = Counter()  # sequence -> target misses
         self.errors = defaultdict(list)  # sequence -> position errors (cm) of posed frames
@@ -56,7 +55,6 @@ class Run:
             if (seq, frame) in self.keys:
                 raise SystemExit(f"{path}:{line}: sequence {seq} frame {frame} twice")
             self.keys.add((seq, frame))
-            self.frames += 1
             self.errors.setdefault(seq, [])
             if posed:
                 self.errors[seq].append(error)
@@ -64,6 +62,10 @@ class Run:
                 self.no_pose += 1
                 if occlusion <= 1.0 - MIN_VISIBLE + 1e-9:
                     self.misses[seq] += 1
+
+    @property
+    def frames(self):
+        return len(self.keys)
 
     def posed(self):
         return sorted(e for errs in self.errors.values() for e in errs)

@@ -781,10 +781,15 @@ impl Trainer {
                     let roi = if cfg.sampling.roi.is_empty() {
                         None
                     } else {
-                        dataset
-                            .labels(&s.entry)?
-                            .first()
-                            .map(|f| f.roi.map_or(RoiKind::Frame, |r| r.kind).name().to_string())
+                        // A usable sequence has at least a window's frames.
+                        let first = dataset.frame_labels(&s.entry, 0)?;
+                        Some(
+                            first
+                                .roi
+                                .map_or(RoiKind::Frame, |r| r.kind)
+                                .name()
+                                .to_string(),
+                        )
                     };
                     Ok((s.entry.camera_class(), roi))
                 })

@@ -184,17 +184,22 @@ impl Dataset {
     /// # Errors
     /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file.
     pub fn labels(&self, entry: &SequenceEntry) -> Result<Vec<FrameLabels>> {
-        let dir = self.sequence_dir(entry)?;
         (0..entry.frames)
-            .map(|f| {
-                let path = dir.join(&frame_files(f)[5]);
-                let bytes = std::fs::read(&path).map_err(|source| RenderError::Io {
-                    path: path.clone(),
-                    source,
-                })?;
-                serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))
-            })
+            .map(|f| self.frame_labels(entry, f))
             .collect()
+    }
+
+    /// The labels of frame `f` of a sequence.
+    ///
+    /// # Errors
+    /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file.
+    pub fn frame_labels(&self, entry: &SequenceEntry, f: usize) -> Result<FrameLabels> {
+        let path = self.sequence_dir(entry)?.join(&frame_files(f)[5]);
+        let bytes = std::fs::read(&path).map_err(|source| RenderError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))
     }
 
     /// The forearm's amodal mask of frame `f` of a sequence (1 where it covers).
