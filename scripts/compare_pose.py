@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
 """Compares pose evaluations (`workcell eval pose`'s pose_frames.csv) of the same frames.
 
-    scripts/compare_pose.py BASELINE.csv CANDIDATE.csv [MORE.csv ...] [--draws 2000] [--seed 1]
+    scripts/compare_pose.py BASELINE.csv [CANDIDATE.csv ...] [--draws 2000] [--seed 1]
 
 For each file: frames, frames without a pose, the pose target's misses (frames without a
 pose in which at least 34 % of the forearm is visible, i.e. occlusion <= 0.66) with the
 sequences that hold them, and the average, 99th percentile and count of errors above 10 cm
-over the frames with a pose. For every file after the first: the difference of its average
+over the frames with a pose (one file alone: that line only). For every file after the first: the difference of its average
 error to the first's, with a 95 % interval from resampling whole sequences (each draw takes
 as many sequences as there are, with replacement, and recomputes both averages over the
 frames each posed in them). A difference whose interval holds zero is inside the noise
@@ -119,12 +119,12 @@ def summary(run):
 
 def main(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("csv", nargs="+", help="pose_frames.csv files; the first is the baseline")
+    p.add_argument(
+        "csv", nargs="+", help="pose_frames.csv files; the others are compared with the first"
+    )
     p.add_argument("--draws", type=int, default=2000, help="bootstrap resamples (default 2000)")
     p.add_argument("--seed", type=int, default=1, help="bootstrap seed (default 1)")
     a = p.parse_args(argv)
-    if len(a.csv) < 2:
-        p.error("give a baseline and at least one file to compare with it")
     if a.draws < 40:
         p.error("--draws: at least 40, for a 95 % interval")
     runs = [Run(path) for path in a.csv]
