@@ -446,7 +446,24 @@ impl TrainConfig {
                 format!("{class} = {w}: each in [0, {MAX_LOSS_WEIGHT}]"),
             );
         }
-        if !l.class_weights.is_empty() && l.class_weights.values().all(|w| *w == 0.0) {
+        // A misspelt class (`upperarm`) would otherwise leave every weight at 1 without a word.
+        let classes = &self.model.classes;
+        if let Some(name) = l
+            .class_weights
+            .keys()
+            .find(|name| !classes.iter().any(|c| c.name() == name.as_str()))
+        {
+            let names: Vec<&str> = classes.iter().map(|c| c.name()).collect();
+            return bad(
+                "loss.class_weights",
+                format!("the model has no class {name:?} (it has {names:?})"),
+            );
+        }
+        // Unlisted classes weigh 1, so only a table that sets every class to 0 counts none.
+        if classes
+            .iter()
+            .all(|c| l.class_weights.get(c.name()) == Some(&0.0))
+        {
             return bad("loss.class_weights", "all 0: no class would count".into());
         }
         Ok(())
@@ -1164,7 +1181,11 @@ mod tests {
             ("[loss]\nfocal = 1e300", "loss"),
             ("[loss.class_weights]\nforearm = nan", "loss.class_weights"),
             (
-                "[loss.class_weights]\nforearm = 0.0\nbackground = 0.0",
+                "[loss.class_weights]\nupperarm = 4.0",
+                "no class \"upperarm\"",
+            ),
+            (
+                "[loss.class_weights]\nrobot = 0.0\ntorso = 0.0\nupper_arm = 0.0\nforearm = 0.0\nhand = 0.0",
                 "all 0",
             ),
             ("steps = 100000000000", "steps"),
