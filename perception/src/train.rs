@@ -5,6 +5,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use workcell_render::Class;
+use workcell_render::dataset::FrameLabels;
 use workcell_render::roi::RoiKind;
 
 use burn::module::Module;
@@ -102,11 +103,12 @@ impl Default for AugmentConfig {
 /// How often each training sequence is drawn, relative to the others.
 ///
 /// A sequence's weight is the product of the factors that its distance class (or camera
-/// row, [`workcell_render::dataset::SequenceEntry::camera_class`]) and its region of
-/// interest match, 1 where none does. The region of interest is the kind of its first
+/// row, [`workcell_render::dataset::SequenceEntry::camera_class`]), its region of interest
+/// and its view match, 1 where none does. The region of interest is the kind of its first
 /// frame's crop (`workspace`, `tracked`, or `frame` for a dataset without crops; a stored
-/// sequence keeps one). With both tables empty every sequence is equally likely, drawn
-/// exactly as before the tables existed.
+/// sequence keeps one); the view is the side from which its first frame's camera sees the
+/// human (`front`, `side` or `back`, [`workcell_render::dataset::View`]). With every table
+/// empty every sequence is equally likely, drawn exactly as before the tables existed.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SamplingConfig {
@@ -114,17 +116,36 @@ pub struct SamplingConfig {
     pub distance: std::collections::BTreeMap<String, f64>,
     /// Factor per kind of region of interest, e.g. `{ workspace = 2.0 }`.
     pub roi: std::collections::BTreeMap<String, f64>,
+    /// Factor per view of the human, e.g. `{ back = 2.0 }`.
+    pub view: std::collections::BTreeMap<String, f64>,
+}
+
+/// What [`SamplingConfig`] weighs a training sequence by (`None`: not read, since no factor
+/// asks for it).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SamplingKeys {
+    pub distance: String,
+    pub roi: Option<String>,
+    pub view: Option<String>,
 }
 
 impl SamplingConfig {
-    /// Both tables empty: uniform over the sequences.
+    /// Every table empty: uniform over the sequences.
     #[must_use]
     pub fn is_uniform(&self) -> bool {
-        self.distance.is_empty() && self.roi.is_empty()
+        self.distance.is_empty() && self.roi.is_empty() && self.view.is_empty()
+    }
+
+    fn tables(&self) -> [(&'static str, &std::collections::BTreeMap<String, f64>); 3] {
+        [
+            ("distance", &self.distance),
+            ("roi", &self.roi),
+            ("view", &self.view),
+        ]
     }
 
     fn validate(&self) -> Result<()> {
-        for (table, map) in [("distance", &self.distance), ("roi", &self.roi)] {
+        for (table, map) in self.tables() {
             if let Some((key, w)) = map
                 .iter()
                 .find(|(_, w)| !(w.is_finite() && (0.0..=MAX_SAMPLING_FACTOR).contains(*w)))
@@ -138,30 +159,23 @@ impl SamplingConfig {
         Ok(())
     }
 
-    /// Each sequence's weight, given its distance class and the kind of its region of
-    /// interest (`None` where it is not known).
+    /// Each sequence's weight, given what it is weighed by.
     ///
     /// # Errors
     /// [`PerceptionError::Config`] for a key that no sequence has (a misspelt class would
     /// otherwise change nothing, silently), or when every weight is 0.
-    pub fn weights(&self, sequences: &[(String, Option<String>)]) -> Result<Vec<f64>> {
-        for (table, map, present) in [
-            (
-                "distance",
-                &self.distance,
-                sequences
-                    .iter()
-                    .map(|(d, _)| d.as_str())
-                    .collect::<Vec<_>>(),
-            ),
-            (
-                "roi",
-                &self.roi,
-                sequences.iter().filter_map(|(_, r)| r.as_deref()).collect(),
-            ),
-        ] {
-            if let Some(key) = map.keys().find(|k| !present.contains(&k.as_str())) {
-                let mut have: Vec<&str> = present.clone();
+    pub fn weights(&self, sequences: &[SamplingKeys]) -> Result<Vec<f64>> {
+        let key_of = |s: &'_ SamplingKeys, table: &str| -> Option<String> {
+            match table {
+                "distance" => Some(s.distance.clone()),
+                "roi" => s.roi.clone(),
+                _ => s.view.clone(),
+            }
+        };
+        for (table, map) in self.tables() {
+            let present: Vec<String> = sequences.iter().filter_map(|s| key_of(s, table)).collect();
+            if let Some(key) = map.keys().find(|k| !present.contains(k)) {
+                let mut have: Vec<&str> = present.iter().map(String::as_str).collect();
                 have.sort_unstable();
                 have.dedup();
                 return Err(PerceptionError::Config {
@@ -174,14 +188,15 @@ impl SamplingConfig {
         }
         let weights: Vec<f64> = sequences
             .iter()
-            .map(|(distance, roi)| {
-                let d = self.distance.get(distance).copied().unwrap_or(1.0);
-                let r = roi
-                    .as_ref()
-                    .and_then(|r| self.roi.get(r))
-                    .copied()
-                    .unwrap_or(1.0);
-                d * r
+            .map(|s| {
+                self.tables()
+                    .iter()
+                    .map(|(table, map)| {
+                        key_of(s, table)
+                            .and_then(|k| map.get(&k).copied())
+                            .unwrap_or(1.0)
+                    })
+                    .product()
             })
             .collect();
         if !weights.iter().any(|w| *w > 0.0) {
@@ -795,20 +810,28 @@ impl Trainer {
             let keys = usable
                 .iter()
                 .map(|s| {
-                    let roi = if cfg.sampling.roi.is_empty() {
+                    let sampling = &cfg.sampling;
+                    // A usable sequence has at least a window's frames.
+                    let first = if sampling.roi.is_empty() && sampling.view.is_empty() {
                         None
                     } else {
-                        // A usable sequence has at least a window's frames.
-                        let first = dataset.frame_labels(&s.entry, 0)?;
-                        Some(
-                            first
-                                .roi
-                                .map_or(RoiKind::Frame, |r| r.kind)
-                                .name()
-                                .to_string(),
-                        )
+                        Some(dataset.frame_labels(&s.entry, 0)?)
                     };
-                    Ok((s.entry.camera_class(), roi))
+                    let roi = first
+                        .as_ref()
+                        .filter(|_| !sampling.roi.is_empty())
+                        .map(|f| f.roi.map_or(RoiKind::Frame, |r| r.kind).name().to_string());
+                    // A frame without a torso label has no view; it matches no view factor.
+                    let view = first
+                        .as_ref()
+                        .filter(|_| !sampling.view.is_empty())
+                        .and_then(FrameLabels::view)
+                        .map(|v| v.name().to_string());
+                    Ok(SamplingKeys {
+                        distance: s.entry.camera_class(),
+                        roi,
+                        view,
+                    })
                 })
                 .collect::<Result<Vec<_>>>()?;
             let weights = cfg.sampling.weights(&keys)?;
@@ -817,7 +840,7 @@ impl Trainer {
             tracing::info!(
                 sequences = weights.len(),
                 weighted_up = favoured,
-                "sampling by distance class and region of interest"
+                "sampling by distance class, region of interest and view"
             );
             Some(
                 weights
@@ -1199,6 +1222,7 @@ mod tests {
             ),
             ("[sampling]\nroi = { workspace = nan }", "sampling.roi"),
             ("[sampling]\nroi = { workspace = 1e300 }", "sampling.roi"),
+            ("[sampling]\nview = { back = inf }", "sampling.view"),
         ] {
             let config: TrainConfig = match toml::from_str(toml) {
                 Ok(c) => c,
@@ -1240,9 +1264,13 @@ mod tests {
         assert_eq!(pick(100).len(), 8);
     }
 
-    fn keys(rows: &[(&str, Option<&str>)]) -> Vec<(String, Option<String>)> {
+    fn keys(rows: &[(&str, Option<&str>)]) -> Vec<SamplingKeys> {
         rows.iter()
-            .map(|(d, r)| ((*d).to_string(), r.map(str::to_string)))
+            .map(|(d, r)| SamplingKeys {
+                distance: (*d).to_string(),
+                roi: r.map(str::to_string),
+                view: None,
+            })
             .collect()
     }
 
@@ -1261,6 +1289,26 @@ mod tests {
             ]))
             .expect("valid");
         assert_eq!(w, vec![6.0, 2.0, 3.0, 1.0, 0.5]);
+        // The view multiplies in too; a sequence without a view matches no view factor.
+        let sampling: SamplingConfig =
+            toml::from_str("distance = { large = 2.0 }\nview = { back = 3.0, side = 0.5 }")
+                .expect("parses");
+        let mut seqs = keys(&[
+            ("large", None),
+            ("large", None),
+            ("short", None),
+            ("short", None),
+        ]);
+        for (s, view) in seqs
+            .iter_mut()
+            .zip([Some("back"), Some("side"), Some("back"), None])
+        {
+            s.view = view.map(str::to_string);
+        }
+        assert_eq!(
+            sampling.weights(&seqs).expect("valid"),
+            vec![6.0, 1.0, 3.0, 1.0]
+        );
         // No tables: every sequence 1.
         let uniform = SamplingConfig::default();
         assert!(uniform.is_uniform());
@@ -1281,6 +1329,7 @@ mod tests {
                 ["sampling.distance", "\"larg\""],
             ),
             ("roi = { frame = 2.0 }", ["sampling.roi", "\"frame\""]),
+            ("view = { back = 2.0 }", ["sampling.view", "\"back\""]),
             (
                 "distance = { large = 0.0, short = 0.0 }",
                 ["sampling", "weight 0"],

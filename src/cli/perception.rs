@@ -148,9 +148,10 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     );
     if !config.sampling.is_uniform() {
         say!(
-            "training sequences drawn unevenly (factors multiply): distance {:?}, region of interest {:?}",
+            "training sequences drawn unevenly (factors multiply): distance {:?}, region of interest {:?}, view {:?}",
             config.sampling.distance,
-            config.sampling.roi
+            config.sampling.roi,
+            config.sampling.view
         );
     }
     backend::set_threads(config.threads);

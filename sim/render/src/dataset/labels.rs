@@ -155,6 +155,69 @@ impl FrameLabels {
     pub fn part(&self, class: Class) -> Option<&PartLabel> {
         self.parts.iter().find(|p| p.class == class)
     }
+
+    /// The angle between the torso's forward axis (the human model's x) and the direction
+    /// from the torso to the camera, in degrees: 0 sees the human from the front, 180 from
+    /// behind. `None` without a torso label (or with the camera at the torso's origin).
+    #[must_use]
+    pub fn view_angle_deg(&self) -> Option<f64> {
+        View::angle_deg(&Pose::from(&self.part(Class::Torso)?.X_CP))
+    }
+
+    /// The side from which the camera sees the human ([`FrameLabels::view_angle_deg`]).
+    #[must_use]
+    pub fn view(&self) -> Option<View> {
+        self.view_angle_deg().map(View::of_angle_deg)
+    }
+}
+
+/// The side from which the camera sees the human: the view angle
+/// ([`FrameLabels::view_angle_deg`]) below 60 degrees, from 60 to 120, from 120 on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum View {
+    Front,
+    Side,
+    Back,
+}
+
+impl View {
+    pub const ALL: [View; 3] = [View::Front, View::Side, View::Back];
+
+    /// The view angle of a torso at `X_CT` in the camera's frame, degrees: between its
+    /// forward axis (x) and the direction from it to the camera's origin.
+    #[must_use]
+    pub fn angle_deg(X_CT: &Pose) -> Option<f64> {
+        let forward = X_CT.rotation * Vector::X;
+        let to_camera = -X_CT.translation;
+        let n = forward.length() * to_camera.length();
+        (n > 0.0 && n.is_finite()).then(|| {
+            (forward.dot(to_camera) / n)
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
+        })
+    }
+
+    /// The view of a view angle in degrees.
+    #[must_use]
+    pub fn of_angle_deg(angle: f64) -> View {
+        if angle < 60.0 {
+            View::Front
+        } else if angle < 120.0 {
+            View::Side
+        } else {
+            View::Back
+        }
+    }
+
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            View::Front => "front",
+            View::Side => "side",
+            View::Back => "back",
+        }
+    }
 }
 
 /// Train, validation or test.
@@ -267,5 +330,37 @@ mod tests {
         let back = Pose::from(&PoseLabel::from(&X));
         assert!((back.translation - X.translation).length() < 1e-15);
         assert!((back.rotation.dot(X.rotation).abs() - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn view_angles_of_known_torso_poses() {
+        // The torso 5 m down the optical axis (+z); a quarter turn about y sends its
+        // forward x to -z (toward the camera), the opposite turn to +z (away from it).
+        let at = |xyz: [f64; 3], pitch: f64| {
+            View::angle_deg(&pose_from_xyz_rpy(xyz, [0.0, pitch, 0.0]))
+                .expect("a torso off the origin")
+        };
+        let quarter = std::f64::consts::FRAC_PI_2;
+        for (xyz, pitch, want, view) in [
+            ([0.0, 0.0, 5.0], quarter, 0.0, View::Front),
+            ([0.0, 0.0, 5.0], 0.0, 90.0, View::Side),
+            ([0.0, 0.0, 5.0], -quarter, 180.0, View::Back),
+            // Off the axis: facing -z from (5, 0, 5), the camera lies 45 degrees aside.
+            ([5.0, 0.0, 5.0], quarter, 45.0, View::Front),
+            ([-5.0, 0.0, 5.0], -quarter, 135.0, View::Back),
+        ] {
+            let angle = at(xyz, pitch);
+            assert!((angle - want).abs() < 1e-9, "{xyz:?} {pitch}: {angle}");
+            assert_eq!(View::of_angle_deg(angle), view);
+        }
+        assert_eq!(
+            View::angle_deg(&Pose::IDENTITY),
+            None,
+            "the camera at the torso"
+        );
+        assert_eq!(
+            [59.9, 60.0, 119.9, 120.0].map(View::of_angle_deg),
+            [View::Front, View::Side, View::Side, View::Back]
+        );
     }
 }

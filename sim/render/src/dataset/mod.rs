@@ -25,7 +25,7 @@ mod stats;
 
 pub use labels::{
     CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, READS, RoiLabel,
-    SEES_THROUGH_OCCLUDER, SequenceEntry, Split,
+    SEES_THROUGH_OCCLUDER, SequenceEntry, Split, View,
 };
 pub use load::{Dataset, MAX_SEQUENCE_FRAMES, MAX_SEQUENCES, Sequence};
 pub use sheet::{PredictionPanel, contact_sheet, prediction_sheet};
