@@ -129,6 +129,9 @@ pub struct SamplingKeys {
     pub view: Option<String>,
 }
 
+/// The key of a sequence that one table of [`SamplingConfig`] reads.
+type KeyOf = fn(&SamplingKeys) -> Option<&str>;
+
 impl SamplingConfig {
     /// Every table empty: uniform over the sequences.
     #[must_use]
@@ -136,16 +139,23 @@ impl SamplingConfig {
         self.distance.is_empty() && self.roi.is_empty() && self.view.is_empty()
     }
 
-    fn tables(&self) -> [(&'static str, &std::collections::BTreeMap<String, f64>); 3] {
+    /// Each table by name, with the key of a sequence that it reads.
+    fn tables(
+        &self,
+    ) -> [(
+        &'static str,
+        &std::collections::BTreeMap<String, f64>,
+        KeyOf,
+    ); 3] {
         [
-            ("distance", &self.distance),
-            ("roi", &self.roi),
-            ("view", &self.view),
+            ("distance", &self.distance, |s| Some(s.distance.as_str())),
+            ("roi", &self.roi, |s| s.roi.as_deref()),
+            ("view", &self.view, |s| s.view.as_deref()),
         ]
     }
 
     fn validate(&self) -> Result<()> {
-        for (table, map) in self.tables() {
+        for (table, map, _) in self.tables() {
             if let Some((key, w)) = map
                 .iter()
                 .find(|(_, w)| !(w.is_finite() && (0.0..=MAX_SAMPLING_FACTOR).contains(*w)))
@@ -165,17 +175,10 @@ impl SamplingConfig {
     /// [`PerceptionError::Config`] for a key that no sequence has (a misspelt class would
     /// otherwise change nothing, silently), or when every weight is 0.
     pub fn weights(&self, sequences: &[SamplingKeys]) -> Result<Vec<f64>> {
-        let key_of = |s: &'_ SamplingKeys, table: &str| -> Option<String> {
-            match table {
-                "distance" => Some(s.distance.clone()),
-                "roi" => s.roi.clone(),
-                _ => s.view.clone(),
-            }
-        };
-        for (table, map) in self.tables() {
-            let present: Vec<String> = sequences.iter().filter_map(|s| key_of(s, table)).collect();
-            if let Some(key) = map.keys().find(|k| !present.contains(k)) {
-                let mut have: Vec<&str> = present.iter().map(String::as_str).collect();
+        for (table, map, key_of) in self.tables() {
+            let present: Vec<&str> = sequences.iter().filter_map(key_of).collect();
+            if let Some(key) = map.keys().find(|k| !present.contains(&k.as_str())) {
+                let mut have = present;
                 have.sort_unstable();
                 have.dedup();
                 return Err(PerceptionError::Config {
@@ -190,12 +193,8 @@ impl SamplingConfig {
             .iter()
             .map(|s| {
                 self.tables()
-                    .iter()
-                    .map(|(table, map)| {
-                        key_of(s, table)
-                            .and_then(|k| map.get(&k).copied())
-                            .unwrap_or(1.0)
-                    })
+                    .into_iter()
+                    .map(|(_, map, key_of)| key_of(s).and_then(|k| map.get(k)).map_or(1.0, |w| *w))
                     .product()
             })
             .collect();
