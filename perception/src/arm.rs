@@ -462,32 +462,53 @@ impl ArmTracker {
 
     /// The network's masks of a frame: the region of interest ([`ArmTracker::roi`])
     /// resampled to [`DEFAULT_INPUT_PX`], segmented (at the network's input size), every
-    /// class's plane back at [`DEFAULT_INPUT_PX`].
+    /// class's plane back at [`DEFAULT_INPUT_PX`]. `depth_m` is the depth camera's image
+    /// registered to `camera` ([`ArmTracker::track`]); a network that reads depth needs it,
+    /// and the masks carry the region's depth for the fit.
     ///
     /// # Errors
-    /// No network ([`ArmTracker::with_network`]), a frame of the wrong size, a network failure.
-    pub fn segment(&mut self, camera: &Camera, rgb: &[u8]) -> Result<RoiMasks> {
+    /// No network ([`ArmTracker::with_network`]), images of the wrong size, no depth image
+    /// for a network that reads depth, a network failure.
+    pub fn segment(
+        &mut self,
+        camera: &Camera,
+        rgb: &[u8],
+        depth_m: Option<&[f32]>,
+    ) -> Result<RoiMasks> {
         let (w, h) = (camera.width as usize, camera.height as usize);
         check_len("an sRGB frame", rgb.len(), 3 * w * h, camera)?;
+        if let Some(d) = depth_m {
+            check_len("a depth image", d.len(), w * h, camera)?;
+        }
         let roi = self.roi(camera);
         let s = DEFAULT_INPUT_PX;
         let size = roi.size as usize;
         let input = resample(&planar_rgb_crop(rgb, w, h, &roi), 3, size, size, s, s);
+        let depth = depth_m.map(|d| roi.sample_nearest(d, w, h, s));
         let roi_camera = roi.camera(camera, s as u32)?;
+        let mut masks = self.segment_planar(&roi_camera, &input, depth.as_deref())?;
+        masks.depth_m = depth;
         Ok(RoiMasks {
             roi,
-            masks: self.segment_planar(&roi_camera, &input)?,
+            masks,
             camera: roi_camera,
         })
     }
 
     /// The network's masks of a region already cut out at [`DEFAULT_INPUT_PX`]: `planar`
-    /// sRGB values scaled to [0, 1], `3 x side x side`.
-    fn segment_planar(&mut self, roi_camera: &Camera, planar: &[f32]) -> Result<ArmMasks> {
+    /// sRGB values scaled to [0, 1], `3 x side x side`, and the region's depth image.
+    fn segment_planar(
+        &mut self,
+        roi_camera: &Camera,
+        planar: &[f32],
+        depth_m: Option<&[f32]>,
+    ) -> Result<ArmMasks> {
         let net = self.net.as_mut().ok_or_else(|| PerceptionError::Input {
             message: "this tracker has no network; give it masks with track_masks".into(),
         })?;
         let s = DEFAULT_INPUT_PX;
+        let input = crate::data::input_frame(planar, depth_m, s, s, net.config())?;
+        let planar = input.as_slice();
         if view_jump(self.last_fx, roi_camera.fx) {
             net.start_view(planar, s, s)?;
         }
@@ -526,7 +547,7 @@ impl ArmTracker {
             check_len("a depth image", d.len(), s * s, roi_camera)?;
         }
         let planar = planar_rgb(rgb, s, s);
-        let mut masks = self.segment_planar(roi_camera, &planar)?;
+        let mut masks = self.segment_planar(roi_camera, &planar, depth_m)?;
         masks.depth_m = depth_m.map(<[f32]>::to_vec);
         self.track_roi(roi_camera, &masks)
     }
@@ -543,16 +564,11 @@ impl ArmTracker {
         rgb: &[u8],
         depth_m: Option<&[f32]>,
     ) -> Result<ArmOutcome> {
-        let (w, h) = (camera.width as usize, camera.height as usize);
-        if let Some(d) = depth_m {
-            check_len("a depth image", d.len(), w * h, camera)?;
-        }
         let RoiMasks {
-            roi,
             camera: roi_camera,
-            mut masks,
-        } = self.segment(camera, rgb)?;
-        masks.depth_m = depth_m.map(|d| roi.sample_nearest(d, w, h, DEFAULT_INPUT_PX));
+            masks,
+            ..
+        } = self.segment(camera, rgb, depth_m)?;
         self.track_roi(&roi_camera, &masks)
     }
 
@@ -934,7 +950,7 @@ mod tests {
         let camera = camera_at(tracker.arm(), Vector::new(2.5, 0.5, 0.2), [640, 480], 45.0);
         let roi = tracker.roi(&camera);
         let out = tracker
-            .segment(&camera, &vec![90; 640 * 480 * 3])
+            .segment(&camera, &vec![90; 640 * 480 * 3], None)
             .expect("segmented");
         assert_eq!(out.roi, roi);
         let s = DEFAULT_INPUT_PX;

@@ -43,11 +43,12 @@ pub enum Activation {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ProcNetConfig {
-    /// Input frames are `[3, size, size]`; must be divisible by `2^(layers - 1)`.
+    /// Input frames are `[3 or 4, size, size]`; must be divisible by `2^(layers - 1)`.
     pub input_size: usize,
     /// Channels of the representation R_l, one entry per layer (3 or 4 layers).
     pub repr_channels: Vec<usize>,
-    /// Channels of the bottom-up input A_l, one per layer; the first is 3 (RGB).
+    /// Channels of the bottom-up input A_l, one per layer; the first is 3 (RGB) or 4 (RGB and
+    /// the depth plane, [`crate::image::depth_plane`]).
     pub input_channels: Vec<usize>,
     pub cell: CellKind,
     /// Every signal crossing layers is taken from the previous time step.
@@ -275,6 +276,19 @@ impl ProcNetConfig {
         self.classes.len()
     }
 
+    /// Whether the network reads the depth image as a fourth input plane
+    /// (`input_channels[0] == 4`, [`crate::image::depth_plane`]).
+    #[must_use]
+    pub fn reads_depth(&self) -> bool {
+        self.input_channels.first() == Some(&4)
+    }
+
+    /// The planes of the network's input: 3 (RGB), or 4 with the depth plane.
+    #[must_use]
+    pub fn input_planes(&self) -> usize {
+        if self.reads_depth() { 4 } else { 3 }
+    }
+
     /// Index of a class by name.
     #[must_use]
     pub fn class_index(&self, class: Class) -> Option<usize> {
@@ -305,11 +319,11 @@ impl ProcNetConfig {
                 ),
             );
         }
-        if self.input_channels[0] != 3 {
+        if !(3..=4).contains(&self.input_channels[0]) {
             return invalid(
                 "input_channels",
                 format!(
-                    "layer 0 reads RGB: 3 channels, got {}",
+                    "layer 0 reads RGB (3 channels) or RGB and depth (4), got {}",
                     self.input_channels[0]
                 ),
             );

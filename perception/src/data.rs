@@ -17,7 +17,9 @@ pub struct SequenceTensors {
     /// Side of the square frames.
     pub size: usize,
     pub frames: usize,
-    /// `[frames, 3, size, size]`, 0..=255 for [0, 1].
+    /// Planes per frame: 3 (RGB), or 4 with the depth plane ([`ProcNetConfig::input_planes`]).
+    pub channels: usize,
+    /// `[frames, channels, size, size]`, 0..=255 for [0, 1].
     pub rgb: Vec<u8>,
     /// `[frames, classes, size, size]`: the area of each pixel covered by each class (0..=255
     /// for [0, 1]), with the occluder taken away (the network is asked for the whole part,
@@ -82,22 +84,96 @@ pub fn one_hot(classes: &[u8], map: &[u8]) -> Vec<f32> {
     out
 }
 
-/// The frames of a sequence at the model's resolution, `[frames, 3, size, size]`.
-pub fn model_frames(sequence: &Sequence, config: &ProcNetConfig) -> Result<Vec<f32>> {
+/// The depth images of a sequence's frames (`[frames, height, width]`, m) when `config`'s
+/// network reads depth ([`ProcNetConfig::reads_depth`]), else `None` (nothing is read).
+///
+/// # Errors
+/// A dataset without depth images (format 1), a missing or corrupt one.
+pub fn depth_frames(
+    dataset: &Dataset,
+    sequence: &Sequence,
+    config: &ProcNetConfig,
+) -> Result<Option<Vec<f32>>> {
+    if !config.reads_depth() {
+        return Ok(None);
+    }
+    let mut depth = Vec::with_capacity(sequence.len() * sequence.pixels());
+    for t in 0..sequence.len() {
+        depth.extend(dataset.depth(&sequence.entry, t)?);
+    }
+    Ok(Some(depth))
+}
+
+/// One frame as the network reads it at the sequence's size: `[3, height, width]` RGB, and
+/// for a network that reads depth the depth plane of `depth_m` (that frame's depth image,
+/// [`crate::image::depth_plane`]) after it.
+///
+/// # Errors
+/// [`PerceptionError::Input`] when the network reads depth and there is none, or it is not
+/// the frame's size.
+pub fn input_frame(
+    rgb: &[f32],
+    depth_m: Option<&[f32]>,
+    width: usize,
+    height: usize,
+    config: &ProcNetConfig,
+) -> Result<Vec<f32>> {
+    let n = width * height;
+    let mut planes = rgb.get(..3 * n).map(<[f32]>::to_vec).ok_or_else(|| PerceptionError::Input {
+        message: format!("a planar RGB frame of {} values, not 3 x {width} x {height}", rgb.len()),
+    })?;
+    if config.reads_depth() {
+        let depth = depth_m.ok_or_else(|| PerceptionError::Input {
+            message: "this network reads depth (input_channels[0] = 4): give it the depth image"
+                .into(),
+        })?;
+        if depth.len() != n {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "a depth image of {} values, not the frame's {width} x {height}",
+                    depth.len()
+                ),
+            });
+        }
+        planes.extend(crate::image::depth_plane(depth, width, height));
+    }
+    Ok(planes)
+}
+
+/// The frames of a sequence at the model's resolution, `[frames, planes, size, size]`:
+/// [`input_frame`] of each, resampled. `depth` is [`depth_frames`]'s.
+///
+/// # Errors
+/// As [`scale_factor`] and [`input_frame`].
+pub fn model_frames(
+    sequence: &Sequence,
+    depth: Option<&[f32]>,
+    config: &ProcNetConfig,
+) -> Result<Vec<f32>> {
     let f = scale_factor(config, sequence.width, sequence.height)?;
     let (w, h) = (sequence.width as usize, sequence.height as usize);
-    Ok((0..sequence.len())
-        .flat_map(|t| resample(sequence.rgb_frame(t), 3, w, h, w / f, h / f))
-        .collect())
+    let planes = config.input_planes();
+    let mut out = Vec::with_capacity(sequence.len() * planes * (w / f) * (h / f));
+    for t in 0..sequence.len() {
+        let d = depth.and_then(|d| d.get(t * w * h..(t + 1) * w * h));
+        let frame = input_frame(sequence.rgb_frame(t), d, w, h, config)?;
+        out.extend(resample(&frame, planes, w, h, w / f, h / f));
+    }
+    Ok(out)
 }
 
 impl SequenceTensors {
-    /// Converts a loaded sequence to the model's resolution.
-    pub fn new(sequence: &Sequence, config: &ProcNetConfig, map: &[u8]) -> Result<Self> {
+    /// Converts a loaded sequence to the model's resolution; `depth` is [`depth_frames`]'s.
+    pub fn new(
+        sequence: &Sequence,
+        depth: Option<&[f32]>,
+        config: &ProcNetConfig,
+        map: &[u8],
+    ) -> Result<Self> {
         let f = scale_factor(config, sequence.width, sequence.height)?;
         let (w, h) = (sequence.width as usize, sequence.height as usize);
         let frames = sequence.len();
-        let rgb = model_frames(sequence, config)?
+        let rgb = model_frames(sequence, depth, config)?
             .into_iter()
             .map(to_byte)
             .collect();
@@ -114,13 +190,15 @@ impl SequenceTensors {
             entry: sequence.entry.clone(),
             size: w / f,
             frames,
+            channels: config.input_planes(),
             rgb,
             target,
         })
     }
 }
 
-/// Loads every sequence of a split at the model's resolution.
+/// Loads every sequence of a split at the model's resolution (with its depth images when
+/// the network reads depth).
 pub fn load_split(
     dataset: &Dataset,
     split: Split,
@@ -129,7 +207,11 @@ pub fn load_split(
     let map = class_map(config, dataset)?;
     dataset
         .sequences(Some(split))
-        .map(|s| SequenceTensors::new(&s?, config, &map))
+        .map(|s| {
+            let s = s?;
+            let depth = depth_frames(dataset, &s, config)?;
+            SequenceTensors::new(&s, depth.as_deref(), config, &map)
+        })
         .collect()
 }
 
@@ -239,7 +321,7 @@ impl Augment {
         }
     }
 
-    /// Applies the colour jitter to `[3, s, s]` in place.
+    /// Applies the colour jitter to the first three planes (RGB) of `[3.., s, s]` in place.
     fn colour(&self, rgb: &mut [f32], s: usize) {
         if *self == Augment::NONE {
             return;
@@ -260,7 +342,7 @@ impl Augment {
 /// A batch of windows: `[time][batch, ...]` tensors.
 #[derive(Debug, Clone)]
 pub struct Batch {
-    /// Per frame `[b, 3, s, s]`.
+    /// Per frame `[b, planes, s, s]`: RGB, and the depth plane for a network that reads it.
     pub rgb: Vec<Tensor<4>>,
     /// Per frame `[b, classes, s, s]`.
     pub target: Vec<Tensor<4>>,
@@ -275,7 +357,8 @@ pub fn make_batch(
 ) -> Batch {
     let b = sequences.len();
     let s = sequences.first().map_or(0, |(q, _, _)| q.size);
-    let (rgb_len, target_len) = (3 * s * s, classes * s * s);
+    let planes = sequences.first().map_or(3, |(q, _, _)| q.channels);
+    let (rgb_len, target_len) = (planes * s * s, classes * s * s);
     let mut rgb = Vec::with_capacity(window);
     let mut target = Vec::with_capacity(window);
     for t in 0..window {
@@ -288,13 +371,13 @@ pub fn make_batch(
             };
             let mut px = floats(&seq.rgb[frame * rgb_len..][..rgb_len]);
             aug.colour(&mut px, s);
-            aug.geometry(&mut px, 3, s);
+            aug.geometry(&mut px, planes, s);
             let mut lab = floats(&seq.target[frame * target_len..][..target_len]);
             aug.geometry(&mut lab, classes, s);
             x.extend(px);
             y.extend(lab);
         }
-        rgb.push(Tensor::from_data(TensorData::new(x, [b, 3, s, s]), device));
+        rgb.push(Tensor::from_data(TensorData::new(x, [b, planes, s, s]), device));
         target.push(Tensor::from_data(
             TensorData::new(y, [b, classes, s, s]),
             device,
@@ -338,6 +421,29 @@ pub fn per_cell_subset<T>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A network that reads RGB takes the frame as it is (a depth image changes nothing); one
+    /// that reads depth gets the depth plane after it, and refuses a frame without depth or
+    /// with a depth image of another size.
+    #[test]
+    fn the_input_frame_has_the_planes_the_network_reads() {
+        let rgb: Vec<f32> = (0..12).map(|v| v as f32 / 12.0).collect();
+        let depth = [3.0, 3.5, 4.0, 0.0];
+        let mut config = ProcNetConfig::cpu();
+        assert!(!config.reads_depth());
+        assert_eq!(input_frame(&rgb, None, 2, 2, &config).unwrap(), rgb);
+        assert_eq!(input_frame(&rgb, Some(&depth), 2, 2, &config).unwrap(), rgb);
+        config.input_channels[0] = 4;
+        assert!(config.reads_depth() && config.input_planes() == 4);
+        let with_depth = input_frame(&rgb, Some(&depth), 2, 2, &config).unwrap();
+        assert_eq!(with_depth[..12], rgb[..]);
+        assert_eq!(with_depth[12..], crate::image::depth_plane(&depth, 2, 2)[..]);
+        for (d, what) in [(None, "give it the depth image"), (Some(&depth[..3]), "3 values")] {
+            let e = input_frame(&rgb, d, 2, 2, &config).unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+        }
+        assert!(input_frame(&rgb[..11], Some(&depth), 2, 2, &config).is_err());
+    }
 
     #[test]
     fn flip_twice_is_identity_and_shift_repeats_edges() {

@@ -672,13 +672,18 @@ pub fn evaluate(
     let forearm = config.class_index(Class::Forearm);
     for (k, entry) in entries.iter().enumerate() {
         let seq = dataset.load(entry)?;
-        let frames = model_frames(&seq, config)?;
+        let depth = crate::data::depth_frames(dataset, &seq, config)?;
+        let frames = model_frames(&seq, depth.as_deref(), config)?;
         let (w, h) = (seq.width as usize, seq.height as usize);
         let s = config.input_size;
+        let planes = config.input_planes();
         let mut state = model.initial_state(1, s, s, device);
         for t in 0..seq.len() {
             let x = Tensor::<4>::from_data(
-                TensorData::new(frames[t * 3 * s * s..][..3 * s * s].to_vec(), [1, 3, s, s]),
+                TensorData::new(
+                    frames[t * planes * s * s..][..planes * s * s].to_vec(),
+                    [1, planes, s, s],
+                ),
                 device,
             );
             let (out, next) = model.step(x, state);
@@ -693,7 +698,7 @@ pub fn evaluate(
                     .unwrap_or_default();
                 ev.frame_prediction
                     .get_or_insert_default()
-                    .add(&predicted, &frames[t * 3 * s * s..][..3 * s * s]);
+                    .add(&predicted, &frames[t * planes * s * s..][..planes * s * s]);
             }
             let logits = if (h, w) == (s, s) {
                 out.logits

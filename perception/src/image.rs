@@ -51,9 +51,82 @@ pub fn planar_rgb_crop(
     planar
 }
 
+/// Metres of depth across the depth plane's range ([`depth_plane`]): one metre either side
+/// of the region's middle, enough for an arm reaching towards or away from the camera.
+pub const DEPTH_PLANE_SPAN_M: f32 = 2.0;
+
+/// A depth image (camera-frame z, m; 0 or not finite where the camera has none) as the fourth
+/// input plane of a network that reads depth (`ProcNetConfig::reads_depth`), in [0, 1]:
+/// 0.5 at the median depth of the image's central half (the region of interest is centred
+/// on the arm, so this is the human's depth, not the wall's), brighter nearer, by
+/// 1 / [`DEPTH_PLANE_SPAN_M`] per metre, clamped; 0 where there is no depth, or everywhere
+/// when the central half has none. Relative depth does not change with the camera's
+/// distance, which the network's three distance classes span from 1.5 to 10 m.
+#[must_use]
+pub fn depth_plane(depth_m: &[f32], width: usize, height: usize) -> Vec<f32> {
+    let valid = |d: f32| d.is_finite() && d > 0.0;
+    let mut centre: Vec<f32> = (height / 4..height - height / 4)
+        .flat_map(|y| (width / 4..width - width / 4).map(move |x| (x, y)))
+        .filter_map(|(x, y)| depth_m.get(y * width + x).copied())
+        .filter(|&d| valid(d))
+        .collect();
+    if centre.is_empty() {
+        return vec![0.0; width * height];
+    }
+    let mid = centre.len() / 2;
+    let (_, &mut middle, _) = centre.select_nth_unstable_by(mid, f32::total_cmp);
+    depth_m
+        .iter()
+        .take(width * height)
+        .map(|&d| {
+            if valid(d) {
+                (0.5 + (middle - d) / DEPTH_PLANE_SPAN_M).clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// 0.5 at the central half's median, 1 / span per metre nearer brighter, clamped, 0
+    /// without depth; the border ring does not move the reference.
+    #[test]
+    fn depth_plane_is_relative_to_the_centre() {
+        // 4x4: the central 2x2 at 3, 3, 4, 5 m (median: the upper middle, 4 m); the ring
+        // far (wall at 20 m), near (0.5 m: clamped at 1) or without depth.
+        let d = [
+            20.0, 20.0, 0.0, f32::NAN, //
+            0.5, 3.0, 3.0, 20.0, //
+            4.5, 4.0, 5.0, 20.0, //
+            20.0, 20.0, 20.0, 20.0,
+        ];
+        let p = depth_plane(&d, 4, 4);
+        let v = |d: f32| 0.5 + (4.0 - d) / DEPTH_PLANE_SPAN_M;
+        assert_eq!(p[5], v(3.0));
+        assert_eq!(p[9], 0.5);
+        assert_eq!(p[10], v(5.0));
+        assert_eq!(p[8], v(4.5));
+        assert_eq!(p[4], 1.0);
+        assert_eq!(p[0], 0.0);
+        assert_eq!(p[2], 0.0);
+        assert_eq!(p[3], 0.0);
+        // The same scene 5 m further away gives the same plane.
+        let far: Vec<f32> = d.iter().map(|&x| if x > 0.0 { x + 5.0 } else { x }).collect();
+        let pf = depth_plane(&far, 4, 4);
+        for (a, b) in p.iter().zip(&pf).skip(5).take(6) {
+            assert!((a - b).abs() < 1e-6, "{a} {b}");
+        }
+        // No depth in the centre: nothing to be relative to.
+        let mut blind = d;
+        for i in [5, 6, 9, 10] {
+            blind[i] = 0.0;
+        }
+        assert_eq!(depth_plane(&blind, 4, 4), vec![0.0; 16]);
+    }
 
     /// The direct crop is the whole frame's conversion cropped, inside and past the edges.
     #[test]

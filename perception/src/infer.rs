@@ -96,15 +96,16 @@ impl ProcNet {
         self.state.as_ref().map_or(0, |s| s.frames)
     }
 
-    /// The forearm's probabilities of a planar RGB frame of any size (`[3, height, width]`
-    /// in [0, 1]): the frame resampled to the input, segmented (the stream's state advances),
-    /// and the mask resampled back to `width x height`.
+    /// The forearm's probabilities of a planar frame of any size (`[planes, height, width]`
+    /// in [0, 1]: RGB, and the depth plane for a network that reads it,
+    /// [`crate::data::input_frame`]): the frame resampled to the input, segmented (the
+    /// stream's state advances), and the mask resampled back to `width x height`.
     ///
     /// # Errors
     /// [`PerceptionError::Input`] when the network has no forearm class; network failures.
     pub fn forearm(&mut self, planar: &[f32], width: usize, height: usize) -> Result<Vec<f32>> {
+        let masks = self.segment_any_size(planar, width, height)?;
         let s = self.config.input_size;
-        let masks = self.segment(&resample(planar, 3, width, height, s, s))?;
         let forearm = masks
             .class(Class::Forearm)
             .ok_or_else(|| PerceptionError::Input {
@@ -125,17 +126,9 @@ impl ProcNet {
     /// A frame of another size than `width x height`, and as [`ProcNet::segment`]; the
     /// stream is then left as it was.
     pub fn start_view(&mut self, planar: &[f32], width: usize, height: usize) -> Result<()> {
-        if planar.len() != 3 * width * height {
-            return Err(PerceptionError::Input {
-                message: format!(
-                    "a planar RGB frame of {} values, not 3 x {width} x {height}",
-                    planar.len()
-                ),
-            });
-        }
-        let s = self.config.input_size;
+        self.check_planar(planar, width, height)?;
         let last = self.state.take();
-        if let Err(e) = self.segment(&resample(planar, 3, width, height, s, s)) {
+        if let Err(e) = self.segment_any_size(planar, width, height) {
             self.state = last;
             return Err(e);
         }
@@ -153,8 +146,8 @@ impl ProcNet {
         width: usize,
         height: usize,
     ) -> Result<Vec<(Class, Vec<f32>)>> {
+        let masks = self.segment_any_size(planar, width, height)?;
         let s = self.config.input_size;
-        let masks = self.segment(&resample(planar, 3, width, height, s, s))?;
         Ok(masks
             .classes
             .iter()
@@ -162,27 +155,53 @@ impl ProcNet {
             .collect())
     }
 
+    /// Refuses a planar frame that is not the network's planes at `width x height`.
+    fn check_planar(&self, planar: &[f32], width: usize, height: usize) -> Result<()> {
+        let planes = self.config.input_planes();
+        if planar.len() != planes * width * height {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "a planar frame of {} values, not {planes} x {width} x {height} ({})",
+                    planar.len(),
+                    if planes == 4 { "RGB and the depth plane" } else { "RGB" }
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// [`ProcNet::segment`] of a planar frame of any size, resampled to the input.
+    fn segment_any_size(&mut self, planar: &[f32], width: usize, height: usize) -> Result<Masks> {
+        self.check_planar(planar, width, height)?;
+        let s = self.config.input_size;
+        let planes = self.config.input_planes();
+        self.segment(&resample(planar, planes, width, height, s, s))
+    }
+
     /// Forgets the stream (a new camera, a cut): the next frame starts from a zero state.
     pub fn reset(&mut self) {
         self.state = None;
     }
 
-    /// Segments the next frame of the stream: `rgb` is `[3, size, size]` (planar) in [0, 1].
-    /// A frame of the wrong size, with a NaN or a value outside [0, 1] is an error, and the
-    /// stream's state is left as it was.
+    /// Segments the next frame of the stream: `rgb` is `[planes, size, size]` (planar) in
+    /// [0, 1], RGB and, for a network that reads depth, the depth plane
+    /// ([`crate::data::input_frame`]). A frame of the wrong size, with a NaN or a value
+    /// outside [0, 1] is an error, and the stream's state is left as it was.
     pub fn segment(&mut self, rgb: &[f32]) -> Result<Masks> {
         let s = self.config.input_size;
-        if rgb.len() != 3 * s * s {
-            let side = ((rgb.len() / 3) as f64).sqrt();
+        let p = self.config.input_planes();
+        if rgb.len() != p * s * s {
+            let side = ((rgb.len() / p) as f64).sqrt();
             return Err(PerceptionError::Input {
                 message: format!(
-                    "expected a planar RGB frame of 3x{s}x{s} = {} values, got {} ({}); resize to {s}x{s}",
-                    3 * s * s,
+                    "expected a planar {} frame of {p}x{s}x{s} = {} values, got {} ({}); resize to {s}x{s}",
+                    if p == 4 { "RGB-D" } else { "RGB" },
+                    p * s * s,
                     rgb.len(),
-                    if rgb.len().is_multiple_of(3) && side.fract() == 0.0 {
-                        format!("3x{side}x{side}")
+                    if rgb.len().is_multiple_of(p) && side.fract() == 0.0 {
+                        format!("{p}x{side}x{side}")
                     } else {
-                        "not 3 channels of a square image".to_string()
+                        format!("not {p} channels of a square image")
                     }
                 ),
             });
@@ -206,7 +225,7 @@ impl ProcNet {
                 ),
             });
         }
-        let x = Tensor::<4>::from_data(TensorData::new(rgb.to_vec(), [1, 3, s, s]), &self.device);
+        let x = Tensor::<4>::from_data(TensorData::new(rgb.to_vec(), [1, p, s, s]), &self.device);
         let state = match self.state.take() {
             Some(state) => state,
             None => self.model.initial_state(1, s, s, &self.device),

@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::cells::{Cell, CellState};
 use crate::config::{Activation, ProcNetConfig};
-use crate::error::Result;
+use crate::error::{PerceptionError, Result};
 use crate::nn::{Conv, Init, Norm, UpConv, decoder_groups, relu, upsample2};
 
 /// One predictive-coding layer: its prediction of its input, its representation cell and
@@ -84,7 +84,7 @@ impl ProcNetState {
 pub struct StepOutput {
     /// Per-class logits, `[b, classes, h, w]`; masks are `sigmoid(logits)`.
     pub logits: Tensor<4>,
-    /// The predicted frame `clamp(Ahat_0, 0, 1)`, `[b, 3, h, w]` (prediction loss on).
+    /// The predicted frame `clamp(Ahat_0, 0, 1)`, `[b, 3 or 4, h, w]` (prediction loss on).
     pub prediction: Option<Tensor<4>>,
     /// `sum_l mean(E_l)`: the prediction-error loss of this frame (prediction loss on).
     pub prediction_error: Option<Tensor<1>>,
@@ -160,6 +160,59 @@ impl ProcNetModel {
         true
     }
 
+    /// The same network grown to read the depth plane as a fourth input channel
+    /// (`input_channels[0]` 3 -> 4, [`crate::image::depth_plane`]): every weight kept, and
+    /// zero weights to and from the depth channel (layer 0's prediction of it, and the columns
+    /// of its errors in the layer-0 cell's input and the convolution up), so the grown network
+    /// segments exactly as the RGB one did until training gives depth a weight. E_0's
+    /// channels `[+RGB, -RGB]` become `[+RGB, +D, -RGB, -D]` (`[RGB, D]` without the
+    /// prediction loss). The weights of an RGB run start an RGB-D one this way.
+    ///
+    /// # Errors
+    /// [`PerceptionError::Config`] for a network that does not read RGB alone, or whose
+    /// layer-0 hGRU reads its input without a convolution.
+    pub fn grow_depth_input(mut self) -> Result<Self> {
+        let refuse = |message: String| {
+            Err(PerceptionError::Config {
+                key: "input_channels".into(),
+                message,
+            })
+        };
+        let a0 = self.input_channels(0);
+        if a0 != 3 {
+            return refuse(format!("grows a network that reads RGB (3 channels), not {a0}"));
+        }
+        // Zero columns go in before these channels of E_0 (and of whatever follows it).
+        let at: &[usize] = if self.prediction_loss { &[3, 6] } else { &[3] };
+        let layer = &mut self.layers[0];
+        if let Some(predict) = &mut layer.predict {
+            grow(&mut predict.weight, 0, &[3]);
+            if let Some(bias) = &mut predict.bias {
+                let b = bias.val();
+                let zero = Tensor::zeros([1], &b.device());
+                *bias = Param::from_tensor(Tensor::cat(vec![b, zero], 0).detach());
+            }
+        }
+        match &mut layer.cell {
+            Cell::Hgru(c) => match &mut c.input {
+                Some(conv) => grow(&mut conv.weight, 1, at),
+                None => {
+                    return refuse(
+                        "the layer-0 hGRU reads its input without a convolution (as many \
+                         input as representation channels): nothing to grow"
+                            .into(),
+                    );
+                }
+            },
+            Cell::ConvLstm(c) => grow(&mut c.gates.weight, 1, at),
+            Cell::Conv(c) => grow(&mut c.conv.weight, 1, at),
+        }
+        if let Some(up) = &mut layer.up {
+            grow(&mut up.weight, 1, at);
+        }
+        Ok(self)
+    }
+
     /// The state before the first frame: zeros.
     #[must_use]
     pub fn initial_state(
@@ -204,7 +257,13 @@ impl ProcNetModel {
 
     fn input_channels(&self, l: usize) -> usize {
         if l == 0 {
-            3
+            // Layer 0 always sends its error up: E_0 has 2 a_0 channels, a_0 without the
+            // prediction loss.
+            let e = self.layers[0]
+                .up
+                .as_ref()
+                .map_or(3, |conv| conv.weight.dims()[1]);
+            if self.prediction_loss { e / 2 } else { e }
         } else {
             self.layers[l - 1]
                 .up
@@ -221,7 +280,8 @@ impl ProcNetModel {
     /// Advances the network by one frame.
     ///
     /// # Shapes
-    /// `frame: [b, 3, h, w]` in [0, 1] -> logits `[b, classes, h, w]`
+    /// `frame: [b, 3 or 4, h, w]` in [0, 1] (RGB, and the depth plane for a network that
+    /// reads it) -> logits `[b, classes, h, w]`
     pub fn step(&self, frame: Tensor<4>, state: ProcNetState) -> (StepOutput, ProcNetState) {
         let l_count = self.layers.len();
         let ProcNetState {
@@ -327,6 +387,30 @@ impl ProcNetModel {
         }
         self.head.forward(self.head_norm.forward(x))
     }
+}
+
+/// Inserts a zero slice along `dim` of a weight before each of the indices `at` (of the
+/// weight as it was, ascending).
+fn grow(weight: &mut Param<Tensor<4>>, dim: usize, at: &[usize]) {
+    let w = weight.val();
+    let mut dims = w.dims();
+    let end = dims[dim];
+    dims[dim] = 1;
+    let zero = Tensor::<4>::zeros(dims, &w.device());
+    let mut pieces = Vec::with_capacity(2 * at.len() + 1);
+    let mut from = 0;
+    for &i in at {
+        if i > from {
+            pieces.push(w.clone().narrow(dim, from, i - from));
+        }
+        pieces.push(zero.clone());
+        from = i;
+    }
+    if end > from {
+        pieces.push(w.narrow(dim, from, end - from));
+    }
+    // Detached: a leaf, as a parameter must be on an autodiff device.
+    *weight = Param::from_tensor(Tensor::cat(pieces, dim).detach());
 }
 
 /// Detaches a state from the autodiff graph (the end of a BPTT window).

@@ -783,7 +783,7 @@ impl Trainer {
 
         // A wrong starting point is refused before the split is loaded.
         if let Some(init) = &cfg.init_weights {
-            weights::check_config_any_input_size(init, &cfg.model)?;
+            weights::check_start(init, &cfg.model)?;
         }
         let dataset = Dataset::open(&cfg.dataset)?;
         let train = load_split(&dataset, Split::Train, &cfg.model)?;
@@ -900,7 +900,7 @@ impl Trainer {
             tracing::info!(step = start, "resuming");
         } else if let Some(init) = &cfg.init_weights {
             // Its configuration was checked above, before the split was loaded.
-            weights::load_into(&mut model, init)?;
+            weights::load_start(&mut model, init, &device)?;
             tracing::info!(weights = %init.display(), "starting from trained weights");
         }
         self.rewrite_metrics(&metrics)?;
@@ -1187,6 +1187,7 @@ mod tests {
             },
             size: 0,
             frames: 0,
+            channels: 3,
             rgb: Vec::new(),
             target: Vec::new(),
         }

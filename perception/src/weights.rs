@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use burn::module::Module;
 use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::Device;
 
@@ -202,6 +203,53 @@ pub fn check_config_any_input_size(path: &Path, expected: &ProcNetConfig) -> Res
     let mut found = read_config(path)?;
     found.input_size = expected.input_size;
     compare_config(path, found, expected)
+}
+
+/// The check of a run's starting weights: [`check_config_any_input_size`], and a network
+/// that reads depth may also start from the same network's RGB weights
+/// ([`load_start`] grows them, [`ProcNetModel::grow_depth_input`]).
+pub fn check_start(path: &Path, expected: &ProcNetConfig) -> Result<()> {
+    let mut found = read_config(path)?;
+    found.input_size = expected.input_size;
+    if expected.reads_depth() && found.input_channels.first() == Some(&3) {
+        found.input_channels[0] = 4;
+    }
+    compare_config(path, found, expected)
+}
+
+/// Loads a run's starting weights ([`check_start`] has passed) into `model`: as they are, or
+/// RGB weights grown to read depth when `model` reads it.
+pub fn load_start(model: &mut ProcNetModel, path: &Path, device: &Device) -> Result<()> {
+    let found = read_config(path)?;
+    if found.reads_depth() || found.input_channels.first() != Some(&3) {
+        return load_into(model, path);
+    }
+    let mut rgb = found.init(device, 0)?;
+    load_into(&mut rgb, path)?;
+    let grown = rgb.grow_depth_input()?;
+    // Grown, it must fit the model it replaces parameter for parameter.
+    let shapes = |m: &ProcNetModel| {
+        let mut v = Vec::new();
+        m.visit(&mut ShapeOf(&mut v));
+        v
+    };
+    if shapes(&grown) != shapes(model) {
+        return Err(weights_error(
+            path,
+            "RGB weights grown to read depth do not fit the run's network",
+        ));
+    }
+    *model = grown;
+    Ok(())
+}
+
+/// Collects every parameter's shape, in the model's order.
+struct ShapeOf<'a>(&'a mut Vec<Vec<usize>>);
+
+impl burn::module::ModuleVisitor for ShapeOf<'_> {
+    fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<burn::tensor::Tensor<D>>) {
+        self.0.push(param.val().dims().to_vec());
+    }
 }
 
 fn compare_config(path: &Path, found: ProcNetConfig, expected: &ProcNetConfig) -> Result<()> {

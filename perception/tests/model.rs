@@ -402,3 +402,69 @@ fn the_paper_preset_has_the_authors_parameter_count() {
         .num_params();
     assert_eq!(params, 5_368_067);
 }
+
+/// A network grown to read depth (`ProcNetModel::grow_depth_input`) segments as the RGB one
+/// did whatever the depth plane holds, its weights load as an RGB-D network's, and it
+/// predicts the depth plane as zero until trained.
+#[test]
+fn a_network_grown_to_read_depth_segments_as_before() {
+    let device = Device::flex();
+    let dir = tempfile::tempdir().unwrap();
+    for cell in CellKind::ALL {
+        for prediction_loss in [false, true] {
+            let config = ProcNetConfig {
+                prediction_loss,
+                ..tiny(cell)
+            };
+            let rgb = config.init(&device, 5).unwrap();
+            let grown = config
+                .init(&device, 5)
+                .unwrap()
+                .grow_depth_input()
+                .unwrap();
+            let mut depth_config = config.clone();
+            depth_config.input_channels[0] = 4;
+            let path = dir.path().join(format!("{cell:?}-{prediction_loss}.safetensors"));
+            weights::save(&grown, &depth_config, &path).unwrap();
+            let (grown, read) = weights::load(&path, &device).unwrap();
+            assert!(read.reads_depth());
+            let s = config.input_size;
+            let (mut a, mut b) = (
+                rgb.initial_state(1, s, s, &device),
+                grown.initial_state(1, s, s, &device),
+            );
+            for t in 0..3 {
+                let x = reference_frame(t, 0, s);
+                let mut xd = x.clone();
+                xd.extend((0..s * s).map(|i| ((i * 7 + t) % 11) as f32 / 10.0));
+                let (oa, na) = rgb.step(
+                    Tensor::from_data(TensorData::new(x, [1, 3, s, s]), &device),
+                    a,
+                );
+                let (ob, nb) = grown.step(
+                    Tensor::from_data(TensorData::new(xd, [1, 4, s, s]), &device),
+                    b,
+                );
+                (a, b) = (na, nb);
+                let what = format!("{cell:?}, prediction loss {prediction_loss}, frame {t}");
+                let la: Vec<f32> = oa.logits.into_data().try_to_vec().unwrap();
+                let lb: Vec<f32> = ob.logits.into_data().try_to_vec().unwrap();
+                let worst = la.iter().zip(&lb).map(|(p, q)| (p - q).abs()).fold(0.0, f32::max);
+                assert!(worst < 1e-5, "{what}: logits differ by {worst}");
+                if let (Some(pa), Some(pb)) = (oa.prediction, ob.prediction) {
+                    let pa: Vec<f32> = pa.into_data().try_to_vec().unwrap();
+                    let pb: Vec<f32> = pb.into_data().try_to_vec().unwrap();
+                    assert_eq!(pb.len(), 4 * s * s, "{what}");
+                    let worst = pa.iter().zip(&pb).map(|(p, q)| (p - q).abs()).fold(0.0, f32::max);
+                    assert!(worst < 1e-5, "{what}: RGB prediction differs by {worst}");
+                    assert!(pb[3 * s * s..].iter().all(|&v| v == 0.0), "{what}");
+                }
+            }
+            // Only a network that reads RGB alone grows.
+            assert!(matches!(
+                grown.grow_depth_input(),
+                Err(PerceptionError::Config { .. })
+            ));
+        }
+    }
+}

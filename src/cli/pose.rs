@@ -101,9 +101,15 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
                     net.config().model_name()
                 );
             }
+            let depth_from = if net.config().reads_depth() {
+                Some(Dataset::open(&args.dataset)?)
+            } else {
+                None
+            };
             Box::new(NetworkMasks {
                 name: format!("{} ({})", net.config().model_name(), weights.display()),
                 net,
+                depth_from,
             })
         }
         other => anyhow::bail!("unknown --masks {other:?} (gt, gt@N, visible, procnet, baseline)"),

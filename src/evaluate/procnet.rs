@@ -108,6 +108,16 @@ impl ProcNetCamera {
                 key: "perception.weights".into(),
                 source: Box::new(e.into()),
             })?;
+            if net.config().reads_depth() && !config.depth {
+                return Err(Error::config(
+                    "perception.depth",
+                    format!(
+                        "{} is a network that reads depth: the camera must measure it \
+                         (perception.depth = true)",
+                        config.weights.display()
+                    ),
+                ));
+            }
             tracker = tracker.with_network(net)?;
         }
         let mut kinematics = KinematicState::new(&model.human);
@@ -349,15 +359,10 @@ pub fn bench_tracker(
             .render(&camera.scene.scene, &camera.camera, &mut camera.frame)
             .map_err(workcell_sim::SimError::from)?;
         let t1 = Instant::now();
-        let mut roi = camera.tracker.segment(&camera.camera, &camera.frame.rgb)?;
-        if config.depth {
-            let (w, h) = (camera.camera.width as usize, camera.camera.height as usize);
-            roi.masks.depth_m =
-                Some(
-                    roi.roi
-                        .sample_nearest(&camera.frame.depth_m, w, h, roi.masks.width),
-                );
-        }
+        let depth = config.depth.then_some(camera.frame.depth_m.as_slice());
+        let roi = camera
+            .tracker
+            .segment(&camera.camera, &camera.frame.rgb, depth)?;
         let t2 = Instant::now();
         let outcome = camera.tracker.track_roi(&roi.camera, &roi.masks)?;
         let t3 = Instant::now();

@@ -1,7 +1,7 @@
 //! Where the forearm masks of a pose evaluation come from.
 
 use workcell_render::Class;
-use workcell_render::dataset::Sequence;
+use workcell_render::dataset::{Dataset, Sequence};
 
 use crate::config::DATASET_CLASSES;
 use crate::data::one_hot;
@@ -153,20 +153,39 @@ fn forearm_of(classes: &[u8]) -> Vec<f32> {
 pub struct NetworkMasks {
     pub net: ProcNet,
     pub name: String,
+    /// Where a network that reads depth ([`crate::ProcNetConfig::reads_depth`]) reads each
+    /// frame's depth image; `None` for one that reads RGB alone.
+    pub depth_from: Option<Dataset>,
 }
 
 impl NetworkMasks {
-    /// Starts the network afresh on frame `t` when it is another view than frame `t - 1`
-    /// ([`ProcNet::start_view`]).
-    fn follow_view(&mut self, sequence: &Sequence, t: usize) -> Result<()> {
+    /// Frame `t` as the network reads it ([`crate::data::input_frame`]): RGB, and the depth
+    /// plane for a network that reads depth.
+    fn input(&self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
+        let (w, h) = (sequence.width as usize, sequence.height as usize);
+        let depth = if self.net.config().reads_depth() {
+            let dataset = self.depth_from.as_ref().ok_or_else(|| PerceptionError::Input {
+                message: format!("{} reads depth: give it the dataset's depth images", self.name),
+            })?;
+            Some(dataset.depth(&sequence.entry, t)?)
+        } else {
+            None
+        };
+        crate::data::input_frame(sequence.rgb_frame(t), depth.as_deref(), w, h, self.net.config())
+    }
+
+    /// Frame `t`'s input, after starting the network afresh on it when it is another view
+    /// than frame `t - 1` ([`ProcNet::start_view`]).
+    fn follow_view(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
+        let input = self.input(sequence, t)?;
         let fx = |t: usize| sequence.labels.get(t).map(|l| l.camera.fx);
         if let (Some(last), Some(now)) = (t.checked_sub(1).and_then(fx), fx(t))
             && crate::arm::view_jump(Some(last), now)
         {
             let (w, h) = (sequence.width as usize, sequence.height as usize);
-            self.net.start_view(sequence.rgb_frame(t), w, h)?;
+            self.net.start_view(&input, w, h)?;
         }
-        Ok(())
+        Ok(input)
     }
 }
 
@@ -179,13 +198,13 @@ impl MaskSource for NetworkMasks {
     }
     fn forearm(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
         let (w, h) = (sequence.width as usize, sequence.height as usize);
-        self.follow_view(sequence, t)?;
-        self.net.forearm(sequence.rgb_frame(t), w, h)
+        let input = self.follow_view(sequence, t)?;
+        self.net.forearm(&input, w, h)
     }
     fn arm(&mut self, sequence: &Sequence, t: usize) -> Result<ArmMasks> {
         let (w, h) = (sequence.width as usize, sequence.height as usize);
-        self.follow_view(sequence, t)?;
-        let planes = self.net.planes(sequence.rgb_frame(t), w, h)?;
+        let input = self.follow_view(sequence, t)?;
+        let planes = self.net.planes(&input, w, h)?;
         let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
         ArmMasks::from_planes(w, h, &refs)
     }
