@@ -803,6 +803,23 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         "setting of --method articulated",
     );
     refused(
+        &["eval", "pose", "--search-starts", "0", "--dataset", data_s],
+        "climbs 1 to 1000 cells",
+    );
+    refused(
+        &[
+            "eval",
+            "pose",
+            "--method",
+            "paper",
+            "--search-starts",
+            "30",
+            "--dataset",
+            data_s,
+        ],
+        "--search-starts is a setting of --method articulated",
+    );
+    refused(
         &["eval", "pose", "--masks", "oracle", "--dataset", data_s],
         "gt, gt@N, visible, procnet, baseline",
     );

@@ -119,9 +119,15 @@ pub fn input_frame(
     config: &ProcNetConfig,
 ) -> Result<Vec<f32>> {
     let n = width * height;
-    let mut planes = rgb.get(..3 * n).map(<[f32]>::to_vec).ok_or_else(|| PerceptionError::Input {
-        message: format!("a planar RGB frame of {} values, not 3 x {width} x {height}", rgb.len()),
-    })?;
+    let mut planes =
+        rgb.get(..3 * n)
+            .map(<[f32]>::to_vec)
+            .ok_or_else(|| PerceptionError::Input {
+                message: format!(
+                    "a planar RGB frame of {} values, not 3 x {width} x {height}",
+                    rgb.len()
+                ),
+            })?;
     if config.reads_depth() {
         let depth = depth_m.ok_or_else(|| PerceptionError::Input {
             message: "this network reads depth (input_channels[0] = 4): give it the depth image"
@@ -377,7 +383,10 @@ pub fn make_batch(
             x.extend(px);
             y.extend(lab);
         }
-        rgb.push(Tensor::from_data(TensorData::new(x, [b, planes, s, s]), device));
+        rgb.push(Tensor::from_data(
+            TensorData::new(x, [b, planes, s, s]),
+            device,
+        ));
         target.push(Tensor::from_data(
             TensorData::new(y, [b, classes, s, s]),
             device,
@@ -437,8 +446,14 @@ mod tests {
         assert!(config.reads_depth() && config.input_planes() == 4);
         let with_depth = input_frame(&rgb, Some(&depth), 2, 2, &config).unwrap();
         assert_eq!(with_depth[..12], rgb[..]);
-        assert_eq!(with_depth[12..], crate::image::depth_plane(&depth, 2, 2)[..]);
-        for (d, what) in [(None, "give it the depth image"), (Some(&depth[..3]), "3 values")] {
+        assert_eq!(
+            with_depth[12..],
+            crate::image::depth_plane(&depth, 2, 2)[..]
+        );
+        for (d, what) in [
+            (None, "give it the depth image"),
+            (Some(&depth[..3]), "3 values"),
+        ] {
             let e = input_frame(&rgb, d, 2, 2, &config).unwrap_err().to_string();
             assert!(e.contains(what), "{e}");
         }

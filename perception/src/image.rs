@@ -99,10 +99,22 @@ mod tests {
         // 4x4: the central 2x2 at 3, 3, 4, 5 m (median: the upper middle, 4 m); the ring
         // far (wall at 20 m), near (0.5 m: clamped at 1) or without depth.
         let d = [
-            20.0, 20.0, 0.0, f32::NAN, //
-            0.5, 3.0, 3.0, 20.0, //
-            4.5, 4.0, 5.0, 20.0, //
-            20.0, 20.0, 20.0, 20.0,
+            20.0,
+            20.0,
+            0.0,
+            f32::NAN, //
+            0.5,
+            3.0,
+            3.0,
+            20.0, //
+            4.5,
+            4.0,
+            5.0,
+            20.0, //
+            20.0,
+            20.0,
+            20.0,
+            20.0,
         ];
         let p = depth_plane(&d, 4, 4);
         let v = |d: f32| 0.5 + (4.0 - d) / DEPTH_PLANE_SPAN_M;
@@ -115,7 +127,10 @@ mod tests {
         assert_eq!(p[2], 0.0);
         assert_eq!(p[3], 0.0);
         // The same scene 5 m further away gives the same plane.
-        let far: Vec<f32> = d.iter().map(|&x| if x > 0.0 { x + 5.0 } else { x }).collect();
+        let far: Vec<f32> = d
+            .iter()
+            .map(|&x| if x > 0.0 { x + 5.0 } else { x })
+            .collect();
         let pf = depth_plane(&far, 4, 4);
         for (a, b) in p.iter().zip(&pf).skip(5).take(6) {
             assert!((a - b).abs() < 1e-6, "{a} {b}");

@@ -163,7 +163,11 @@ impl ProcNet {
                 message: format!(
                     "a planar frame of {} values, not {planes} x {width} x {height} ({})",
                     planar.len(),
-                    if planes == 4 { "RGB and the depth plane" } else { "RGB" }
+                    if planes == 4 {
+                        "RGB and the depth plane"
+                    } else {
+                        "RGB"
+                    }
                 ),
             });
         }

@@ -180,7 +180,9 @@ impl ProcNetModel {
         };
         let a0 = self.input_channels(0);
         if a0 != 3 {
-            return refuse(format!("grows a network that reads RGB (3 channels), not {a0}"));
+            return refuse(format!(
+                "grows a network that reads RGB (3 channels), not {a0}"
+            ));
         }
         // Zero columns go in before these channels of E_0 (and of whatever follows it).
         let at: &[usize] = if self.prediction_loss { &[3, 6] } else { &[3] };

@@ -900,7 +900,7 @@ impl Trainer {
             tracing::info!(step = start, "resuming");
         } else if let Some(init) = &cfg.init_weights {
             // Its configuration was checked above, before the split was loaded.
-            weights::load_start(&mut model, init, &device)?;
+            weights::load_start(&mut model, &cfg.model, init, &device)?;
             tracing::info!(weights = %init.display(), "starting from trained weights");
         }
         self.rewrite_metrics(&metrics)?;

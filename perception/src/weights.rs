@@ -217,11 +217,17 @@ pub fn check_start(path: &Path, expected: &ProcNetConfig) -> Result<()> {
     compare_config(path, found, expected)
 }
 
-/// Loads a run's starting weights ([`check_start`] has passed) into `model`: as they are, or
-/// RGB weights grown to read depth when `model` reads it.
-pub fn load_start(model: &mut ProcNetModel, path: &Path, device: &Device) -> Result<()> {
+/// Loads a run's starting weights ([`check_start`] has passed) into `model`, of the
+/// configuration `expected`: as they are, or RGB weights grown to read depth when `expected`
+/// reads it.
+pub fn load_start(
+    model: &mut ProcNetModel,
+    expected: &ProcNetConfig,
+    path: &Path,
+    device: &Device,
+) -> Result<()> {
     let found = read_config(path)?;
-    if found.reads_depth() || found.input_channels.first() != Some(&3) {
+    if !expected.reads_depth() || found.reads_depth() {
         return load_into(model, path);
     }
     let mut rgb = found.init(device, 0)?;
@@ -247,7 +253,10 @@ pub fn load_start(model: &mut ProcNetModel, path: &Path, device: &Device) -> Res
 struct ShapeOf<'a>(&'a mut Vec<Vec<usize>>);
 
 impl burn::module::ModuleVisitor for ShapeOf<'_> {
-    fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<burn::tensor::Tensor<D>>) {
+    fn visit_float<const D: usize>(
+        &mut self,
+        param: &burn::module::Param<burn::tensor::Tensor<D>>,
+    ) {
         self.0.push(param.val().dims().to_vec());
     }
 }

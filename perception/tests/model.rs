@@ -417,14 +417,12 @@ fn a_network_grown_to_read_depth_segments_as_before() {
                 ..tiny(cell)
             };
             let rgb = config.init(&device, 5).unwrap();
-            let grown = config
-                .init(&device, 5)
-                .unwrap()
-                .grow_depth_input()
-                .unwrap();
+            let grown = config.init(&device, 5).unwrap().grow_depth_input().unwrap();
             let mut depth_config = config.clone();
             depth_config.input_channels[0] = 4;
-            let path = dir.path().join(format!("{cell:?}-{prediction_loss}.safetensors"));
+            let path = dir
+                .path()
+                .join(format!("{cell:?}-{prediction_loss}.safetensors"));
             weights::save(&grown, &depth_config, &path).unwrap();
             let (grown, read) = weights::load(&path, &device).unwrap();
             assert!(read.reads_depth());
@@ -449,13 +447,21 @@ fn a_network_grown_to_read_depth_segments_as_before() {
                 let what = format!("{cell:?}, prediction loss {prediction_loss}, frame {t}");
                 let la: Vec<f32> = oa.logits.into_data().try_to_vec().unwrap();
                 let lb: Vec<f32> = ob.logits.into_data().try_to_vec().unwrap();
-                let worst = la.iter().zip(&lb).map(|(p, q)| (p - q).abs()).fold(0.0, f32::max);
+                let worst = la
+                    .iter()
+                    .zip(&lb)
+                    .map(|(p, q)| (p - q).abs())
+                    .fold(0.0, f32::max);
                 assert!(worst < 1e-5, "{what}: logits differ by {worst}");
                 if let (Some(pa), Some(pb)) = (oa.prediction, ob.prediction) {
                     let pa: Vec<f32> = pa.into_data().try_to_vec().unwrap();
                     let pb: Vec<f32> = pb.into_data().try_to_vec().unwrap();
                     assert_eq!(pb.len(), 4 * s * s, "{what}");
-                    let worst = pa.iter().zip(&pb).map(|(p, q)| (p - q).abs()).fold(0.0, f32::max);
+                    let worst = pa
+                        .iter()
+                        .zip(&pb)
+                        .map(|(p, q)| (p - q).abs())
+                        .fold(0.0, f32::max);
                     assert!(worst < 1e-5, "{what}: RGB prediction differs by {worst}");
                     assert!(pb[3 * s * s..].iter().all(|&v| v == 0.0), "{what}");
                 }

@@ -54,6 +54,10 @@ pub struct EvalPoseArgs {
     /// with a depth channel).
     #[arg(long)]
     pub depth: bool,
+    /// With --method articulated: the grid cells the global search climbs, the best distinct
+    /// ones first (1 to 1000; default ArmFitConfig's 10).
+    #[arg(long)]
+    pub search_starts: Option<usize>,
     /// With --method paper: search over the whole image instead of a region of interest
     /// around the mask.
     #[arg(long)]
@@ -150,10 +154,20 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                      fit renders the region the dataset stores and hangs the arm from its shoulder"
                 );
             }
+            let mut config = ArmFitConfig::default();
+            if let Some(n) = args.search_starts {
+                if !(1..=1000).contains(&n) {
+                    anyhow::bail!("--search-starts {n}: the global search climbs 1 to 1000 cells");
+                }
+                config.refine = n;
+            }
             PoseMethod::Articulated {
-                config: ArmFitConfig::default(),
+                config,
                 depth: args.depth,
             }
+        }
+        "paper" if args.search_starts.is_some() => {
+            anyhow::bail!("--search-starts is a setting of --method articulated")
         }
         "paper" if args.depth => {
             anyhow::bail!(

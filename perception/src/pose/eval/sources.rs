@@ -164,14 +164,26 @@ impl NetworkMasks {
     fn input(&self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
         let (w, h) = (sequence.width as usize, sequence.height as usize);
         let depth = if self.net.config().reads_depth() {
-            let dataset = self.depth_from.as_ref().ok_or_else(|| PerceptionError::Input {
-                message: format!("{} reads depth: give it the dataset's depth images", self.name),
-            })?;
+            let dataset = self
+                .depth_from
+                .as_ref()
+                .ok_or_else(|| PerceptionError::Input {
+                    message: format!(
+                        "{} reads depth: give it the dataset's depth images",
+                        self.name
+                    ),
+                })?;
             Some(dataset.depth(&sequence.entry, t)?)
         } else {
             None
         };
-        crate::data::input_frame(sequence.rgb_frame(t), depth.as_deref(), w, h, self.net.config())
+        crate::data::input_frame(
+            sequence.rgb_frame(t),
+            depth.as_deref(),
+            w,
+            h,
+            self.net.config(),
+        )
     }
 
     /// Frame `t`'s input, after starting the network afresh on it when it is another view
