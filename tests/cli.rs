@@ -519,6 +519,37 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         "weights of another configuration: repr_channels",
     );
 
+    // A network that reads depth starts from the same network's RGB weights, grown with zero
+    // weights to and from the depth plane: at a learning rate of 1e-15 it segments the test
+    // split as the RGB run does, to the table's last digit.
+    let depth_out = tmp.path().join("depth");
+    second_cycle(
+        second("[4, 4, 4]").replace("input_channels = [3, 4, 4]", "input_channels = [4, 4, 4]"),
+        &depth_out,
+    );
+    let forearm_row = |weights: &Path| {
+        let eval = workcell(&[
+            "eval",
+            "segmentation",
+            "--weights",
+            weights.to_str().expect("utf-8"),
+            "--dataset",
+            data_s,
+            "--split",
+            "test",
+        ]);
+        assert!(eval.status.success(), "{}", text(&eval.stderr));
+        text(&eval.stdout)
+            .lines()
+            .find(|l| l.starts_with("| forearm |"))
+            .map(str::to_string)
+            .expect("a forearm row")
+    };
+    assert_eq!(
+        forearm_row(&depth_out.join("procnet.safetensors")),
+        forearm_row(&out.join("procnet.safetensors"))
+    );
+
     let weights = out.join("procnet.safetensors");
     let weights_s = weights.to_str().expect("utf-8");
     // `eval segmentation` of the run's weights on a split of the dataset.
