@@ -696,9 +696,13 @@ pub fn evaluate(
                     .into_data()
                     .try_into_vec::<f32>()
                     .unwrap_or_default();
-                ev.frame_prediction
-                    .get_or_insert_default()
-                    .add(&predicted, &frames[t * planes * s * s..][..planes * s * s]);
+                // The colour planes: a network that reads depth predicts its plane after them.
+                let rgb = 3 * s * s;
+                if let Some(colour) = predicted.get(..rgb) {
+                    ev.frame_prediction
+                        .get_or_insert_default()
+                        .add(colour, &frames[t * planes * s * s..][..rgb]);
+                }
             }
             let logits = if (h, w) == (s, s) {
                 out.logits

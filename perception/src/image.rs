@@ -98,24 +98,13 @@ mod tests {
     fn depth_plane_is_relative_to_the_centre() {
         // 4x4: the central 2x2 at 3, 3, 4, 5 m (median: the upper middle, 4 m); the ring
         // far (wall at 20 m), near (0.5 m: clamped at 1) or without depth.
-        let d = [
-            20.0,
-            20.0,
-            0.0,
-            f32::NAN, //
-            0.5,
-            3.0,
-            3.0,
-            20.0, //
-            4.5,
-            4.0,
-            5.0,
-            20.0, //
-            20.0,
-            20.0,
-            20.0,
-            20.0,
-        ];
+        let d: Vec<f32> = [
+            [20.0, 20.0, 0.0, f32::NAN],
+            [0.5, 3.0, 3.0, 20.0],
+            [4.5, 4.0, 5.0, 20.0],
+            [20.0, 20.0, 20.0, 20.0],
+        ]
+        .concat();
         let p = depth_plane(&d, 4, 4);
         let v = |d: f32| 0.5 + (4.0 - d) / DEPTH_PLANE_SPAN_M;
         assert_eq!(p[5], v(3.0));
@@ -136,7 +125,7 @@ mod tests {
             assert!((a - b).abs() < 1e-6, "{a} {b}");
         }
         // No depth in the centre: nothing to be relative to.
-        let mut blind = d;
+        let mut blind = d.clone();
         for i in [5, 6, 9, 10] {
             blind[i] = 0.0;
         }
