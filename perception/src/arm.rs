@@ -508,7 +508,7 @@ impl ArmTracker {
         })?;
         let s = DEFAULT_INPUT_PX;
         let input = crate::data::input_frame(planar, depth_m, s, s, net.config())?;
-        let planar = input.as_slice();
+        let planar = &*input;
         if view_jump(self.last_fx, roi_camera.fx) {
             net.start_view(planar, s, s)?;
         }

@@ -1,6 +1,8 @@
 //! Dataset sequences as network inputs and targets at the model's resolution, and the
 //! sequence-consistent augmentation of training.
 
+use std::borrow::Cow;
+
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use workcell_render::dataset::{Dataset, Sequence, SequenceEntry, Split};
@@ -111,39 +113,38 @@ pub fn depth_frames(
 /// # Errors
 /// [`PerceptionError::Input`] when the network reads depth and there is none, or it is not
 /// the frame's size.
-pub fn input_frame(
-    rgb: &[f32],
+pub fn input_frame<'a>(
+    rgb: &'a [f32],
     depth_m: Option<&[f32]>,
     width: usize,
     height: usize,
     config: &ProcNetConfig,
-) -> Result<Vec<f32>> {
+) -> Result<Cow<'a, [f32]>> {
     let n = width * height;
-    let mut planes =
-        rgb.get(..3 * n)
-            .map(<[f32]>::to_vec)
-            .ok_or_else(|| PerceptionError::Input {
-                message: format!(
-                    "a planar RGB frame of {} values, not 3 x {width} x {height}",
-                    rgb.len()
-                ),
-            })?;
-    if config.reads_depth() {
-        let depth = depth_m.ok_or_else(|| PerceptionError::Input {
-            message: "this network reads depth (input_channels[0] = 4): give it the depth image"
-                .into(),
-        })?;
-        if depth.len() != n {
-            return Err(PerceptionError::Input {
-                message: format!(
-                    "a depth image of {} values, not the frame's {width} x {height}",
-                    depth.len()
-                ),
-            });
-        }
-        planes.extend(crate::image::depth_plane(depth, width, height));
+    let colour = rgb.get(..3 * n).ok_or_else(|| PerceptionError::Input {
+        message: format!(
+            "a planar RGB frame of {} values, not 3 x {width} x {height}",
+            rgb.len()
+        ),
+    })?;
+    // An RGB network reads the frame as it is: no copy on the tracker's per-frame path.
+    if !config.reads_depth() {
+        return Ok(Cow::Borrowed(colour));
     }
-    Ok(planes)
+    let depth = depth_m.ok_or_else(|| PerceptionError::Input {
+        message: "this network reads depth (input_channels[0] = 4): give it the depth image".into(),
+    })?;
+    if depth.len() != n {
+        return Err(PerceptionError::Input {
+            message: format!(
+                "a depth image of {} values, not the frame's {width} x {height}",
+                depth.len()
+            ),
+        });
+    }
+    let mut planes = colour.to_vec();
+    planes.extend(crate::image::depth_plane(depth, width, height));
+    Ok(Cow::Owned(planes))
 }
 
 /// The frames of a sequence at the model's resolution, `[frames, planes, size, size]`:
@@ -440,8 +441,11 @@ mod tests {
         let depth = [3.0, 3.5, 4.0, 0.0];
         let mut config = ProcNetConfig::cpu();
         assert!(!config.reads_depth());
-        assert_eq!(input_frame(&rgb, None, 2, 2, &config).unwrap(), rgb);
-        assert_eq!(input_frame(&rgb, Some(&depth), 2, 2, &config).unwrap(), rgb);
+        assert_eq!(*input_frame(&rgb, None, 2, 2, &config).unwrap(), rgb[..]);
+        assert_eq!(
+            *input_frame(&rgb, Some(&depth), 2, 2, &config).unwrap(),
+            rgb[..]
+        );
         config.input_channels[0] = 4;
         assert!(config.reads_depth() && config.input_planes() == 4);
         let with_depth = input_frame(&rgb, Some(&depth), 2, 2, &config).unwrap();

@@ -1,5 +1,7 @@
 //! Where the forearm masks of a pose evaluation come from.
 
+use std::borrow::Cow;
+
 use workcell_render::Class;
 use workcell_render::dataset::{Dataset, Sequence};
 
@@ -161,7 +163,7 @@ pub struct NetworkMasks {
 impl NetworkMasks {
     /// Frame `t` as the network reads it ([`crate::data::input_frame`]): RGB, and the depth
     /// plane for a network that reads depth.
-    fn input(&self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
+    fn input<'s>(&self, sequence: &'s Sequence, t: usize) -> Result<Cow<'s, [f32]>> {
         let (w, h) = (sequence.width as usize, sequence.height as usize);
         let depth = if self.net.config().reads_depth() {
             let dataset = self
@@ -188,7 +190,7 @@ impl NetworkMasks {
 
     /// Frame `t`'s input, after starting the network afresh on it when it is another view
     /// than frame `t - 1` ([`ProcNet::start_view`]).
-    fn follow_view(&mut self, sequence: &Sequence, t: usize) -> Result<Vec<f32>> {
+    fn follow_view<'s>(&mut self, sequence: &'s Sequence, t: usize) -> Result<Cow<'s, [f32]>> {
         let input = self.input(sequence, t)?;
         let fx = |t: usize| sequence.labels.get(t).map(|l| l.camera.fx);
         if let (Some(last), Some(now)) = (t.checked_sub(1).and_then(fx), fx(t))
