@@ -21,6 +21,12 @@ it reports the coverage there too, which is the honest figure: the calibration w
 the first.
 
     scripts/calibrate_uncertainty.py VALIDATION.csv [TEST.csv] [--target 0.99]
+        [--pool VALIDATION2.csv TEST2.csv]...
+
+`--pool` adds a second source of the same masks' frames (the tracker's own crops beside the
+stored ones, say): the calibration is chosen on every validation CSV together, and each
+source's coverage is reported on its own, so that a bound that holds on one kind of frame
+and not the other shows.
 
 Standard library only.
 """
@@ -133,16 +139,29 @@ def main():
     parser.add_argument("validation")
     parser.add_argument("test", nargs="?")
     parser.add_argument("--target", type=float, default=0.99)
+    parser.add_argument(
+        "--pool",
+        nargs=2,
+        action="append",
+        default=[],
+        metavar=("VALIDATION", "TEST"),
+        help="another source's CSVs, pooled into the calibration, reported on their own",
+    )
     args = parser.parse_args()
     if not 0.0 < args.target < 1.0:
         sys.exit("--target is a fraction in (0, 1)")
-    val = load(args.validation)
-    test = load(args.test) if args.test else None
-    if not val:
-        sys.exit(f"{args.validation}: no frame with a pose")
+    if args.pool and not args.test:
+        sys.exit("--pool needs the first source's TEST.csv too")
+    sources = [(args.validation, args.test)] + [tuple(p) for p in args.pool]
+    loaded = [(load(v), load(t) if t else None) for v, t in sources]
+    for (v_path, _), (v, _) in zip(sources, loaded):
+        if not v:
+            sys.exit(f"{v_path}: no frame with a pose")
+    val = [f for v, _ in loaded for f in v]
+    test = [f for _, t in loaded if t for f in t] if args.test else None
     errors = sorted(f[0] for f in val)
     print(
-        f"{args.validation}: {len(val)} frames with a pose; error median "
+        f"{' + '.join(v for v, _ in sources)}: {len(val)} frames with a pose; error median "
         f"{100 * quantile(errors, 0.5):.2f} cm, 99th percentile {100 * quantile(errors, 0.99):.2f} cm"
     )
     rows, best = calibrate(val, args.target)
@@ -176,6 +195,13 @@ def main():
                 f"{100 * coverage(own, best[0]):.2f} % of {len(own)}" if own else "no frames"
             )
         print(f"  from {100 * ([0.0] + HIDDEN_BANDS)[b]:.0f} %: " + "; ".join(cells))
+    if len(sources) > 1:
+        print("\ncoverage per source (validation, test)")
+        for (v_path, t_path), (v, t) in zip(sources, loaded):
+            print(
+                f"  {v_path}: {100 * coverage(v, best[0]):.2f} % of {len(v)}; "
+                f"{t_path}: {100 * coverage(t, best[0]):.2f} % of {len(t)}"
+            )
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use workcell_perception::pose::{ArmFitConfig, Calibration};
+use workcell_perception::pose::{ArmFitConfig, Calibration, MaskOrigin};
 use workcell_perception::{ArmTracker, Backend, ProcNet};
 use workcell_render::Camera;
 use workcell_render::dataset::HumanLabel;
@@ -53,8 +53,11 @@ impl TrackerCrop {
         weights: &Path,
         counts: Arc<CropCounts>,
     ) -> Result<Self> {
-        let fit = Calibration::measured(true, true).apply(ArmFitConfig::default());
         let net = ProcNet::load(weights, Backend::Flex)?;
+        let masks = MaskOrigin::network(net.config().reads_depth());
+        let fit = Calibration::measured(masks, true)
+            .unwrap_or_else(|| unreachable!("every network's masks are calibrated with depth"))
+            .apply(ArmFitConfig::default());
         let tracker = ArmTracker::new(human, X_WH, fit)?.with_network(net)?;
         Ok(Self { tracker, counts })
     }

@@ -293,7 +293,11 @@ fn dataset_generate_reads_frames_through_the_trackers_region() {
     let said = text(&run.stdout);
     assert!(said.contains("the tracker read 27 new frames"), "{said}");
     let stamp = std::fs::read_to_string(out.join("config.toml")).expect("stamp");
-    assert!(stamp.contains("# crop: tracker (ArmTracker, RGB-D, weights procnet-cpu.safetensors"));
+    // The shipped network for a camera with depth, which the tracker has here.
+    assert!(
+        stamp.contains("# crop: tracker (ArmTracker, RGB-D, weights procnet-depth.safetensors"),
+        "{stamp}"
+    );
     // Every frame's label names the region the tracker read it through.
     let manifest: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("manifest.json")).expect("manifest"))
@@ -1054,18 +1058,27 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     assert!(summary.contains("## Verdict") && summary.contains("![separation](separation.png)"));
     // ProcNet and the articulated fit in the loop: the camera is rendered, segmented and
     // fitted at its rate, and the report says so.
-    for (perception, name) in [
-        // The shipped weights by default, wherever the evaluation file is.
+    for (perception, set, name) in [
+        // The shipped weights by default, wherever the evaluation file is: the RGB network
+        // for an RGB camera, the network that reads depth for an RGB-D one.
         (
             "procnet",
-            "perception/weights/procnet-cpu.safetensors) + articulated render-and-compare",
+            "perception.depth=false",
+            "perception/weights/procnet-cpu.safetensors) + articulated render-and-compare, ",
+        ),
+        (
+            "procnet",
+            "perception.depth=true",
+            "perception/weights/procnet-depth.safetensors) + articulated render-and-compare \
+             with depth (RGB-D)",
         ),
         (
             "pose-gt-masks",
+            "perception.depth=false",
             "ground-truth arm masks + articulated render-and-compare",
         ),
     ] {
-        let loop_dir = dir.path().join(perception);
+        let loop_dir = dir.path().join(format!("{perception}-{set}"));
         let out = workcell(&[
             "evaluate",
             eval.to_str().expect("utf-8"),
@@ -1073,6 +1086,8 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
             "1",
             "--perception",
             perception,
+            "--set",
+            set,
             "--out",
             loop_dir.to_str().expect("utf-8"),
         ]);

@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use workcell::perception::pose::{ArmFitConfig, ArmMasks, Calibration};
+use workcell::perception::pose::{ArmFitConfig, ArmMasks, Calibration, MaskOrigin};
 use workcell::perception::{ArmTracker, Backend, ProcNet};
 use workcell::render::dataset::{FrameLabels, Manifest};
 use workcell::render::image::{PixelKind, read_png};
@@ -49,12 +49,19 @@ fn main() -> anyhow::Result<()> {
     model.retain_visuals(|g| human.look.shows(g.name.as_deref()));
     let X_WH = Pose::from(&human.X_WH);
     // The radius to inflate the capsules by, as measured for these masks and this camera
-    // (docs/perception.md): 99 % of the validation split's frames within it.
-    let config = Calibration::measured(!true_masks, depth).apply(ArmFitConfig::default());
+    // (docs/perception.md): 99 % of the validation split's frames within it. With depth the
+    // shipped network reads the depth image too.
+    let masks = if true_masks {
+        MaskOrigin::Rendered
+    } else {
+        MaskOrigin::network(depth)
+    };
+    let config = Calibration::measured(masks, depth)
+        .context("no calibration was measured for these masks without depth")?
+        .apply(ArmFitConfig::default());
     let mut tracker = ArmTracker::new(&model, &X_WH, config)?;
     if !true_masks {
-        let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("perception/weights/procnet-cpu.safetensors");
+        let weights = workcell::perception::weights::shipped_path(depth);
         tracker = tracker.with_network(ProcNet::load(&weights, Backend::Flex)?)?;
     }
 

@@ -11,6 +11,27 @@ use crate::config::ProcNetConfig;
 use crate::error::{PerceptionError, Result};
 use crate::model::ProcNetModel;
 
+/// The shipped ProcNet for an RGB camera, relative to the source tree's root.
+pub const SHIPPED_RGB: &str = "perception/weights/procnet-cpu.safetensors";
+
+/// The shipped ProcNet for a camera that measures depth (it reads the depth image as a fourth
+/// plane), relative to the source tree's root.
+pub const SHIPPED_DEPTH: &str = "perception/weights/procnet-depth.safetensors";
+
+/// The shipped weights for a camera with (`depth`) or without a depth channel, relative to
+/// the source tree's root.
+#[must_use]
+pub fn shipped(depth: bool) -> &'static str {
+    if depth { SHIPPED_DEPTH } else { SHIPPED_RGB }
+}
+
+/// [`shipped`] as a path in this crate's source tree, wherever the program runs from.
+#[must_use]
+pub fn shipped_path(depth: bool) -> std::path::PathBuf {
+    let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    crate_dir.parent().unwrap_or(crate_dir).join(shipped(depth))
+}
+
 /// The `format` entry of a weight file's metadata.
 pub const FORMAT: &str = "workcell-procnet/1";
 

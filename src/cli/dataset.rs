@@ -36,8 +36,8 @@ pub struct GenerateArgs {
     /// found). The scenes are the same either way.
     #[arg(long, default_value = "dataset")]
     pub crop: String,
-    /// With `--crop tracker`: the tracker's ProcNet weights [default: the shipped
-    /// perception/weights/procnet-cpu.safetensors].
+    /// With `--crop tracker`: the tracker's ProcNet weights [default: the shipped network
+    /// for a camera with depth, perception/weights/procnet-depth.safetensors].
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Make only the sequences of these splits (comma-separated: train, validation, test)
@@ -185,7 +185,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
             let weights = args
                 .weights
                 .clone()
-                .unwrap_or_else(|| PathBuf::from(super::SHIPPED_WEIGHTS));
+                .unwrap_or_else(|| PathBuf::from(workcell::perception::weights::SHIPPED_DEPTH));
             let factory = TrackerCrop::factory(&generator.human(), &weights, counts.clone())
                 .with_context(|| format!("the tracker's network, {}", weights.display()))?;
             let name = format!(

@@ -603,11 +603,12 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
     bar.finish_and_clear();
     let p = &evaluation.config.perception;
     say!(
-        "perception on {} frames of the cell's camera ({}; seed {}), {}, network and fit on {} thread(s)",
+        "perception on {} frames of the cell's camera ({}; seed {}), {}, weights {}, network and fit on {} thread(s)",
         timings.len(),
         args.evaluation.display(),
         args.seed,
         if p.depth { "RGB-D" } else { "RGB" },
+        p.weights_path().display(),
         args.threads,
     );
     say!();

@@ -147,9 +147,6 @@ impl Drop for OutputDir {
     }
 }
 
-/// The shipped ProcNet, relative to the source tree (the commands run from its root).
-pub const SHIPPED_WEIGHTS: &str = "perception/weights/procnet-cpu.safetensors";
-
 /// A progress bar of `len` steps drawn with indicatif's `template` (its default style when
 /// the template does not parse).
 pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {

@@ -10,7 +10,7 @@ use workcell::perception::pose::eval::{
     GroundTruthAtSize, GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, PoseMethod,
     VisibleMasks, compare_markdown, evaluate_pose,
 };
-use workcell::perception::pose::{ArmFitConfig, Calibration, HIDDEN_BANDS, PoseConfig};
+use workcell::perception::pose::{ArmFitConfig, Calibration, HIDDEN_BANDS, MaskOrigin, PoseConfig};
 use workcell::perception::{Backend, ProcNet, backend};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
 use workcell::render::dataset::{PredictionPanel, prediction_sheet};
@@ -35,8 +35,9 @@ pub struct EvalPoseArgs {
     /// and compared side by side (pose_compare.md).
     #[arg(long, default_value = "procnet")]
     pub masks: String,
-    /// Network weights for --masks procnet or baseline [default:
-    /// perception/weights/procnet-cpu.safetensors or baseline-cpu-64.safetensors].
+    /// Network weights for --masks procnet or baseline [default: the shipped
+    /// perception/weights/procnet-cpu.safetensors, procnet-depth.safetensors with --depth
+    /// (the network that reads the depth image too), or baseline-cpu-64.safetensors].
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// flex, tch or gpu (the latter two with their cargo features), for the network.
@@ -91,7 +92,7 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
             // The shipped ProcNet and baseline, both 64x64 networks of the cpu preset.
             let weights = args.weights.clone().unwrap_or_else(|| {
                 PathBuf::from(if kind == "procnet" {
-                    super::SHIPPED_WEIGHTS
+                    workcell::perception::weights::shipped(args.depth)
                 } else {
                     "perception/weights/baseline-cpu-64.safetensors"
                 })
@@ -196,8 +197,10 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         // The bound of "within the bound": the calibration measured for these masks, where
         // there is one (the shipped ProcNet's, or true masks').
         let calibration = match *kind {
-            "gt" => Some(Calibration::measured(false, args.depth)),
-            "procnet" if args.weights.is_none() => Some(Calibration::measured(true, args.depth)),
+            "gt" => Calibration::measured(MaskOrigin::Rendered, args.depth),
+            "procnet" if args.weights.is_none() => {
+                Calibration::measured(MaskOrigin::network(args.depth), args.depth)
+            }
             _ => None,
         };
         let method = match &method {

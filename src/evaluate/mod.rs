@@ -194,8 +194,10 @@ impl Evaluation {
         // Paths inside the file are relative to the file.
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario_path = dir.join(&config.cell);
-        if config.perception.weights.is_relative() {
-            config.perception.weights = dir.join(&config.perception.weights);
+        if let Some(weights) = &mut config.perception.weights {
+            if weights.is_relative() {
+                *weights = dir.join(&*weights);
+            }
         }
         let mut scenario = Scenario::from_file(&scenario_path)?;
         if let Some(speed) = config.human_speed_scale {
@@ -480,7 +482,7 @@ mod tests {
         let evaluation = Evaluation::from_file(&path).expect("evaluation");
         assert_eq!(
             evaluation.config.perception.weights,
-            dir.path().join("nets/w.safetensors")
+            Some(dir.path().join("nets/w.safetensors"))
         );
         assert_eq!(evaluation.scenario_path, std::path::PathBuf::from(cell));
 

@@ -36,9 +36,12 @@ pub struct PerceptionConfig {
     /// `procnet` (the cell's camera rendered, ProcNet and render-and-compare; `rate_hz` is
     /// the camera's, the noise settings do not apply).
     pub kind: PerceptionKind,
-    /// For `procnet`: the network's weights, relative to the evaluation file. Default: the
-    /// shipped `perception/weights/procnet-cpu.safetensors` of this source tree.
-    pub weights: std::path::PathBuf,
+    /// For `procnet`: the network's weights, relative to the evaluation file. Default (none
+    /// given): the shipped ones of this source tree for the camera,
+    /// `perception/weights/procnet-depth.safetensors` (the network that reads the depth
+    /// image too) where `depth`, else `procnet-cpu.safetensors` ([`Self::weights_path`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weights: Option<std::path::PathBuf>,
     /// For `procnet`: the cell's camera by name; empty for the first. Default empty.
     pub camera: String,
     /// For `procnet`: `network` (ProcNet's masks of the arm's parts) or `ground_truth` (each
@@ -110,11 +113,7 @@ impl Default for PerceptionConfig {
     fn default() -> Self {
         Self {
             kind: PerceptionKind::Noisy,
-            weights: concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/perception/weights/procnet-cpu.safetensors"
-            )
-            .into(),
+            weights: None,
             camera: String::new(),
             masks: MaskKind::Network,
             depth: false,
@@ -135,6 +134,14 @@ impl Default for PerceptionConfig {
 }
 
 impl PerceptionConfig {
+    /// The network's weights: `weights`, or the shipped ones for the camera.
+    #[must_use]
+    pub fn weights_path(&self) -> std::path::PathBuf {
+        self.weights
+            .clone()
+            .unwrap_or_else(|| crate::perception::weights::shipped_path(self.depth))
+    }
+
     /// The uncertainty of an estimate `age_s` old, m, for an estimate whose bound is
     /// `base_m + drift_m_s age + a_max age^2 / 2`. Until the next frame is due
     /// (`latency_s + 1 / rate_hz` after exposure) the bound is held at its value then: the
@@ -293,9 +300,9 @@ impl PerceptionConfig {
                     // feed-forward baseline); an unreadable file fails when it is loaded.
                     MaskKind::Network => format!(
                         "{} ({})",
-                        crate::perception::weights::read_config(&self.weights)
+                        crate::perception::weights::read_config(&self.weights_path())
                             .map_or("ProcNet", |c| c.model_name()),
-                        self.weights.display()
+                        self.weights_path().display()
                     ),
                     MaskKind::GroundTruth => "ground-truth arm masks".to_string(),
                 },

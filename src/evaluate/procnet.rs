@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 
-use workcell_perception::pose::{ArmFitConfig, ArmMasks, Calibration};
+use workcell_perception::pose::{ArmFitConfig, ArmMasks, Calibration, MaskOrigin};
 use workcell_perception::{ArmTracker, Backend, NoEstimate, ProcNet};
 use workcell_safety::{HumanEstimate, HumanGeometry};
 use workcell_sim::render::occlusion::{OCCLUDER_DEPTH_M, Occluder, OccluderKind, fit_occluder};
@@ -86,8 +86,36 @@ impl ProcNetCamera {
         let camera = camera_config
             .camera()
             .map_err(workcell_sim::SimError::from)?;
-        let network = config.masks == MaskKind::Network;
-        let measured = Calibration::measured(network, config.depth);
+        let net = if config.masks == MaskKind::Network {
+            let weights = config.weights_path();
+            let net = ProcNet::load(&weights, Backend::Flex).map_err(|e| Error::At {
+                key: "perception.weights".into(),
+                source: Box::new(e.into()),
+            })?;
+            if net.config().reads_depth() && !config.depth {
+                return Err(Error::config(
+                    "perception.depth",
+                    format!(
+                        "{} is a network that reads depth: the camera must measure it \
+                         (perception.depth = true)",
+                        weights.display()
+                    ),
+                ));
+            }
+            Some(net)
+        } else {
+            None
+        };
+        let masks = match &net {
+            Some(net) => MaskOrigin::network(net.config().reads_depth()),
+            None => MaskOrigin::Rendered,
+        };
+        let measured = Calibration::measured(masks, config.depth).ok_or_else(|| {
+            Error::config(
+                "perception.depth",
+                "no uncertainty was calibrated for these masks without depth",
+            )
+        })?;
         let fit = Calibration {
             scale: if config.uncertainty_scale >= 0.0 {
                 config.uncertainty_scale
@@ -103,21 +131,7 @@ impl ProcNetCamera {
         }
         .apply(ArmFitConfig::default());
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
-        if network {
-            let net = ProcNet::load(&config.weights, Backend::Flex).map_err(|e| Error::At {
-                key: "perception.weights".into(),
-                source: Box::new(e.into()),
-            })?;
-            if net.config().reads_depth() && !config.depth {
-                return Err(Error::config(
-                    "perception.depth",
-                    format!(
-                        "{} is a network that reads depth: the camera must measure it \
-                         (perception.depth = true)",
-                        config.weights.display()
-                    ),
-                ));
-            }
+        if let Some(net) = net {
             tracker = tracker.with_network(net)?;
         }
         let mut kinematics = KinematicState::new(&model.human);

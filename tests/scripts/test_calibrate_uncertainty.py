@@ -1,7 +1,11 @@
 """scripts/calibrate_uncertainty.py against hand-computed answers (standard library only)."""
 
+import csv
 import importlib.util
 import os
+import subprocess
+import sys
+import tempfile
 import unittest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -64,6 +68,41 @@ class Calibrate(unittest.TestCase):
         frames = [(0.05, 0.0, 0.0, 0.1)] * 100 + [(0.01, 0.0, 0.0, 0.9)] * 100
         calibration = calibrate_uncertainty.band_floors(frames, 0.0, 0.99)
         self.assertEqual(calibration[2], (0.05, 0.05, 0.05))
+
+
+    def test_pooled_sources_are_calibrated_together_and_reported_apart(self):
+        # Source A: 100 frames of 1 cm error; source B: 100 of 10 cm. Pooled, the 99 %
+        # floor (index 198 of 200 sorted errors) is 10 cm and covers both; each source's
+        # coverage is its own line.
+        def write(path, error_cm, n=100):
+            with open(path, "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(["no_pose", "ends_cm", "sigma_m", "spread_m", "hidden_share"])
+                for _ in range(n):
+                    w.writerow(["", error_cm, 0.0, 0.0, 0.0])
+
+        with tempfile.TemporaryDirectory() as tmp:
+            paths = {k: os.path.join(tmp, f"{k}.csv") for k in ("av", "at", "bv", "bt")}
+            write(paths["av"], 1.0)
+            write(paths["at"], 1.0)
+            write(paths["bv"], 10.0)
+            write(paths["bt"], 20.0)
+            script = os.path.join(HERE, "..", "..", "scripts", "calibrate_uncertainty.py")
+            out = subprocess.run(
+                [sys.executable, script, paths["av"], paths["at"], "--pool", paths["bv"], paths["bt"]],
+                capture_output=True, text=True, check=True,
+            ).stdout
+            self.assertIn("200 frames with a pose", out)
+            self.assertIn("smallest mean radius: scale 0, floor 0.1000 m", out)
+            self.assertIn(f"{paths['at']}: 100.00 % of 100", out)
+            # B's test errors are twice its validation's: none within the bound.
+            self.assertIn(f"{paths['bt']}: 0.00 % of 100", out)
+            lone = subprocess.run(
+                [sys.executable, script, paths["av"], "--pool", paths["bv"], paths["bt"]],
+                capture_output=True, text=True,
+            )
+            self.assertNotEqual(lone.returncode, 0)
+            self.assertIn("--pool needs", lone.stderr)
 
 
 if __name__ == "__main__":

@@ -64,7 +64,7 @@ mod search;
 
 pub use articulated::{
     ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmGain, ArmMasks, ArticulatedArm, Calibration,
-    FITTED_PARTS, HIDDEN_BANDS, HIDDEN_MARGIN_M,
+    FITTED_PARTS, HIDDEN_BANDS, HIDDEN_MARGIN_M, MaskOrigin,
 };
 pub use config::PoseConfig;
 pub use image::f_m;
