@@ -194,10 +194,10 @@ impl Evaluation {
         // Paths inside the file are relative to the file.
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario_path = dir.join(&config.cell);
-        if let Some(weights) = &mut config.perception.weights {
-            if weights.is_relative() {
-                *weights = dir.join(&*weights);
-            }
+        if let Some(weights) = &mut config.perception.weights
+            && weights.is_relative()
+        {
+            *weights = dir.join(&*weights);
         }
         let mut scenario = Scenario::from_file(&scenario_path)?;
         if let Some(speed) = config.human_speed_scale {
