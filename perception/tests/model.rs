@@ -347,8 +347,8 @@ fn flex_and_the_gpu_give_the_same_masks() {
 }
 
 /// The shipped weights (ProcNet, flesh at 64x64 and skeletal at 128x128, and its feed-forward
-/// baseline) load, are of the configuration their recipe trains (ProcNet: `configs/train.toml`
-/// and `configs/train-skeletal.toml`; the baseline: `configs/train-64.toml` with `--model
+/// baseline) load, are of the configuration their recipe trains (ProcNet: `configs/train.toml`,
+/// `configs/train-skeletal.toml` and `configs/train-64-depth.toml`; the baseline: `configs/train-64.toml` with `--model
 /// baseline`), stay within the 20 MB budget together, and run.
 #[test]
 fn the_shipped_weights_load_and_match_their_recipe() {
@@ -360,6 +360,7 @@ fn the_shipped_weights_load_and_match_their_recipe() {
     for (file, model) in [
         ("procnet-cpu", recipe("train.toml").model),
         ("procnet-skeletal", recipe("train-skeletal.toml").model),
+        ("procnet-depth", recipe("train-64-depth.toml").model),
         (
             "baseline-cpu-64",
             recipe("train-64.toml").model.feed_forward_baseline(),
@@ -371,7 +372,12 @@ fn the_shipped_weights_load_and_match_their_recipe() {
         assert_eq!(net.config(), &model, "{file}");
         assert_eq!(net.config().is_feed_forward(), file.starts_with("baseline"));
         let s = net.config().input_size;
-        let masks = net.segment(&reference_frame(0, 0, s)).unwrap();
+        let mut frame = reference_frame(0, 0, s);
+        if net.config().reads_depth() {
+            // The depth plane of a region whose centre is at the median depth.
+            frame.extend(std::iter::repeat_n(0.5, s * s));
+        }
+        let masks = net.segment(&frame).unwrap();
         // The shipped files name their classes as strings; they read back as the classes.
         assert_eq!(
             masks.classes,
@@ -388,6 +394,15 @@ fn the_shipped_weights_load_and_match_their_recipe() {
         total < 20 * 1024 * 1024,
         "{total} bytes of weights, over the 20 MB budget"
     );
+    // What runs where no weights are named: the network that reads depth for a camera that
+    // measures it, the RGB one otherwise.
+    for depth in [false, true] {
+        let config = workcell_perception::weights::read_config(
+            &workcell_perception::weights::shipped_path(depth),
+        )
+        .unwrap();
+        assert_eq!(config.reads_depth(), depth);
+    }
 }
 
 /// The paper preset has the size of the authors' runs: about 5.4 M parameters for 3 layers
