@@ -852,7 +852,11 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "--dataset",
             data_s,
         ],
-        "--search-starts is a setting of --method articulated",
+        "--search-starts and --min-gain are settings of --method articulated",
+    );
+    refused(
+        &["eval", "pose", "--min-gain", "1.5", "--dataset", data_s],
+        "--min-gain 1.5: a gain from 0 to 1",
     );
     refused(
         &["eval", "pose", "--masks", "oracle", "--dataset", data_s],

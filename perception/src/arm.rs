@@ -328,8 +328,12 @@ pub struct ArmTracker {
     /// The last estimate's shoulder, elbow and wrist: the next region of interest follows
     /// them.
     joints_W: Option<[Vector; 3]>,
-    /// Frames in a row with a pose: the region follows the arm from [`CONFIRM_POSES`] on.
+    /// Frames in a row with a pose (a held frame, [`HOLD_REGION`], keeps the count): the
+    /// region follows the arm from [`CONFIRM_POSES`] on.
     streak: usize,
+    /// Frames in a row without a pose while the region still follows the last estimate
+    /// (at most [`HOLD_REGION`]).
+    held: usize,
     /// The focal length, px, of the last region the network read: a region of another
     /// scale is another view, and the network's memory of the last one is dropped.
     last_fx: Option<f64>,
@@ -351,6 +355,13 @@ pub fn view_jump(last_fx: Option<f64>, fx: f64) -> bool {
 /// keep the real one out of view for frames on end (measured: docs/perception.md, "The
 /// deployed tracker's own crops").
 pub const CONFIRM_POSES: usize = 2;
+
+/// Frames without a pose for which the region keeps following the arm's last estimate
+/// before it falls back to the workspace. The network's first frames of a tracked crop can
+/// miss a far arm that its next frame finds; falling back at once starts it afresh on the
+/// workspace crop and then on the tracked one again (measured: docs/perception.md, "A new
+/// view read three times").
+pub const HOLD_REGION: usize = 1;
 
 /// The side of the region of interest's image the fit reads (the networks' masks are
 /// resampled to it): the size of the datasets' stored regions.
@@ -385,6 +396,7 @@ impl ArmTracker {
             net: None,
             joints_W: None,
             streak: 0,
+            held: 0,
             last_fx: None,
         })
     }
@@ -429,6 +441,7 @@ impl ArmTracker {
         self.fitter.reset();
         self.joints_W = None;
         self.streak = 0;
+        self.held = 0;
         self.last_fx = None;
         if let Some(net) = &mut self.net {
             net.reset();
@@ -438,6 +451,7 @@ impl ArmTracker {
     /// The region of `camera`'s image the next frame is read through: around the last
     /// estimate's shoulder, elbow and wrist ([`Roi::of_joints`], the middle of
     /// [`roi::TRACKED_MARGIN`]) once [`CONFIRM_POSES`] frames in a row gave a pose, else
+    /// (and for [`HOLD_REGION`] frames without one after that), else
     /// the sphere the forearm can reach ([`Roi::of_sphere`]), else the whole frame.
     #[must_use]
     pub fn roi(&self, camera: &Camera) -> Roi {
@@ -509,7 +523,8 @@ impl ArmTracker {
         let s = DEFAULT_INPUT_PX;
         let input = crate::data::input_frame(planar, depth_m, s, s, net.config())?;
         let planar = &*input;
-        if view_jump(self.last_fx, roi_camera.fx) {
+        // A stream's first frame is a new view too.
+        if self.last_fx.is_none() || view_jump(self.last_fx, roi_camera.fx) {
             net.start_view(planar, s, s)?;
         }
         self.last_fx = Some(roi_camera.fx);
@@ -630,8 +645,13 @@ impl ArmTracker {
         let fit = match self.fitter.fit(camera, masks)? {
             Ok(fit) => fit,
             Err(reason) => {
-                self.joints_W = None;
-                self.streak = 0;
+                if self.streak >= CONFIRM_POSES && self.held < HOLD_REGION {
+                    self.held += 1;
+                } else {
+                    self.joints_W = None;
+                    self.streak = 0;
+                    self.held = 0;
+                }
                 return Ok(Err(NoEstimate::NoPose(reason)));
             }
         };
@@ -666,6 +686,7 @@ impl ArmTracker {
                 });
         self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist]);
         self.streak += 1;
+        self.held = 0;
         Ok(Ok(ArmEstimate {
             parts,
             uncertainty_m: fit.uncertainty_m,
@@ -919,15 +940,19 @@ mod tests {
             .expect("in front");
         let inside = |x: f64, x0: i64| x >= x0 as f64 && x <= (x0 + i64::from(tracked.size)) as f64;
         assert!(inside(u, tracked.x0) && inside(v, tracked.y0));
-        // A lost track falls back to the workspace.
+        // A frame without a pose keeps the region for HOLD_REGION frames; a track lost for
+        // longer falls back to the workspace.
         let empty = ArmMasks::from_classes(&vec![0; 640 * 480], 640, 480).expect("masks");
-        assert!(
+        assert_eq!(HOLD_REGION, 1);
+        let mut lose = || {
             tracker
                 .track_masks(&camera, &empty)
                 .expect("no error")
-                .is_err()
-        );
-        assert_eq!(tracker.roi(&camera), workspace);
+                .expect_err("no arm in empty masks");
+            tracker.region(&camera)
+        };
+        assert_eq!(lose(), (tracked, RoiKind::Tracked));
+        assert_eq!(lose(), (workspace, RoiKind::Workspace));
     }
 
     /// A tracker of the built-in human at the origin with the shipped network.
@@ -963,8 +988,9 @@ mod tests {
     }
 
     /// A region already cut out ([`ArmTracker::track_region`]): the network keeps its memory
-    /// while the region keeps its scale, and starts afresh, with one read of the new view,
-    /// when the scale jumps (the workspace crop to the tracked one and back).
+    /// while the region keeps its scale, and starts afresh, with VIEW_READS reads of the new
+    /// view, on the stream's first frame and when the scale jumps (the workspace crop to the
+    /// tracked one and back).
     #[test]
     fn a_region_of_another_scale_starts_the_network_afresh() {
         let mut tracker = shipped_tracker();
@@ -981,12 +1007,14 @@ mod tests {
             .expect("camera");
         let rgb = vec![90u8; 3 * s * s];
         let frames = |t: &ArmTracker| t.network().map(ProcNet::frames);
+        let r = crate::VIEW_READS;
+        assert_eq!(r, 3);
         for (camera, expected) in [
-            (&wide, 1),
-            (&near, 2),
-            (&zoomed, 2),
-            (&zoomed, 3),
-            (&wide, 2),
+            (&wide, r + 1),
+            (&near, r + 2),
+            (&zoomed, r + 1),
+            (&zoomed, r + 2),
+            (&wide, r + 1),
         ] {
             let outcome = tracker.track_region(camera, &rgb, None).expect("tracked");
             assert!(outcome.is_err(), "a grey frame shows no arm");

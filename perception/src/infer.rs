@@ -13,6 +13,13 @@ use crate::image::resample;
 use crate::model::{ProcNetModel, ProcNetState};
 use crate::weights;
 
+/// Reads of a new view's first frame before the frame itself ([`ProcNet::start_view`]). A
+/// recurrent network's masks of a view it has just met are its worst: through the tracker's
+/// own crops of the test split, the network that reads depth gave no pose in 3 frames with
+/// at least a third of the forearm in view after one read, and in none after three (each
+/// stream's first frame a new view too; docs/perception.md, "A new view read three times").
+pub const VIEW_READS: usize = 3;
+
 /// Class probabilities of one frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Masks {
@@ -117,10 +124,11 @@ impl ProcNet {
         Ok(resample(forearm, 1, s, s, width, height))
     }
 
-    /// Starts the stream afresh on a new view of the scene (a region of interest of another
-    /// scale, whose pixels the stream's memory is not of): forgets the last view and reads
-    /// `planar` (a frame of any size, as [`ProcNet::planes`] takes it) once, so that the
-    /// next call on the same frame has one frame of memory of this view.
+    /// Starts the stream afresh on a new view of the scene (a camera stream's first frame,
+    /// a region of interest of another scale, whose pixels the stream's memory is not of):
+    /// forgets the last view and reads `planar` (a frame of any size, as
+    /// [`ProcNet::planes`] takes it) [`VIEW_READS`] times, so that the next call on the same
+    /// frame has that much memory of this view.
     ///
     /// # Errors
     /// A frame of another size than `width x height`, and as [`ProcNet::segment`]; the
@@ -128,9 +136,11 @@ impl ProcNet {
     pub fn start_view(&mut self, planar: &[f32], width: usize, height: usize) -> Result<()> {
         self.check_planar(planar, width, height)?;
         let last = self.state.take();
-        if let Err(e) = self.segment_any_size(planar, width, height) {
-            self.state = last;
-            return Err(e);
+        for _ in 0..VIEW_READS {
+            if let Err(e) = self.segment_any_size(planar, width, height) {
+                self.state = last;
+                return Err(e);
+            }
         }
         Ok(())
     }

@@ -32,6 +32,6 @@ pub use arm::{
 pub use backend::Backend;
 pub use config::{Activation, CellKind, ProcNetConfig};
 pub use error::{PerceptionError, Result};
-pub use infer::{Masks, ProcNet};
+pub use infer::{Masks, ProcNet, VIEW_READS};
 pub use model::{ProcNetModel, ProcNetState, StepOutput};
 pub use train::{TrainConfig, Trainer};

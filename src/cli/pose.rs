@@ -59,6 +59,10 @@ pub struct EvalPoseArgs {
     /// ones first (1 to 1000; default ArmFitConfig's 10).
     #[arg(long)]
     pub search_starts: Option<usize>,
+    /// With --method articulated: a fit whose gain is below this is no pose (0 to 1; default
+    /// ArmFitConfig's 0.3).
+    #[arg(long)]
+    pub min_gain: Option<f64>,
     /// With --method paper: search over the whole image instead of a region of interest
     /// around the mask.
     #[arg(long)]
@@ -162,13 +166,19 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 config.refine = n;
             }
+            if let Some(g) = args.min_gain {
+                if !(0.0..=1.0).contains(&g) {
+                    anyhow::bail!("--min-gain {g}: a gain from 0 to 1");
+                }
+                config.min_gain = g;
+            }
             PoseMethod::Articulated {
                 config,
                 depth: args.depth,
             }
         }
-        "paper" if args.search_starts.is_some() => {
-            anyhow::bail!("--search-starts is a setting of --method articulated")
+        "paper" if args.search_starts.is_some() || args.min_gain.is_some() => {
+            anyhow::bail!("--search-starts and --min-gain are settings of --method articulated")
         }
         "paper" if args.depth => {
             anyhow::bail!(

@@ -150,8 +150,8 @@ fn forearm_of(classes: &[u8]) -> Vec<f32> {
 
 /// A segmentation network's forearm probabilities, resampled to the dataset's size. Where a
 /// frame's region of interest changes scale ([`crate::arm::view_jump`], as the deployed
-/// tracker's crop does when it finds or loses the arm), the network starts afresh, as the
-/// tracker's does.
+/// tracker's crop does when it finds or loses the arm), and on a sequence's first frame, the
+/// network starts afresh, as the tracker's does.
 pub struct NetworkMasks {
     pub net: ProcNet,
     pub name: String,
@@ -188,14 +188,15 @@ impl NetworkMasks {
         )
     }
 
-    /// Frame `t`'s input, after starting the network afresh on it when it is another view
-    /// than frame `t - 1` ([`ProcNet::start_view`]).
+    /// Frame `t`'s input, after starting the network afresh on it when it is the
+    /// sequence's first or another view than frame `t - 1` ([`ProcNet::start_view`]), as
+    /// the tracker's network starts on a stream's first frame and on each new view.
     fn follow_view<'s>(&mut self, sequence: &'s Sequence, t: usize) -> Result<Cow<'s, [f32]>> {
         let input = self.input(sequence, t)?;
         let fx = |t: usize| sequence.labels.get(t).map(|l| l.camera.fx);
-        if let (Some(last), Some(now)) = (t.checked_sub(1).and_then(fx), fx(t))
-            && crate::arm::view_jump(Some(last), now)
-        {
+        let jump = matches!((t.checked_sub(1).and_then(fx), fx(t)),
+            (Some(last), Some(now)) if crate::arm::view_jump(Some(last), now));
+        if t == 0 || jump {
             let (w, h) = (sequence.width as usize, sequence.height as usize);
             self.net.start_view(&input, w, h)?;
         }
