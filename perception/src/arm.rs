@@ -450,9 +450,9 @@ impl ArmTracker {
 
     /// The region of `camera`'s image the next frame is read through: around the last
     /// estimate's shoulder, elbow and wrist ([`Roi::of_joints`], the middle of
-    /// [`roi::TRACKED_MARGIN`]) once [`CONFIRM_POSES`] frames in a row gave a pose, else
-    /// (and for [`HOLD_REGION`] frames without one after that), else
-    /// the sphere the forearm can reach ([`Roi::of_sphere`]), else the whole frame.
+    /// [`roi::TRACKED_MARGIN`]) once [`CONFIRM_POSES`] frames in a row gave a pose (and for
+    /// [`HOLD_REGION`] frames without one after that), else the sphere the forearm can reach
+    /// ([`Roi::of_sphere`]), else the whole frame.
     #[must_use]
     pub fn roi(&self, camera: &Camera) -> Roi {
         self.region(camera).0

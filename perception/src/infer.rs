@@ -135,9 +135,11 @@ impl ProcNet {
     /// stream is then left as it was.
     pub fn start_view(&mut self, planar: &[f32], width: usize, height: usize) -> Result<()> {
         self.check_planar(planar, width, height)?;
+        let s = self.config.input_size;
+        let input = resample(planar, self.config.input_planes(), width, height, s, s);
         let last = self.state.take();
         for _ in 0..VIEW_READS {
-            if let Err(e) = self.segment_any_size(planar, width, height) {
+            if let Err(e) = self.segment(&input) {
                 self.state = last;
                 return Err(e);
             }
