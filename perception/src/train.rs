@@ -228,6 +228,8 @@ pub const MAX_STEPS: usize = 10_000_000;
 pub const MAX_WINDOW: usize = 64;
 /// The longest burn-in before a window, frames.
 pub const MAX_BURN_IN: usize = 1024;
+/// The most reads of a window's first frame before it ([`TrainConfig::view_reads`]).
+pub const MAX_VIEW_READS: usize = 16;
 /// The largest loss weight (a weight of 1e300 is infinite in f32).
 pub const MAX_LOSS_WEIGHT: f32 = 1e3;
 
@@ -254,6 +256,13 @@ pub struct TrainConfig {
     /// counts in the loss unless nothing came before it. The feed-forward baseline has no
     /// state and ignores it.
     pub burn_in: usize,
+    /// Reads of a window's first frame, without gradients, before the window, when the
+    /// window starts from a zero state (no burn-in before it): the window then begins as a
+    /// deployed stream begins a new view ([`crate::ProcNet::start_view`] reads it
+    /// [`crate::VIEW_READS`] times), and its first frame counts in the loss. 0 (the default):
+    /// the window starts cold and its first frame weighs 0. The feed-forward baseline
+    /// ignores it.
+    pub view_reads: usize,
     /// Peak learning rate of the one-cycle schedule.
     pub lr: f64,
     /// Fraction of the steps spent warming up.
@@ -298,6 +307,7 @@ impl Default for TrainConfig {
             batch: 4,
             window: 10,
             burn_in: 0,
+            view_reads: 0,
             lr: 1e-3,
             warmup_fraction: 0.3,
             weight_decay: 1e-4,
@@ -390,6 +400,12 @@ impl TrainConfig {
             return bad(
                 "burn_in",
                 format!("at most {MAX_BURN_IN} frames, got {}", self.burn_in),
+            );
+        }
+        if self.view_reads > MAX_VIEW_READS {
+            return bad(
+                "view_reads",
+                format!("at most {MAX_VIEW_READS} reads, got {}", self.view_reads),
             );
         }
         if !(self.lr.is_finite() && self.lr > 0.0) {
@@ -667,6 +683,23 @@ pub fn burn_in_state(model: &ProcNetModel, frames: &[Tensor<4>]) -> Option<ProcN
         state = Some(inner.step(x, s).1);
     }
     state.map(|s| s.map_tensors(Tensor::autodiff))
+}
+
+/// The state a training window of `rgb[burn..]` starts from: the one the `burn` frames
+/// before it leave ([`burn_in_state`]), or, without them, the one that `view_reads` reads of
+/// the window's first frame leave, as a deployed stream starts a new view
+/// ([`TrainConfig::view_reads`]); `None` (a zero state) when neither is asked for.
+pub fn window_start(
+    model: &ProcNetModel,
+    rgb: &[Tensor<4>],
+    burn: usize,
+    view_reads: usize,
+) -> Option<ProcNetState> {
+    if burn > 0 {
+        return burn_in_state(model, rgb.get(..burn)?);
+    }
+    let first = rgb.first()?;
+    burn_in_state(model, &vec![first.clone(); view_reads])
 }
 
 /// What a progress callback is told after every step.
@@ -956,7 +989,11 @@ impl Trainer {
             }
             let batch = make_batch(&picks, burn + cfg.window, classes, &device);
             let lr = cfg.learning_rate(step);
-            let initial = burn_in_state(&model, &batch.rgb[..burn]);
+            let initial = if model.is_feed_forward() {
+                None
+            } else {
+                window_start(&model, &batch.rgb, burn, cfg.view_reads)
+            };
             let losses = window_loss(
                 &model,
                 &batch.rgb[burn..],
@@ -1214,6 +1251,7 @@ mod tests {
             ("steps = 100000000000", "steps"),
             ("window = 1000000", "window"),
             ("burn_in = 1000000", "burn_in"),
+            ("view_reads = 17", "view_reads"),
             ("frame_prediction_bias = nan", "frame_prediction_bias"),
             ("frame_prediction_bias = -0.5", "frame_prediction_bias"),
             (

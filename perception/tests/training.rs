@@ -9,7 +9,7 @@ use common::{reference_frame, tiny};
 use workcell_perception::cells::Cell;
 use workcell_perception::loss::dice_per_class;
 use workcell_perception::model::ProcNetModel;
-use workcell_perception::train::{LossConfig, burn_in_state, window_loss};
+use workcell_perception::train::{LossConfig, burn_in_state, window_loss, window_start};
 use workcell_perception::{CellKind, ProcNetConfig};
 use workcell_render::Class;
 
@@ -356,6 +356,59 @@ fn a_burnt_in_window_scores_the_frames_of_the_whole_run() {
     let grads = GradientsParams::from_grads(after.total.backward(), &model);
     assert!(!grads.is_empty());
     assert!(burn_in_state(&model, &[]).is_none());
+}
+
+/// A window that starts with view reads begins as a deployed stream begins a new view: its
+/// first frame read that many times with nothing before, then every frame of the window
+/// scored from there, the first too. A burn-in, when there is one, decides the start instead.
+#[test]
+fn a_window_with_view_reads_starts_as_a_new_view_does() {
+    let device = Device::flex().autodiff();
+    let s = 16;
+    let n = 4;
+    let reads = 3;
+    let xs = frames(n, s, &device);
+    let targets = striped_targets(n, s, (3, 5), &device);
+    let loss = LossConfig::default();
+    let model = tiny(CellKind::Hgru).init(&device, 3).unwrap();
+    let scalar = |t: Tensor<1>| f64::from(t.into_scalar::<f32>());
+    let start = window_start(&model, &xs, 0, reads).expect("three reads");
+    assert_eq!(start.frames, reads);
+    let window = window_loss(&model, &xs, &targets, &loss, None, Some(start));
+    // By hand: frame 0 read three times, then frames 0..n, each one's Dice counted.
+    let mut state = model.initial_state(1, s, s, &device);
+    let reads_then_window = std::iter::repeat_n(0, reads).chain(0..n);
+    let mut dice = Vec::new();
+    for (i, t) in reads_then_window.enumerate() {
+        let (out, next) = model.step(xs[t].clone(), state);
+        state = next;
+        if i >= reads {
+            let p = burn::tensor::activation::sigmoid(out.logits);
+            dice.push(scalar(
+                dice_per_class(p, targets[t].clone()).mean().reshape([1]),
+            ));
+        }
+    }
+    let by_hand = dice.iter().sum::<f64>() / n as f64;
+    let got = scalar(window.dice);
+    assert!((got - by_hand).abs() < 1e-5, "{got} against {by_hand}");
+    // A cold window scores frames 1..n alone, from nothing: another loss.
+    let cold = scalar(window_loss(&model, &xs, &targets, &loss, None, None).dice);
+    assert!((cold - by_hand).abs() > 1e-4, "{cold} against {by_hand}");
+    // No reads and no burn-in: a zero state. A burn-in: its frames, whatever view_reads says.
+    assert!(window_start(&model, &xs, 0, 0).is_none());
+    let burnt = window_start(&model, &xs, 2, reads).expect("a burn-in");
+    assert_eq!(burnt.frames, 2);
+    let after = scalar(window_loss(&model, &xs[2..], &targets[2..], &loss, None, Some(burnt)).dice);
+    let burn_in = burn_in_state(&model, &xs[..2]);
+    let expected = scalar(window_loss(&model, &xs[2..], &targets[2..], &loss, None, burn_in).dice);
+    assert!(
+        (after - expected).abs() < 1e-6,
+        "{after} against {expected}"
+    );
+    let read = window_start(&model, &xs[2..], 0, reads);
+    let read = scalar(window_loss(&model, &xs[2..], &targets[2..], &loss, None, read).dice);
+    assert!((after - read).abs() > 1e-4, "{after} against {read}");
 }
 
 /// A weight file whose metadata claims a model larger than its tensors is refused before
