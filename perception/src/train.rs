@@ -591,9 +591,9 @@ pub struct WindowLoss {
 
 /// Runs `model` over a batch of windows and returns the weighted losses. From a zero state
 /// (`initial` is `None`) the window's first frame weighs 0, since a recurrent network has seen
-/// nothing yet, and the others 1; from a burnt-in state ([`burn_in_state`]), and in a
-/// feed-forward network, every frame weighs 1. Per-class weights, one per output channel,
-/// when given.
+/// nothing yet, and the others 1; from a burnt-in state or after view reads
+/// ([`window_start`]), and in a feed-forward network, every frame weighs 1. Per-class
+/// weights, one per output channel, when given.
 pub fn window_loss(
     model: &ProcNetModel,
     rgb: &[Tensor<4>],

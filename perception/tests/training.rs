@@ -451,8 +451,8 @@ fn a_weight_file_cannot_claim_more_than_it_holds() {
     );
 }
 
-/// Every training recipe under `configs/` parses and validates with today's keys, and the
-/// two that begin windows differently say so: the recipes are the commands of
+/// Every training recipe under `configs/` parses and validates with today's keys, and only
+/// the one that begins its windows as a new view sets `view_reads`: the recipes are the commands of
 /// docs/perception.md, and one that no longer parses is a measurement nobody can repeat.
 #[test]
 fn every_recipe_in_configs_parses() {
