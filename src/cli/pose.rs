@@ -63,6 +63,11 @@ pub struct EvalPoseArgs {
     /// ArmFitConfig's 0.3).
     #[arg(long)]
     pub min_gain: Option<f64>,
+    /// With --method articulated: a global search's fit with a gain from this up to
+    /// --min-gain is a pose when the frame before put the forearm within 10 cm of it (0 to
+    /// 1; default ArmFitConfig's 0.2; --min-gain's value turns it off).
+    #[arg(long)]
+    pub confirm_min_gain: Option<f64>,
     /// With --method paper: search over the whole image instead of a region of interest
     /// around the mask.
     #[arg(long)]
@@ -172,13 +177,25 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 config.min_gain = g;
             }
+            if let Some(g) = args.confirm_min_gain {
+                if !(0.0..=1.0).contains(&g) {
+                    anyhow::bail!("--confirm-min-gain {g}: a gain from 0 to 1");
+                }
+                config.confirm_min_gain = g;
+            }
             PoseMethod::Articulated {
                 config,
                 depth: args.depth,
             }
         }
-        "paper" if args.search_starts.is_some() || args.min_gain.is_some() => {
-            anyhow::bail!("--search-starts and --min-gain are settings of --method articulated")
+        "paper"
+            if args.search_starts.is_some()
+                || args.min_gain.is_some()
+                || args.confirm_min_gain.is_some() =>
+        {
+            anyhow::bail!(
+                "--search-starts, --min-gain and --confirm-min-gain are settings of --method articulated"
+            )
         }
         "paper" if args.depth => {
             anyhow::bail!(

@@ -48,6 +48,15 @@
 //! and depth, searching below a gain of 0.55 (6 % of frames) took the 99th percentile of the
 //! forearm's error from 6.0 to 4.9 cm.
 //!
+//! **Acceptance.** A fit is a pose when its gain reaches [`ArmFitConfig::min_gain`] (0.3).
+//! Below it, down to [`ArmFitConfig::confirm_min_gain`] (0.2), the best fit is a pose only
+//! when the frame before put the forearm's centre and wrist within
+//! [`ArmFitConfig::confirm_m`] of it (its pose, or its own best fit below the threshold, which
+//! is tracked on as a candidate; [`ArmFit::confirmed`]). Masks that show a far, half-hidden
+//! arm faintly give such fits frame after frame in one place; masks that miss the arm give
+//! them here and there. A fit that reaches `min_gain` always wins over a fainter one, so a
+//! faint track never keeps a better fit out.
+//!
 //! **Hypotheses.** Far from the camera a silhouette is nearly an orthographic projection, and
 //! the arm mirrored through the plane across the line of sight that holds the shoulder
 //! renders the same masks: the masks cannot tell the two apart. The fit keeps every climb
@@ -88,8 +97,19 @@ pub const FITTED_PARTS: [HumanPart; 3] = HumanPart::ARM;
 /// Settings of the articulated fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArmFitConfig {
-    /// A fit whose gain is below this is no pose (and ends a track). Default 0.3.
+    /// A fit whose gain is below this is no pose (and ends a track), unless it is
+    /// confirmed (`confirm_min_gain`). Default 0.3.
     pub min_gain: f64,
+    /// A global search's best fit with a gain from this up to `min_gain` is a pose when
+    /// the frame before confirms it: that frame's pose, or its own best fit of at least
+    /// this gain, put the forearm's centre and wrist within `confirm_m` of this one's (in
+    /// the world frame). Masks that show the arm faintly give such fits frame after frame
+    /// in one place; masks that miss the arm give them here and there. `min_gain` turns it
+    /// off. Default 0.2.
+    pub confirm_min_gain: f64,
+    /// How near the frame before must put the forearm's centre and wrist to confirm a fit
+    /// below `min_gain`, m. Default 0.1 (at 30 Hz, 3 m/s).
+    pub confirm_m: f64,
     /// Grid points per joint in the global search. Default 12.
     pub grid: usize,
     /// Grid cells climbed by the global search. Default 10.
@@ -157,6 +177,8 @@ impl Default for ArmFitConfig {
     fn default() -> Self {
         Self {
             min_gain: 0.3,
+            confirm_min_gain: 0.2,
+            confirm_m: 0.1,
             grid: 12,
             refine: 10,
             max_iterations: 40,
@@ -593,6 +615,9 @@ pub struct ArmFit {
     /// The global search ran (first frame, the track lost, or its gain below
     /// [`ArmFitConfig::search_below_gain`]).
     pub reacquired: bool,
+    /// The gain is below [`ArmFitConfig::min_gain`], and the frame before confirmed the fit
+    /// ([`ArmFitConfig::confirm_min_gain`]).
+    pub confirmed: bool,
     /// Part masks rendered for this frame.
     pub renders: usize,
 }
@@ -674,6 +699,9 @@ pub struct ArmFitter<R: Renderer> {
     config: ArmFitConfig,
     /// The hypotheses tracked, best first: each its last fits, oldest first (at most two).
     tracks: Vec<Vec<Vec<f64>>>,
+    /// The forearm's centre and wrist in the world frame where the last frame put them (its
+    /// pose, or its best fit of at least [`ArmFitConfig::confirm_min_gain`]).
+    last_points: Option<[Vector; 2]>,
     batch: MaskBatch,
     spans: SpanBatch,
     poses: Vec<Pose>,
@@ -689,6 +717,7 @@ impl<R: Renderer> ArmFitter<R> {
             arm,
             config,
             tracks: Vec::new(),
+            last_points: None,
             batch: MaskBatch::new(),
             spans: SpanBatch::new(),
             poses: Vec::new(),
@@ -705,11 +734,13 @@ impl<R: Renderer> ArmFitter<R> {
     /// Forgets the track: the next frame searches globally.
     pub fn reset(&mut self) {
         self.tracks.clear();
+        self.last_points = None;
     }
 
     /// Tracks from `q` on the next frame (as if it had been the last fit).
     pub fn set_prior(&mut self, q: &[f64]) {
         self.tracks = vec![vec![q.to_vec()]];
+        self.last_points = None;
     }
 
     /// The arm in `masks`, seen by `camera` (the masks' size; its pose in the world is
@@ -733,14 +764,21 @@ impl<R: Renderer> ArmFitter<R> {
         }
         self.renders = 0;
         self.rng = ChaCha8Rng::seed_from_u64(0x4152_4d46); // "ARMF"
-        let outcome = self.fit_inner(camera, masks);
-        if !matches!(outcome, Ok(Ok(_))) {
+        let last_points = self.last_points.take();
+        let outcome = self.fit_inner(camera, masks, last_points);
+        // A frame without a pose ends the track, unless it left a candidate to confirm.
+        if !matches!(outcome, Ok(Ok(_))) && self.last_points.is_none() {
             self.tracks.clear();
         }
         outcome
     }
 
-    fn fit_inner(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmFitOutcome> {
+    fn fit_inner(
+        &mut self,
+        camera: &Camera,
+        masks: &ArmMasks,
+        last_points: Option<[Vector; 2]>,
+    ) -> Result<ArmFitOutcome> {
         let planes = masks.parts.iter().chain([&masks.background]);
         if planes.flatten().any(|v| !(0.0..=1.0).contains(v)) {
             return Ok(Err(NoPose::NotAProbability));
@@ -756,6 +794,8 @@ impl<R: Renderer> ArmFitter<R> {
         };
         let coarse = coarse_owned.as_ref().unwrap_or(&target);
         let mut climbs: Vec<(Climb, Vec<Vec<f64>>)> = Vec::new();
+        // Fits from `confirm_min_gain` up to `min_gain`, each with its track.
+        let mut faint: Vec<(Climb, Vec<Vec<f64>>)> = Vec::new();
         for track in self.tracks.clone() {
             let Some(last) = track.last() else { continue };
             let mut predicted = last.clone();
@@ -768,6 +808,8 @@ impl<R: Renderer> ArmFitter<R> {
             let climb = self.climb(coarse, predicted.clone(), Some(&predicted))?;
             if climb.score.gain >= c.min_gain {
                 climbs.push((climb, track));
+            } else if climb.score.gain >= c.confirm_min_gain {
+                faint.push((climb, track));
             }
         }
         // The global search when the track is lost, and when the tracked fits explain the
@@ -778,12 +820,38 @@ impl<R: Renderer> ArmFitter<R> {
             .fold(f64::NEG_INFINITY, f64::max);
         let reacquired = climbs.is_empty() || tracked_gain < c.search_below_gain;
         if reacquired {
-            climbs.extend(
-                self.search(coarse)?
-                    .into_iter()
-                    .filter(|climb| climb.score.gain >= c.min_gain)
-                    .map(|climb| (climb, Vec::new())),
-            );
+            for climb in self.search(coarse)? {
+                if climb.score.gain >= c.min_gain {
+                    climbs.push((climb, Vec::new()));
+                } else if climb.score.gain >= c.confirm_min_gain {
+                    faint.push((climb, Vec::new()));
+                }
+            }
+        }
+        // Nothing reaches `min_gain`: the best fainter fit is a pose only where the frame
+        // before put the forearm within `confirm_m` of it. Unconfirmed, it is tracked as a
+        // candidate for the next frame to confirm.
+        let mut confirmed = false;
+        if climbs.is_empty() {
+            let best = faint
+                .into_iter()
+                .max_by(|a, b| a.0.score.objective.total_cmp(&b.0.score.objective));
+            let Some((best, track)) = best else {
+                return Ok(Err(NoPose::PoorFit));
+            };
+            let points = self.forearm_points(&best.q, &target.X_WC)?;
+            let points = points.map(|p| target.X_WC.transform_point(p));
+            confirmed = last_points.is_some_and(|last| {
+                last.iter()
+                    .zip(&points)
+                    .all(|(a, b)| (*a - *b).length() <= c.confirm_m)
+            });
+            self.last_points = Some(points);
+            if !confirmed {
+                self.tracks = vec![vec![best.q]];
+                return Ok(Err(NoPose::PoorFit));
+            }
+            climbs.push((best, track));
         }
         climbs.sort_by(|a, b| b.0.score.objective.total_cmp(&a.0.score.objective));
         let Some(best_gain) = climbs.first().map(|(climb, _)| climb.score.gain) else {
@@ -822,9 +890,10 @@ impl<R: Renderer> ArmFitter<R> {
                 t
             })
             .collect();
-        let Some((climb, _, _)) = kept.into_iter().next() else {
+        let Some((climb, _, points)) = kept.into_iter().next() else {
             return Ok(Err(NoPose::PoorFit));
         };
+        self.last_points = Some(points.map(|p| target.X_WC.transform_point(p)));
         let (q, covariance) = self.refine(&target, climb.q.clone())?;
         let plain = self.score(&target, std::slice::from_ref(&q), None)?[0];
         if let Some(last) = self.tracks.first_mut().and_then(|t| t.last_mut()) {
@@ -853,6 +922,7 @@ impl<R: Renderer> ArmFitter<R> {
             hidden_share,
             sigma_m,
             reacquired,
+            confirmed,
             renders: self.renders,
         }))
     }
@@ -1836,6 +1906,63 @@ mod tests {
         let fit = kept.fit(&camera, &masks).expect("fit").expect("a pose");
         assert!(!fit.reacquired);
         assert!(fit.gain < 0.5, "gain {}", fit.gain);
+    }
+
+    /// A fit below `min_gain` is a pose only when the frame before put the forearm within
+    /// `confirm_m` of it. With `min_gain` above any gain (1 is a perfect fit), every fit here
+    /// is such a fit: the first frame gives none, the next (the arm moved a little) a confirmed
+    /// pose; a jump farther than `confirm_m` gives none until the frame after it; a reset
+    /// forgets the frame before; with `confirm_min_gain` at `min_gain` nothing is a pose.
+    #[test]
+    fn a_fit_below_the_threshold_is_confirmed_by_the_frame_before() {
+        let (arm, camera) = setup();
+        let masks_of = |q: &[f64]| {
+            ArmMasks::from_classes(&classes(&arm, &camera, q), 128, 128).expect("masks")
+        };
+        let config = ArmFitConfig {
+            min_gain: 1.5,
+            confirm_min_gain: 0.5,
+            ..ArmFitConfig::default()
+        };
+        let near = [vec![0.5, 0.9, 1.0], vec![0.52, 0.88, 1.02]];
+        let far = vec![0.5, 0.9, 1.8]; // the elbow bent 0.8 rad more: the wrist moves > 10 cm
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config.clone());
+        assert_eq!(
+            fitter.fit(&camera, &masks_of(&near[0])).expect("fit").err(),
+            Some(NoPose::PoorFit),
+            "the first frame has nothing to confirm it"
+        );
+        let fit = fitter
+            .fit(&camera, &masks_of(&near[1]))
+            .expect("fit")
+            .expect("a pose confirmed by the frame before");
+        assert!(fit.confirmed && fit.gain > 0.9, "gain {}", fit.gain);
+        let err = distance_cm(&arm, &camera, &fit.q, &near[1]);
+        assert!(err < 1.5, "{err:.2} cm off");
+        assert!(
+            fitter.fit(&camera, &masks_of(&far)).expect("fit").is_err(),
+            "a fit far from the frame before is not confirmed"
+        );
+        let fit = fitter
+            .fit(&camera, &masks_of(&far))
+            .expect("fit")
+            .expect("the frame after the jump confirms it");
+        assert!(fit.confirmed, "gain {}", fit.gain);
+        assert!(distance_cm(&arm, &camera, &fit.q, &far) < 1.5);
+        fitter.reset();
+        assert!(fitter.fit(&camera, &masks_of(&far)).expect("fit").is_err());
+
+        let mut off = ArmFitter::new(
+            CpuRenderer::new(),
+            arm.clone(),
+            ArmFitConfig {
+                confirm_min_gain: 1.5,
+                ..config
+            },
+        );
+        for q in &near {
+            assert!(off.fit(&camera, &masks_of(q)).expect("fit").is_err());
+        }
     }
 
     /// Far away the masks of the arm and of its mirror image are nearly the same: whichever

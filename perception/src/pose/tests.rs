@@ -396,6 +396,7 @@ fn frame_result(
         occlusion: 0.8,
         outcome,
         reacquired: false,
+        confirmed: false,
         f_m: 0.0,
         gain: 0.0,
         uncertainty_m: 0.0,

@@ -84,6 +84,9 @@ pub struct FrameResult {
     /// The errors, or why there was no pose.
     pub outcome: std::result::Result<PoseError, NoPose>,
     pub reacquired: bool,
+    /// The articulated fit's gain was below its threshold and the frame before confirmed
+    /// the pose ([`crate::pose::ArmFit::confirmed`]; false for the paper's method).
+    pub confirmed: bool,
     pub f_m: f64,
     pub gain: f64,
     pub uncertainty_m: f64,

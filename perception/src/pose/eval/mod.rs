@@ -154,6 +154,7 @@ enum Estimator {
 struct Found {
     X_CO: Pose,
     reacquired: bool,
+    confirmed: bool,
     f_m: f64,
     gain: f64,
     uncertainty_m: f64,
@@ -247,6 +248,7 @@ pub fn evaluate_pose(
                     let found = outcome.map(|fit| Found {
                         X_CO: fit.X_CO(),
                         reacquired: fit.reacquired,
+                        confirmed: fit.confirmed,
                         f_m: fit.f_m,
                         gain: fit.gain,
                         uncertainty_m: fit.uncertainty_m,
@@ -284,6 +286,7 @@ pub fn evaluate_pose(
                     let found = outcome.map(|e| Found {
                         X_CO: e.X_CO,
                         reacquired: e.reacquired,
+                        confirmed: false,
                         f_m: e.f_m,
                         gain: e.gain,
                         uncertainty_m: e.uncertainty_m,
@@ -305,12 +308,18 @@ pub fn evaluate_pose(
                 continue;
             }
             let truth = Pose::from(&part.X_CP);
-            let (mut reacquired, mut fm, mut gain, mut unc, mut renders) =
-                (false, 0.0, 0.0, 0.0, 0);
+            let (mut reacquired, mut confirmed, mut fm, mut gain, mut unc, mut renders) =
+                (false, false, 0.0, 0.0, 0.0, 0);
             let (mut sigma_m, mut spread_m, mut hidden_share) = (f64::NAN, f64::NAN, f64::NAN);
             let outcome = found.map(|e| {
-                (reacquired, fm, gain, unc, renders) =
-                    (e.reacquired, e.f_m, e.gain, e.uncertainty_m, e.renders);
+                (reacquired, confirmed, fm, gain, unc, renders) = (
+                    e.reacquired,
+                    e.confirmed,
+                    e.f_m,
+                    e.gain,
+                    e.uncertainty_m,
+                    e.renders,
+                );
                 (sigma_m, spread_m, hidden_share) = (e.sigma_m, e.spread_m, e.hidden_share);
                 // The hand tells the articulated fit's wrist from its elbow: no twin.
                 pose_error_with(
@@ -343,6 +352,7 @@ pub fn evaluate_pose(
                 occlusion,
                 outcome,
                 reacquired,
+                confirmed,
                 f_m: fm,
                 gain,
                 uncertainty_m: unc,

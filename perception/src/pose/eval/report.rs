@@ -248,6 +248,22 @@ impl PoseEvaluation {
             md,
             "Within the bound: of the frames with a pose, those whose reported uncertainty covers both ends of the true forearm (the radius the safety filter inflates the forearm by).\n"
         );
+        let confirmed: Vec<&FrameResult> = self.frames.iter().filter(|f| f.confirmed).collect();
+        if !confirmed.is_empty() {
+            let covered = confirmed
+                .iter()
+                .filter(|f| {
+                    f.outcome
+                        .as_ref()
+                        .is_ok_and(|e| e.ends_cm <= 100.0 * f.uncertainty_m)
+                })
+                .count();
+            let _ = writeln!(
+                md,
+                "{} poses had a gain below the fit's threshold and were confirmed by the frame before (`ArmFitConfig::confirm_min_gain`); {covered} of them within the bound.\n",
+                confirmed.len()
+            );
+        }
         let _ = writeln!(
             md,
             "The paper's PoseCNN column is PoseCNN itself; this project's stand-in for it is the feed-forward baseline (`--masks baseline`; `--masks procnet,baseline` compares the two).\n"
@@ -343,7 +359,7 @@ impl PoseEvaluation {
     #[must_use]
     pub fn to_csv(&self) -> String {
         let mut csv = String::from(
-            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm,truth_gain,sigma_m,spread_m,truth_gain_upper_arm,truth_gain_forearm,truth_gain_hand,hidden_share\n",
+            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm,truth_gain,sigma_m,spread_m,truth_gain_upper_arm,truth_gain_forearm,truth_gain_hand,hidden_share,confirmed\n",
         );
         for f in &self.frames {
             let (no_pose, e) = match &f.outcome {
@@ -353,7 +369,7 @@ impl PoseEvaluation {
             let v = |g: fn(&PoseError) -> f64| e.map_or(String::new(), |e| format!("{:.4}", g(e)));
             let _ = writeln!(
                 csv,
-                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{},{:.4},{:.5},{:.5},{:.4},{:.4},{:.4},{:.4}",
+                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{},{:.4},{:.5},{:.5},{:.4},{:.4},{:.4},{:.4},{}",
                 f.sequence,
                 f.frame,
                 crate::eval::csv_field(&f.distance_class),
@@ -382,7 +398,8 @@ impl PoseEvaluation {
                 f.truth_gain[1],
                 f.truth_gain[2],
                 f.truth_gain[3],
-                f.hidden_share
+                f.hidden_share,
+                f.confirmed
             );
         }
         csv
