@@ -774,7 +774,8 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
                     "truth_gain_upper_arm",
                     "truth_gain_forearm",
                     "truth_gain_hand",
-                    "hidden_share"
+                    "hidden_share",
+                    "confirmed"
                 ]),
             "{csv}"
         );
@@ -804,6 +805,20 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             }
         }
         assert!(method != "articulated" || checked > 0, "{csv}");
+        // A pose confirmed below the gain threshold is a pose, and only the articulated
+        // fit confirms.
+        let confirmed = column("confirmed");
+        for line in csv.lines().skip(1) {
+            let row: Vec<&str> = line.split(',').collect();
+            match row[confirmed] {
+                "false" => {}
+                "true" => assert!(
+                    method == "articulated" && !row[position].is_empty(),
+                    "{line}"
+                ),
+                other => panic!("confirmed: {other:?} in {line}"),
+            }
+        }
         // The contact sheet of the frames without a pose, written when there are any.
         let why = column("no_pose");
         let without = csv
@@ -852,12 +867,38 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "--dataset",
             data_s,
         ],
-        "--search-starts and --min-gain are settings of --method articulated",
+        "--search-starts, --min-gain and --confirm-min-gain are settings of --method articulated",
+    );
+    refused(
+        &[
+            "eval",
+            "pose",
+            "--method",
+            "paper",
+            "--confirm-min-gain",
+            "0.2",
+            "--dataset",
+            data_s,
+        ],
+        "are settings of --method articulated",
     );
     refused(
         &["eval", "pose", "--min-gain", "1.5", "--dataset", data_s],
         "--min-gain 1.5: a gain from 0 to 1",
     );
+    for bad in ["1.5", "NaN"] {
+        refused(
+            &[
+                "eval",
+                "pose",
+                "--confirm-min-gain",
+                bad,
+                "--dataset",
+                data_s,
+            ],
+            &format!("--confirm-min-gain {bad}: a gain from 0 to 1"),
+        );
+    }
     refused(
         &["eval", "pose", "--masks", "oracle", "--dataset", data_s],
         "gt, gt@N, visible, procnet, baseline",

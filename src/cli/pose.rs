@@ -63,9 +63,10 @@ pub struct EvalPoseArgs {
     /// ArmFitConfig's 0.3).
     #[arg(long)]
     pub min_gain: Option<f64>,
-    /// With --method articulated: a global search's fit with a gain from this up to
-    /// --min-gain is a pose when the frame before put the forearm within 10 cm of it (0 to
-    /// 1; default ArmFitConfig's 0.2; --min-gain's value turns it off).
+    /// With --method articulated: a fit with a gain from this up to --min-gain is a pose
+    /// when the frame before put the forearm within 10 cm of it (0 to 1; default: the one
+    /// measured for the masks, 0.2 for the shipped network that reads depth, off for the
+    /// others; --min-gain's value turns it off).
     #[arg(long)]
     pub confirm_min_gain: Option<f64>,
     /// With --method paper: search over the whole image instead of a region of interest
@@ -231,10 +232,17 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             _ => None,
         };
         let method = match &method {
-            PoseMethod::Articulated { config, depth } => PoseMethod::Articulated {
-                config: calibration.map_or_else(|| config.clone(), |c| c.apply(config.clone())),
-                depth: *depth,
-            },
+            PoseMethod::Articulated { config, depth } => {
+                let mut config =
+                    calibration.map_or_else(|| config.clone(), |c| c.apply(config.clone()));
+                if let Some(g) = args.confirm_min_gain {
+                    config.confirm_min_gain = g;
+                }
+                PoseMethod::Articulated {
+                    config,
+                    depth: *depth,
+                }
+            }
             paper => paper.clone(),
         };
         let progress = super::progress_bar(

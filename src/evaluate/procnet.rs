@@ -127,7 +127,7 @@ impl ProcNetCamera {
             } else {
                 measured.floor_m
             },
-            hidden_floors_m: measured.hidden_floors_m,
+            ..measured
         }
         .apply(ArmFitConfig::default());
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;

@@ -49,13 +49,16 @@
 //! forearm's error from 6.0 to 4.9 cm.
 //!
 //! **Acceptance.** A fit is a pose when its gain reaches [`ArmFitConfig::min_gain`] (0.3).
-//! Below it, down to [`ArmFitConfig::confirm_min_gain`] (0.2), the best fit is a pose only
-//! when the frame before put the forearm's centre and wrist within
-//! [`ArmFitConfig::confirm_m`] of it (its pose, or its own best fit below the threshold, which
-//! is tracked on as a candidate; [`ArmFit::confirmed`]). Masks that show a far, half-hidden
-//! arm faintly give such fits frame after frame in one place; masks that miss the arm give
-//! them here and there. A fit that reaches `min_gain` always wins over a fainter one, so a
-//! faint track never keeps a better fit out.
+//! Below it, down to [`ArmFitConfig::confirm_min_gain`], the best fit is a pose only when the
+//! frame before put the forearm's centre and wrist within [`ArmFitConfig::confirm_m`] of it
+//! (its pose, or its own best fit below the threshold, which is tracked on as a candidate;
+//! [`ArmFit::confirmed`]). Masks that show a far, half-hidden arm faintly give such fits frame
+//! after frame in one place; masks that miss the arm give them here and there. A fit that
+//! reaches `min_gain` always wins over a fainter one, so a faint track never keeps a better
+//! fit out. Whether it pays is the masks' ([`Calibration::measured`]): from 0.2 for the
+//! network that reads depth, whose confirmed poses are either right or far off, so their
+//! bound is at least [`Calibration::confirmed_floor_m`]; off for the RGB network, whose
+//! confirmed fits were mostly wrong arms.
 //!
 //! **Hypotheses.** Far from the camera a silhouette is nearly an orthographic projection, and
 //! the arm mirrored through the plane across the line of sight that holds the shoulder
@@ -100,12 +103,13 @@ pub struct ArmFitConfig {
     /// A fit whose gain is below this is no pose (and ends a track), unless it is
     /// confirmed (`confirm_min_gain`). Default 0.3.
     pub min_gain: f64,
-    /// A global search's best fit with a gain from this up to `min_gain` is a pose when
-    /// the frame before confirms it: that frame's pose, or its own best fit of at least
-    /// this gain, put the forearm's centre and wrist within `confirm_m` of this one's (in
-    /// the world frame). Masks that show the arm faintly give such fits frame after frame
-    /// in one place; masks that miss the arm give them here and there. `min_gain` turns it
-    /// off. Default 0.2.
+    /// When nothing reaches `min_gain`, the best fit with a gain from this up to `min_gain`
+    /// (tracked or found by the global search) is a pose if the frame before confirms it:
+    /// that frame's pose, or its own best such fit, put the forearm's centre and wrist within
+    /// `confirm_m` of this one's (in the world frame). Masks that show the arm faintly give
+    /// such fits frame after frame in one place; masks that miss the arm give them here and
+    /// there. Measured per source of masks ([`Calibration::confirm_min_gain`]). Default
+    /// infinity: off.
     pub confirm_min_gain: f64,
     /// How near the frame before must put the forearm's centre and wrist to confirm a fit
     /// below `min_gain`, m. Default 0.1 (at 30 Hz, 3 m/s).
@@ -160,6 +164,9 @@ pub struct ArmFitConfig {
     /// quarter, a half or three quarters of the forearm's region ([`ArmFit::hidden_share`];
     /// [`Calibration::floor_at`]), m. Default 0 (the floor alone).
     pub uncertainty_hidden_floors_m: [f64; 3],
+    /// The least uncertainty of a pose confirmed below `min_gain`
+    /// ([`Calibration::confirmed_floor_m`]), m. Default 0.
+    pub uncertainty_confirmed_floor_m: f64,
     /// The global search runs, beside the tracked hypotheses, when their best gain is below
     /// this: a track that explains the masks this poorly has likely followed a wrong
     /// optimum. Default 0.55.
@@ -177,7 +184,7 @@ impl Default for ArmFitConfig {
     fn default() -> Self {
         Self {
             min_gain: 0.3,
-            confirm_min_gain: 0.2,
+            confirm_min_gain: f64::INFINITY,
             confirm_m: 0.1,
             grid: 12,
             refine: 10,
@@ -200,6 +207,7 @@ impl Default for ArmFitConfig {
             uncertainty_scale: 1.0,
             uncertainty_floor_m: 0.0,
             uncertainty_hidden_floors_m: [0.0; 3],
+            uncertainty_confirmed_floor_m: 0.0,
             search_below_gain: 0.55,
             depth_sigma_m: 0.03,
             depth_weight: 0.05,
@@ -216,11 +224,12 @@ const END_ON_COS: f64 = 0.9;
 /// for the depth camera's noise.
 pub const HIDDEN_MARGIN_M: f64 = 0.05;
 
-/// The uncertainty's calibration for one source of masks: `scale`, `floor_m` and
-/// `hidden_floors_m` of [`ArmFitConfig`], fitted on the validation split so that 99 % of its
-/// frames have the forearm's centre and wrist within the bound, in each band of
-/// [`ArmFit::hidden_share`] (`scripts/calibrate_uncertainty.py`, on the per-frame CSV of
-/// `workcell eval pose --split validation`; docs/perception.md).
+/// What the fit measured for one source of masks: the uncertainty's calibration (`scale`,
+/// `floor_m` and `hidden_floors_m` of [`ArmFitConfig`], fitted on the validation split so that
+/// 99 % of its frames have the forearm's centre and wrist within the bound, in each band of
+/// [`ArmFit::hidden_share`]: `scripts/calibrate_uncertainty.py`, on the per-frame CSV of
+/// `workcell eval pose --split validation`), and whether a faint fit confirmed by the frame
+/// before is a pose, with the floor of its bound (docs/perception.md).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Calibration {
     pub scale: f64,
@@ -228,6 +237,12 @@ pub struct Calibration {
     /// The floors where a quarter, a half, three quarters of the forearm's region is
     /// hidden ([`Calibration::floor_at`]).
     pub hidden_floors_m: [f64; 3],
+    /// [`ArmFitConfig::confirm_min_gain`]: infinity where confirmed fits of these masks
+    /// were measured to be wrong too often to be poses.
+    pub confirm_min_gain: f64,
+    /// The least bound of a confirmed pose, m: such fits are right or far off (the masks'
+    /// faint arm, or a consistent wrong one), and the curvature tells neither.
+    pub confirmed_floor_m: f64,
 }
 
 /// Where [`ArmFit::hidden_share`] starts each band of [`Calibration::hidden_floors_m`].
@@ -286,10 +301,21 @@ impl Calibration {
             (MaskOrigin::DepthNetwork, true) => (1.0, 0.0233, [0.0634, 0.0634, 0.2850]),
             (MaskOrigin::DepthNetwork, false) => return None,
         };
+        // Faint fits confirmed by the frame before: poses for the network that reads depth
+        // (validation, stored and tracker's crops: 22 such poses, 0.3-8 cm off or 40-65 cm,
+        // none beyond 65 cm); not for the RGB network, whose confirmed fits were mostly
+        // wrong arms held in one place (test: 9 of 15 more than 40 cm off without depth,
+        // 1183's 54-63 cm with it); true masks give none.
+        let (confirm_min_gain, confirmed_floor_m) = match masks {
+            MaskOrigin::DepthNetwork => (0.2, 0.65),
+            MaskOrigin::Rendered | MaskOrigin::Network => (f64::INFINITY, 0.0),
+        };
         Some(Self {
             scale,
             floor_m,
             hidden_floors_m,
+            confirm_min_gain,
+            confirmed_floor_m,
         })
     }
 
@@ -300,6 +326,8 @@ impl Calibration {
             uncertainty_scale: self.scale,
             uncertainty_floor_m: self.floor_m,
             uncertainty_hidden_floors_m: self.hidden_floors_m,
+            confirm_min_gain: self.confirm_min_gain,
+            uncertainty_confirmed_floor_m: self.confirmed_floor_m,
             ..config
         }
     }
@@ -307,10 +335,16 @@ impl Calibration {
     /// The radius of a fit whose curvature spreads the forearm's centre and wrist by
     /// `sigma_m`, whose hypotheses lie `spread_m` apart and whose forearm's region is
     /// `hidden_share` hidden, under this calibration (what [`ArmFit::uncertainty_m`]
-    /// reports): `scale sigma + floor`, or the spread where that is larger.
+    /// reports): `scale sigma + floor`, or the spread where that is larger; for a pose
+    /// `confirmed` below the gain threshold, at least `confirmed_floor_m`.
     #[must_use]
-    pub fn radius(&self, sigma_m: f64, spread_m: f64, hidden_share: f64) -> f64 {
-        (self.scale * sigma_m + self.floor_at(hidden_share)).max(spread_m)
+    pub fn radius(&self, sigma_m: f64, spread_m: f64, hidden_share: f64, confirmed: bool) -> f64 {
+        let r = (self.scale * sigma_m + self.floor_at(hidden_share)).max(spread_m);
+        if confirmed {
+            r.max(self.confirmed_floor_m)
+        } else {
+            r
+        }
     }
 
     /// The floor for a forearm's region `hidden_share` hidden: `floor_m` below the first of
@@ -330,6 +364,8 @@ impl Calibration {
             scale: config.uncertainty_scale,
             floor_m: config.uncertainty_floor_m,
             hidden_floors_m: config.uncertainty_hidden_floors_m,
+            confirm_min_gain: config.confirm_min_gain,
+            confirmed_floor_m: config.uncertainty_confirmed_floor_m,
         }
     }
 }
@@ -918,7 +954,7 @@ impl<R: Renderer> ArmFitter<R> {
             part_gain: climb.score.part_gain,
             sigma_q,
             spread_m,
-            uncertainty_m: Calibration::of(&c).radius(sigma_m, spread_m, hidden_share),
+            uncertainty_m: Calibration::of(&c).radius(sigma_m, spread_m, hidden_share, confirmed),
             hidden_share,
             sigma_m,
             reacquired,
@@ -2085,6 +2121,8 @@ mod tests {
             scale: 0.0,
             floor_m: 0.01,
             hidden_floors_m: [0.1, 0.2, 0.3],
+            confirm_min_gain: f64::INFINITY,
+            confirmed_floor_m: 0.0,
         };
         let config = calibration.apply(ArmFitConfig::default());
         let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
@@ -2106,21 +2144,25 @@ mod tests {
     }
 
     /// The floor grows band by band with the hidden share, and never falls below a less
-    /// hidden band's.
+    /// hidden band's; a confirmed pose's bound is at least its own floor.
     #[test]
     fn the_floor_follows_the_hidden_share() {
         let c = Calibration {
             scale: 2.0,
             floor_m: 0.05,
             hidden_floors_m: [0.04, 0.2, 0.1],
+            confirm_min_gain: 0.2,
+            confirmed_floor_m: 0.6,
         };
         let floors: Vec<f64> = [0.0, 0.24, 0.25, 0.5, 0.74, 0.75, 1.0]
             .iter()
             .map(|&h| c.floor_at(h))
             .collect();
         assert_eq!(floors, [0.05, 0.05, 0.05, 0.2, 0.2, 0.2, 0.2]);
-        assert!((c.radius(0.01, 0.0, 0.5) - 0.22).abs() < 1e-12);
-        assert_eq!(c.radius(0.01, 0.5, 0.5), 0.5);
+        assert!((c.radius(0.01, 0.0, 0.5, false) - 0.22).abs() < 1e-12);
+        assert_eq!(c.radius(0.01, 0.5, 0.5, false), 0.5);
+        assert_eq!(c.radius(0.01, 0.5, 0.5, true), 0.6);
+        assert_eq!(c.radius(0.01, 0.7, 0.5, true), 0.7);
         assert_eq!(Calibration::of(&c.apply(ArmFitConfig::default())), c);
     }
 
