@@ -302,8 +302,8 @@ impl Calibration {
             (MaskOrigin::DepthNetwork, false) => return None,
         };
         // Faint fits confirmed by the frame before: poses for the network that reads depth
-        // (validation, stored and tracker's crops: 22 such poses, 0.3-8 cm off or 40-65 cm,
-        // none beyond 65 cm); not for the RGB network, whose confirmed fits were mostly
+        // (validation, stored and tracker's crops: 12 such poses, the forearm's centre or
+        // wrist 4-11 cm off or 40-65 cm, none beyond 65 cm); not for the RGB network, whose confirmed fits were mostly
         // wrong arms held in one place (test: 9 of 15 more than 40 cm off without depth,
         // 1183's 54-63 cm with it); true masks give none.
         let (confirm_min_gain, confirmed_floor_m) = match masks {
