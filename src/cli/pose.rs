@@ -178,11 +178,11 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 config.min_gain = g;
             }
-            if let Some(g) = args.confirm_min_gain {
-                if !(0.0..=1.0).contains(&g) {
-                    anyhow::bail!("--confirm-min-gain {g}: a gain from 0 to 1");
-                }
-                config.confirm_min_gain = g;
+            // Set after the masks' calibration (below), which carries its own.
+            if let Some(g) = args.confirm_min_gain
+                && !(0.0..=1.0).contains(&g)
+            {
+                anyhow::bail!("--confirm-min-gain {g}: a gain from 0 to 1");
             }
             PoseMethod::Articulated {
                 config,
