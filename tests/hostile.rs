@@ -449,3 +449,334 @@ fn datasets_are_never_trusted_blindly() {
     let inside = blocker.join("data");
     refused_in(dir.path(), &generate_args(&config, &inside), "cannot write");
 }
+
+/// `robot add` checks the name before it touches any file: a name with `..` removed any
+/// `*.staging` folder it reached (`<into>/.<name>.staging` was removed first).
+#[test]
+fn robot_add_checks_the_name_before_it_removes_anything() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let victim = dir.path().join("x/victim.staging");
+    std::fs::create_dir_all(&victim).expect("victim");
+    std::fs::write(victim.join("important.txt"), "keep").expect("write");
+    let into = dir.path().join("x/lib/sub");
+    std::fs::create_dir_all(&into).expect("into");
+    let urdf = dir.path().join("r.urdf");
+    std::fs::write(&urdf, two_links("0.01", "")).expect("urdf");
+    for name in ["/../../victim", "../../victim", "..", "a/b", ""] {
+        refused_in(
+            dir.path(),
+            &["robot", "add", s(&urdf), "--name", name, "--into", s(&into)],
+            "letters, digits, '_' or '-'",
+        );
+        assert_eq!(
+            std::fs::read_to_string(victim.join("important.txt")).expect("the victim survives"),
+            "keep",
+            "{name:?}"
+        );
+    }
+    assert_eq!(
+        std::fs::read_dir(&into).expect("into").count(),
+        0,
+        "nothing was made in --into"
+    );
+}
+
+/// Runs `args` in `dir`; refused (as [`refused_in`]) within `seconds`, else killed and
+/// failed: a FIFO or a device read as a file hung or read gigabytes before.
+fn refused_within(dir: &Path, args: &[&str], needle: &str, seconds: u64) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_workcell"))
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    let started = std::time::Instant::now();
+    loop {
+        if child.try_wait().expect("wait").is_some() {
+            break;
+        }
+        if started.elapsed() > std::time::Duration::from_secs(seconds) {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{args:?} still ran after {seconds} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().expect("output");
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    assert!(
+        stderr.contains(needle),
+        "{args:?}: '{needle}' not in\n{stderr}"
+    );
+}
+
+/// Every file the project reads is a regular file of bounded size: a FIFO as the
+/// evaluation, the scenario, a training recipe, a dataset's manifest or a shard's record
+/// hung, and /dev/zero in the same places was read to 4.2 GB before "out of memory".
+#[cfg(unix)]
+#[test]
+fn special_files_are_refused_wherever_a_file_is_read() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let fifo = |name: &str| {
+        let path = dir.path().join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).expect("mkdir");
+        }
+        let made = Command::new("mkfifo").arg(&path).status().expect("mkfifo");
+        assert!(made.success());
+        path
+    };
+    let eval_fifo = fifo("eval.toml");
+    let cell_fifo = fifo("cell.toml");
+    let train_fifo = fifo("train.toml");
+    fifo("data/manifest.json");
+    fifo("shard/run.json");
+    let eval = dir.path().join("ok.toml");
+    std::fs::write(&eval, "cell = \"cell.toml\"\n").expect("eval");
+    let zero_cell = format!("cell={:?}", "/dev/zero");
+    let cases: Vec<Vec<&str>> = vec![
+        vec!["evaluate", s(&eval_fifo)],
+        vec!["evaluate", "/dev/zero"],
+        vec!["evaluate", s(&eval)],
+        vec!["evaluate", s(&eval), "--set", &zero_cell],
+        vec!["simulate", s(&cell_fifo)],
+        vec!["train", "--config", s(&train_fifo), "--out", "run"],
+        vec!["train", "--config", "/dev/zero", "--out", "run"],
+        vec!["dataset", "show", "data"],
+        vec!["report", "merge", "shard"],
+        vec![
+            "dataset",
+            "generate",
+            "--config",
+            "/dev/zero",
+            "--out",
+            "d2",
+        ],
+    ];
+    for args in cases {
+        refused_within(dir.path(), &args, "not a regular file", 20);
+    }
+}
+
+/// `threads` in a training recipe has the limits of `--threads`: 5000 panicked in rayon
+/// after 17 s, 100000 ran past a minute with no output.
+#[test]
+fn a_training_recipe_asks_for_at_most_256_threads() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for threads in ["0", "5000", "100000"] {
+        let recipe = dir.path().join(format!("t{threads}.toml"));
+        std::fs::write(&recipe, format!("threads = {threads}\n")).expect("recipe");
+        refused_within(
+            dir.path(),
+            &["train", "--config", s(&recipe), "--out", "run"],
+            &format!("threads: 1..=256, got {threads}"),
+            20,
+        );
+    }
+}
+
+/// Settings that no run needs are refused, naming the key and the limit.
+#[test]
+fn settings_beyond_reason_are_refused() {
+    // The second episode's seed wrapped around to 0.
+    refused(
+        &[
+            "evaluate",
+            "configs/evaluate.toml",
+            "--seed",
+            "18446744073709551615",
+            "--episodes",
+            "2",
+        ],
+        "at most --seed 18446744073709551614",
+    );
+    // A 300-digit task-time ratio.
+    refused(
+        &[
+            "evaluate",
+            "configs/evaluate.toml",
+            "--set",
+            "task_s=1e-300",
+        ],
+        "task_s: 1e-300 is below the limit of 0.1 s",
+    );
+    for key in ["safety.anticipation_s", "safety.escape_horizon_s"] {
+        refused(
+            &[
+                "evaluate",
+                "configs/evaluate.toml",
+                "--set",
+                &format!("{key}=1e9"),
+            ],
+            &format!("{key}: 1000000000 s is beyond the limit of 3 s"),
+        );
+    }
+}
+
+/// `--print-defaults` with `--config` prints that configuration, every default filled in
+/// (it printed the defaults and ignored the file).
+#[test]
+fn print_defaults_reads_the_config_it_is_given() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let config = dir.path().join("data.toml");
+    std::fs::write(&config, "frames = 7\nwidth_px = 48\n").expect("config");
+    let out = workcell_in(
+        dir.path(),
+        &[
+            "dataset",
+            "generate",
+            "--print-defaults",
+            "--config",
+            s(&config),
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let printed = text(&out.stdout);
+    assert!(printed.contains("frames = 7"), "{printed}");
+    assert!(printed.contains("width_px = 48"), "{printed}");
+    assert!(
+        printed.contains("sequences_per_pair"),
+        "defaults filled in: {printed}"
+    );
+    let recipe = dir.path().join("train.toml");
+    std::fs::write(&recipe, "steps = 123\n").expect("recipe");
+    let out = workcell_in(
+        dir.path(),
+        &["train", "--print-defaults", "--config", s(&recipe)],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let printed = text(&out.stdout);
+    assert!(printed.contains("steps = 123"), "{printed}");
+    assert!(
+        printed.contains("batch = "),
+        "defaults filled in: {printed}"
+    );
+}
+
+/// A merged report is the report of its episodes: a record edited into "no violation",
+/// holding NaN or -inf, a seed twice, settings that contradict its evaluation or a replay
+/// outside its folder is refused, naming the folder and the field. An output that is one of
+/// the inputs is refused too (`--force` overwrote that shard's record).
+#[test]
+fn run_records_that_lie_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let eval = dir.path().join("eval.toml");
+    std::fs::write(
+        &eval,
+        format!(
+            "cell = {:?}\ntask_s = 2.0\n[perception]\nkind = \"noisy\"\n",
+            s(&root().join("configs/default.toml"))
+        ),
+    )
+    .expect("eval");
+    let shard = |k: usize| dir.path().join(format!("shard{k}"));
+    for k in 1..=2 {
+        let out = workcell_in(
+            dir.path(),
+            &[
+                "evaluate",
+                s(&eval),
+                "--episodes",
+                "2",
+                "--filter",
+                "none",
+                "--shard",
+                &format!("{k}/2"),
+                "--out",
+                s(&shard(k)),
+            ],
+        );
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+    let record = |k: usize| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(shard(k).join("run.json")).expect("run.json"))
+            .expect("json")
+    };
+    let honest = record(1);
+    let merged = dir.path().join("merged");
+    let merge = |out: &Path, extra: &[&str]| {
+        let mut args: Vec<String> = ["report", "merge"].map(String::from).to_vec();
+        args.extend([shard(1), shard(2)].map(|p| p.display().to_string()));
+        args.extend(["--out".to_string(), out.display().to_string()]);
+        args.extend(extra.iter().map(|a| a.to_string()));
+        args
+    };
+    let out = workcell_in(
+        dir.path(),
+        &merge(&merged, &[])
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let cases: Vec<(Edit, &str)> = vec![
+        (
+            // Edited into "no violation": a contact at -1 m with nothing counted.
+            Box::new(|r| {
+                let m = &mut r["metrics"][0];
+                m["min_separation_m"] = serde_json::json!(-1.0);
+                for key in ["violations", "contacts_moving", "contacts_standing"] {
+                    m[key] = serde_json::json!(0);
+                }
+                m["violation_s"] = serde_json::json!(0.0);
+                m["violation_moving_s"] = serde_json::json!(0.0);
+            }),
+            "metrics[0] (episode 0).violations = 0 (0 s below d_min) contradicts min_separation_m = -1",
+        ),
+        (
+            Box::new(|r| r["metrics"][0]["min_separation_m"] = serde_json::json!("NaN")),
+            "min_separation_m = NaN: must be a number",
+        ),
+        (
+            Box::new(|r| r["metrics"][0]["min_separation_m"] = serde_json::json!("-inf")),
+            "min_separation_m = -inf: must be a number",
+        ),
+        (
+            Box::new(|r| r["metrics"][0]["violation_s"] = serde_json::json!("inf")),
+            "violation_s = inf: must be finite and >= 0",
+        ),
+        (
+            Box::new(|r| r["metrics"][0]["seed"] = serde_json::json!(2)),
+            "seed = 2: episode 0 of a run from seed 1 has seed 1",
+        ),
+        (
+            Box::new(|r| r["settings"]["d_min_m"] = serde_json::json!(0.5)),
+            "settings.d_min_m = 0.5 contradicts the evaluation's safety.d_min_m",
+        ),
+        (
+            Box::new(|r| {
+                r["replays"] = serde_json::json!([[0, "../../../etc/passwd"]]);
+            }),
+            "is not a path inside the folder",
+        ),
+    ];
+    let run_json = shard(1).join("run.json");
+    for (edit, needle) in cases {
+        let mut tampered = honest.clone();
+        edit(&mut tampered);
+        std::fs::write(&run_json, serde_json::to_vec(&tampered).expect("json")).expect("write");
+        let args = merge(&dir.path().join("refused"), &[]);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        refused_in(dir.path(), &args, needle);
+        refused_in(dir.path(), &args, &shard(1).display().to_string());
+        // A single record is read the same way by `report sweep`.
+        refused_in(
+            dir.path(),
+            &["report", "sweep", s(&shard(1)), "--out", "sweep"],
+            needle,
+        );
+    }
+    std::fs::write(&run_json, serde_json::to_vec(&honest).expect("json")).expect("write");
+
+    // The merged report into a shard's own folder would overwrite that shard's record.
+    let before = std::fs::read(&run_json).expect("run.json");
+    let args = merge(&shard(1), &["--force"]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    refused_in(dir.path(), &args, "is the shard folder");
+    assert_eq!(std::fs::read(&run_json).expect("run.json"), before);
+}

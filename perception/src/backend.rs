@@ -82,9 +82,15 @@ impl Backend {
     }
 }
 
+/// The most CPU threads a run may ask for (`--threads`, a training recipe's `threads`): far
+/// above the cores of any machine the project runs on, and low enough that the thread pools
+/// start at once.
+pub const MAX_THREADS: usize = 256;
+
 /// Sets the number of CPU threads of both backends (rayon for flex, LibTorch's intra-op
 /// pool for tch, and the threads of a camera stream's forward pass on flex,
 /// [`on_stream_threads`]). Call it once, before the first tensor operation.
+
 pub fn set_threads(threads: usize) {
     let threads = threads.max(1);
     STREAM_THREADS.store(threads, Ordering::Relaxed);

@@ -7,6 +7,7 @@ use std::time::Instant;
 use workcell_render::Class;
 use workcell_render::dataset::FrameLabels;
 use workcell_render::roi::RoiKind;
+use workcell_robots::input::{MAX_CONFIG_BYTES, read_text_file};
 
 use burn::module::Module;
 use burn::optim::grad_clipping::GradientClippingConfig;
@@ -328,10 +329,11 @@ impl Default for TrainConfig {
 impl TrainConfig {
     /// Reads a TOML file; `dataset` is resolved against the file's folder.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| PerceptionError::ConfigFile {
-            path: path.to_path_buf(),
-            message: format!("cannot read: {e}"),
-        })?;
+        let text =
+            read_text_file(path, MAX_CONFIG_BYTES).map_err(|e| PerceptionError::ConfigFile {
+                path: path.to_path_buf(),
+                message: format!("cannot read: {e}"),
+            })?;
         Self::from_toml(&text, path)
     }
 
@@ -377,6 +379,12 @@ impl TrainConfig {
         self.sampling.validate()?;
         if !(1..=MAX_STEPS).contains(&self.steps) {
             return bad("steps", format!("1..={MAX_STEPS}, got {}", self.steps));
+        }
+        if !(1..=crate::backend::MAX_THREADS).contains(&self.threads) {
+            return bad(
+                "threads",
+                format!("1..={}, got {}", crate::backend::MAX_THREADS, self.threads),
+            );
         }
         if self.batch == 0 || self.batch > 256 {
             return bad("batch", format!("1..=256, got {}", self.batch));
@@ -569,7 +577,7 @@ impl StepMetrics {
 
 /// Reads `metrics.csv` of a run.
 pub fn read_metrics(path: &Path) -> Result<Vec<StepMetrics>> {
-    let text = std::fs::read_to_string(path).map_err(|source| PerceptionError::Io {
+    let text = read_text_file(path, MAX_CONFIG_BYTES).map_err(|source| PerceptionError::Io {
         path: path.to_path_buf(),
         source,
     })?;
@@ -899,8 +907,18 @@ impl Trainer {
         // Resume from the checkpoint if there is one.
         let mut metrics: Vec<StepMetrics> = Vec::new();
         let mut start = 0usize;
-        if let Ok(text) = std::fs::read_to_string(files.checkpoint_step()) {
-            let step_path = files.checkpoint_step();
+        let step_path = files.checkpoint_step();
+        let step_text = match read_text_file(&step_path, MAX_CONFIG_BYTES) {
+            Ok(text) => Some(text),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+            Err(source) => {
+                return Err(PerceptionError::Io {
+                    path: step_path,
+                    source,
+                });
+            }
+        };
+        if let Some(text) = step_text {
             start = serde_json::from_str::<usize>(text.trim()).map_err(|e| {
                 PerceptionError::Training {
                     message: format!("{}: {e}", step_path.display()),
@@ -918,12 +936,17 @@ impl Trainer {
                 });
             }
             weights::load_checked(&mut model, &cfg.model, &files.checkpoint_weights(start))?;
-            let record = OptimizerRecord::load(files.checkpoint_optimizer(start)).map_err(|e| {
-                PerceptionError::Weights {
+            let optimizer_path = files.checkpoint_optimizer(start);
+            workcell_robots::input::check_regular_file(&optimizer_path, weights::MAX_WEIGHTS_BYTES)
+                .map_err(|source| PerceptionError::Io {
+                    path: optimizer_path.clone(),
+                    source,
+                })?;
+            let record =
+                OptimizerRecord::load(&optimizer_path).map_err(|e| PerceptionError::Weights {
                     path: files.checkpoint_optimizer(start),
                     message: format!("cannot load the optimizer state: {e:?}"),
-                }
-            })?;
+                })?;
             optim = optim.load_record(record);
             metrics = read_metrics(&files.metrics())
                 .unwrap_or_default()
@@ -1074,7 +1097,7 @@ impl Trainer {
 
     fn check_or_write_config(&self) -> Result<()> {
         let path = self.files.config();
-        match std::fs::read_to_string(&path) {
+        match read_text_file(&path, MAX_CONFIG_BYTES) {
             Ok(existing) => {
                 let theirs: TrainConfig =
                     toml::from_str(&existing).map_err(|e| PerceptionError::ConfigFile {
@@ -1098,7 +1121,13 @@ impl Trainer {
                     ),
                 })
             }
-            Err(_) => std::fs::write(&path, self.config.to_toml()).map_err(io_err(&path)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                std::fs::write(&path, self.config.to_toml()).map_err(io_err(&path))
+            }
+            Err(e) => Err(PerceptionError::Io {
+                path: path.clone(),
+                source: e,
+            }),
         }
     }
 
@@ -1120,7 +1149,7 @@ impl Trainer {
                 message: format!("cannot save the optimizer state: {e:?}"),
             })?;
         let step_path = files.checkpoint_step();
-        let previous = std::fs::read_to_string(&step_path)
+        let previous = read_text_file(&step_path, MAX_CONFIG_BYTES)
             .ok()
             .and_then(|t| t.trim().parse::<usize>().ok());
         let tmp = step_path.with_extension("json.tmp");

@@ -54,22 +54,8 @@ pub const MAX_WEIGHTS_BYTES: u64 = 4 << 30;
 /// The metadata of a safetensors file and the size of its data section, checked as
 /// [`read_metadata`] says.
 fn read_header(path: &Path) -> Result<(serde_json::Map<String, serde_json::Value>, usize)> {
-    let meta =
-        std::fs::metadata(path).map_err(|e| weights_error(path, format!("cannot read: {e}")))?;
-    if !meta.is_file() {
-        return Err(weights_error(path, "cannot read: not a regular file"));
-    }
-    if meta.len() > MAX_WEIGHTS_BYTES {
-        return Err(weights_error(
-            path,
-            format!(
-                "cannot read: {} bytes, more than the limit of {MAX_WEIGHTS_BYTES}",
-                meta.len()
-            ),
-        ));
-    }
-    let bytes =
-        std::fs::read(path).map_err(|e| weights_error(path, format!("cannot read: {e}")))?;
+    let bytes = workcell_robots::input::read_regular_file(path, MAX_WEIGHTS_BYTES)
+        .map_err(|e| weights_error(path, format!("cannot read: {e}")))?;
     parse_header(&bytes, path)
 }
 
@@ -297,6 +283,8 @@ fn compare_config(path: &Path, found: ProcNetConfig, expected: &ProcNetConfig) -
 
 /// Loads a file's tensors into `model` without checking its configuration (the caller has).
 pub(crate) fn load_into(model: &mut ProcNetModel, path: &Path) -> Result<()> {
+    workcell_robots::input::check_regular_file(path, MAX_WEIGHTS_BYTES)
+        .map_err(|e| weights_error(path, format!("cannot read: {e}")))?;
     let mut store = SafetensorsStore::from_file(path);
     let result = model
         .load_from(&mut store)

@@ -204,6 +204,32 @@ pub struct AddedRobot {
     pub meshes: Vec<PathBuf>,
 }
 
+/// A robot's name in the library is a folder name that no path can be made of: ASCII letters,
+/// digits, `_` and `-`, at most 64 of them. Check it before any file is touched: the name
+/// becomes `<library>/<name>/` and the staging folders beside it.
+///
+/// # Errors
+/// [`RobotError::InvalidArgument`] saying what the name may hold.
+pub fn check_robot_name(name: &str) -> Result<()> {
+    let valid = !name.is_empty()
+        && name.len() <= MAX_ROBOT_NAME
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if valid {
+        Ok(())
+    } else {
+        Err(RobotError::InvalidArgument {
+            message: format!(
+                "robot name {name:?} must be 1 to {MAX_ROBOT_NAME} letters, digits, '_' or '-'"
+            ),
+        })
+    }
+}
+
+/// The longest robot name, characters.
+pub const MAX_ROBOT_NAME: usize = 64;
+
 /// Copies the URDF at `source` and every mesh it references into `<library>/<name>/`: the URDF
 /// becomes `<name>.urdf` with its mesh paths made relative (`meshes/<package>/<path>` for
 /// `package://` URIs, `meshes/<file>` otherwise), and `source.toml` records where it came
@@ -211,7 +237,7 @@ pub struct AddedRobot {
 /// existing robot of that name is replaced only with `replace`.
 ///
 /// # Errors
-/// [`RobotError::InvalidArgument`] for a name that is not `[A-Za-z0-9_-]+` or that exists,
+/// [`RobotError::InvalidArgument`] for a name [`check_robot_name`] refuses or that exists,
 /// the errors of [`UrdfAssets::read`], [`RobotError::Io`] for a file that cannot be copied.
 pub fn add_robot(
     source: &Path,
@@ -221,15 +247,7 @@ pub fn add_robot(
     replace: bool,
 ) -> Result<AddedRobot> {
     let invalid = |message: String| RobotError::InvalidArgument { message };
-    if name.is_empty()
-        || !name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-    {
-        return Err(invalid(format!(
-            "robot name '{name}' must be letters, digits, '_' or '-'"
-        )));
-    }
+    check_robot_name(name)?;
     let assets = UrdfAssets::read(source, packages)?;
     let io = |path: &Path| {
         let path = path.to_path_buf();
@@ -270,30 +288,22 @@ pub fn add_robot(
                 if let Some(dir) = dest.parent() {
                     std::fs::create_dir_all(dir).map_err(io(dir))?;
                 }
-                std::fs::copy(&m.path, &dest).map_err(io(&m.path))?;
-                // A .gltf's buffers in files of their own go beside it, under the names it
-                // gives them (inside its folder only).
                 let bytes = crate::input::read_regular_file(&m.path, crate::input::MAX_MESH_BYTES)
                     .map_err(io(&m.path))?;
+                std::fs::write(&dest, &bytes).map_err(io(&dest))?;
+                // A .gltf's buffers in files of their own go beside it, under the names it
+                // gives them (inside its folder only).
                 for uri in crate::gltf_buffer_files(&bytes, &m.path) {
-                    let relative = Path::new(&uri);
-                    let inside = relative
-                        .components()
-                        .all(|c| matches!(c, std::path::Component::Normal(_)));
-                    if !inside {
-                        return Err(invalid(format!(
-                            "{}: buffer {uri:?} lies outside the mesh's folder",
-                            m.path.display()
-                        )));
-                    }
-                    let (from, to_file) = (
-                        m.path.parent().unwrap_or(Path::new(".")).join(relative),
-                        dest.parent().unwrap_or(Path::new(".")).join(relative),
-                    );
+                    let from = crate::mesh::gltf_buffer_path(&m.path, &uri)
+                        .map_err(|why| invalid(format!("{}: {why}", m.path.display())))?;
+                    let to_file = dest.parent().unwrap_or(Path::new(".")).join(&uri);
                     if let Some(dir) = to_file.parent() {
                         std::fs::create_dir_all(dir).map_err(io(dir))?;
                     }
-                    std::fs::copy(&from, &to_file).map_err(io(&from))?;
+                    let buffer =
+                        crate::input::read_regular_file(&from, crate::input::MAX_MESH_BYTES)
+                            .map_err(io(&from))?;
+                    std::fs::write(&to_file, buffer).map_err(io(&to_file))?;
                 }
                 copied.push((m.path.clone(), to.clone()));
                 to

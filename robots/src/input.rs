@@ -26,6 +26,11 @@ pub const MAX_LINKS: usize = 1024;
 pub const MAX_DOF: usize = 128;
 /// The largest mimic multiplier or offset magnitude (gripper mimics use 1, -1 or ratios).
 pub const MAX_MIMIC_FACTOR: f64 = 1e3;
+/// The largest configuration or record file read, in bytes: scenarios, evaluations, training
+/// recipes, dataset manifests and labels, run records (`run.json`). The biggest the project
+/// writes are run records of a few MB (a million episodes' metrics would be about 1 GB: a
+/// sweep that large is merged from shards, each read on its own).
+pub const MAX_CONFIG_BYTES: u64 = 256 << 20;
 /// Joint limits beyond this magnitude (rad) mean "unlimited": a revolute joint with them is
 /// taken as continuous (vendors write +-1e16 for rotors). A prismatic joint must stay within
 /// it (m).
@@ -38,7 +43,28 @@ pub const MAX_JOINT_LIMIT: f64 = 1e4;
 /// The I/O error, or one of kind `InvalidInput` saying why the file is refused (the caller
 /// names the file).
 pub fn read_regular_file(path: &Path, max_bytes: u64) -> std::io::Result<Vec<u8>> {
-    let refuse = |message: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, message);
+    let meta = check_regular_file(path, max_bytes)?;
+    let file = std::fs::File::open(path)?;
+    // The path may have been replaced between the check and the open: check what was opened.
+    if !file.metadata()?.is_file() {
+        return Err(refuse("not a regular file".into()));
+    }
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
+    file.take(max_bytes + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(refuse(format!(
+            "grew past the limit of {max_bytes} bytes while it was read"
+        )));
+    }
+    Ok(bytes)
+}
+
+/// Checks, without opening it, that `path` is a regular file of at most `max_bytes` bytes:
+/// for files a library opens itself (burn's optimizer records and safetensors stores).
+///
+/// # Errors
+/// The I/O error of its metadata, or one of kind `InvalidInput` saying why it is refused.
+pub fn check_regular_file(path: &Path, max_bytes: u64) -> std::io::Result<std::fs::Metadata> {
     let meta = std::fs::metadata(path)?;
     if !meta.is_file() {
         return Err(refuse("not a regular file".into()));
@@ -49,16 +75,31 @@ pub fn read_regular_file(path: &Path, max_bytes: u64) -> std::io::Result<Vec<u8>
             meta.len()
         )));
     }
-    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
-    std::fs::File::open(path)?
-        .take(max_bytes + 1)
-        .read_to_end(&mut bytes)?;
-    if bytes.len() as u64 > max_bytes {
-        return Err(refuse(format!(
-            "grew past the limit of {max_bytes} bytes while it was read"
-        )));
-    }
-    Ok(bytes)
+    Ok(meta)
+}
+
+fn refuse(message: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidInput, message)
+}
+
+/// Reads a text file as [`read_regular_file`] does: a regular file of at most `max_bytes`
+/// bytes, in UTF-8. Every configuration, manifest and record the project reads comes through
+/// here (or through [`read_regular_file`] for binary files).
+///
+/// # Errors
+/// As [`read_regular_file`], and one of kind `InvalidData` for text that is not UTF-8 (the
+/// message gives the byte offset, never the bytes).
+pub fn read_text_file(path: &Path, max_bytes: u64) -> std::io::Result<String> {
+    let bytes = read_regular_file(path, max_bytes)?;
+    String::from_utf8(bytes).map_err(|e| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "not UTF-8 text (invalid byte at offset {})",
+                e.utf8_error().valid_up_to()
+            ),
+        )
+    })
 }
 
 /// Reads a URDF file: a regular file of at most [`MAX_URDF_BYTES`], in UTF-8.

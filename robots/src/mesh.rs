@@ -198,15 +198,49 @@ pub fn gltf_buffer_files(bytes: &[u8], path: &Path) -> Vec<String> {
     .unwrap_or_default()
 }
 
-/// Nodes deeper than this in a glTF scene are refused (a malformed file may nest without
-/// end, or loop).
-const MAX_GLTF_DEPTH: usize = 64;
+/// The file a `.gltf` at `gltf_path` names by the buffer URI `uri` (not a `data:` URI): a
+/// relative path inside the `.gltf`'s own folder, which lies inside the mesh's package root,
+/// so that a buffer follows the rule of the meshes. Absolute paths, `..`, URI schemes and
+/// symbolic links that lead out of the folder are refused.
+///
+/// # Errors
+/// A message naming the URI and why it is refused (never the bytes of any file).
+pub fn gltf_buffer_path(gltf_path: &Path, uri: &str) -> Result<std::path::PathBuf, String> {
+    let refused = |why: &str| format!("buffer {uri:?} {why}");
+    if uri.contains("://") || uri.starts_with("data:") {
+        return Err(refused("uses a URI scheme other than data:"));
+    }
+    let relative = Path::new(uri);
+    let plain = !uri.is_empty()
+        && relative
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)));
+    if !plain {
+        return Err(refused(
+            "is not a relative path inside the .gltf's folder (no '..', not absolute)",
+        ));
+    }
+    let folder = gltf_path.parent().unwrap_or(Path::new("."));
+    let file = folder.join(relative);
+    // A link inside the folder may point out of it.
+    if let (Ok(real), Ok(real_folder)) = (file.canonicalize(), folder.canonicalize())
+        && !real.starts_with(&real_folder)
+    {
+        return Err(refused("resolves outside the .gltf's folder"));
+    }
+    Ok(file)
+}
+
+/// The most nodes a glTF scene may have.
+const MAX_GLTF_NODES: usize = 100_000;
 
 /// The triangles of a glTF 2.0 file's default scene (else its first), every mesh placed by
 /// its node's transform from the scene root. Vertices are taken as written, in metres, in
 /// the link's frame, like the other formats: glTF's "+Y is up" is not turned into ROS's +Z.
-/// Buffers come from the `.glb`'s binary chunk, from `data:` URIs, or from files beside
-/// `path` (read with the same size limit as meshes).
+/// Buffers come from the `.glb`'s binary chunk, from `data:` URIs, or from files in
+/// `path`'s folder ([`gltf_buffer_path`]; read with the same limits as meshes). Nodes form
+/// trees (glTF 2.0, 3.5.3: no node has two parents): a node reached twice is refused, so
+/// that each node is visited once.
 fn gltf_mesh(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<TriMesh, String> {
     // The gltf crate indexes without checking in places (its own validator looks accessors
     // up by the index it is about to validate; accessor iterators slice the buffers): a
@@ -240,7 +274,7 @@ fn gltf_mesh_unguarded(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Tri
                         .decode(data)
                         .map_err(|e| bad(format!("a data URI: {e}")))?
                 } else {
-                    let file = path.parent().unwrap_or(Path::new(".")).join(uri);
+                    let file = gltf_buffer_path(path, uri).map_err(bad)?;
                     crate::input::read_regular_file(&file, crate::input::MAX_MESH_BYTES)
                         .map_err(|e| bad(format!("buffer {}: {e}", file.display())))?
                 }
@@ -267,13 +301,27 @@ fn gltf_mesh_unguarded(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Tri
         triangles: Vec::new(),
     };
     let s = Vector::from_array(scale);
-    let mut stack: Vec<(gltf::Node<'_>, [[f64; 4]; 4], usize)> =
-        scene.nodes().map(|n| (n, IDENTITY_4, 0)).collect();
-    while let Some((node, parent, depth)) = stack.pop() {
-        if depth > MAX_GLTF_DEPTH {
-            return Err(bad(format!(
-                "nodes nested deeper than {MAX_GLTF_DEPTH} (a loop?)"
-            )));
+    let nodes = gltf.document.nodes().len();
+    if nodes > MAX_GLTF_NODES {
+        return Err(bad(format!(
+            "{nodes} nodes, more than the limit of {MAX_GLTF_NODES}"
+        )));
+    }
+    // A node shared by two parents (or a loop) would be walked once per path: 2.5 kB of
+    // nodes each listing the next two as children made 2^64 paths.
+    let mut reached = vec![false; nodes];
+    let mut stack: Vec<(gltf::Node<'_>, [[f64; 4]; 4])> =
+        scene.nodes().map(|n| (n, IDENTITY_4)).collect();
+    while let Some((node, parent)) = stack.pop() {
+        match reached.get_mut(node.index()) {
+            Some(seen) if !*seen => *seen = true,
+            _ => {
+                return Err(bad(format!(
+                    "node {} is reached twice: glTF nodes form trees (a node with two \
+                     parents, or a loop)",
+                    node.index()
+                )));
+            }
         }
         let local = node.transform().matrix().map(|c| c.map(f64::from));
         let world = mul4(&parent, &local);
@@ -282,7 +330,7 @@ fn gltf_mesh_unguarded(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Tri
                 add_primitive(&mut mesh, &primitive, &buffers, &world, s).map_err(bad)?;
             }
         }
-        stack.extend(node.children().map(|c| (c, world, depth + 1)));
+        stack.extend(node.children().map(|c| (c, world)));
     }
     mesh.checked(path)
 }
@@ -339,8 +387,12 @@ fn add_primitive(
         Some(i) => i.into_u32().collect(),
         None => (0..u32::try_from(count).map_err(|_| "mesh too large".to_string())?).collect(),
     };
-    if let Some(&i) = indices.iter().find(|&&i| i as usize >= count) {
-        return Err(format!("index {i} past the primitive's {count} vertices"));
+    // The position, not the value: an index is the file's bytes, and an error must not echo
+    // what a buffer holds.
+    if let Some(k) = indices.iter().position(|&i| i as usize >= count) {
+        return Err(format!(
+            "index number {k} points past the primitive's {count} vertices"
+        ));
     }
     let triangles: Vec<[u32; 3]> = match primitive.mode() {
         Mode::Triangles => indices

@@ -310,3 +310,144 @@ fn gltf_with_an_external_buffer_loads_and_travels_with_its_robot() {
             .expect("add");
     RobotModel::from_urdf_file(&added.urdf, &PackageMap::new()).expect("the added robot loads");
 }
+
+/// A `.gltf` holding one triangle whose buffer is the file `uri`: positions of three
+/// vertices, then three `u32` indices.
+fn one_triangle_gltf(uri: &str, byte_length: usize) -> String {
+    serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"byteLength": byte_length, "uri": uri}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 12}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"}
+        ]
+    })
+    .to_string()
+}
+
+/// One triangle's buffer: its positions, then `indices`.
+fn triangle_buffer(indices: [u32; 3]) -> Vec<u8> {
+    let positions: [f32; 9] = [0., 0., 0., 1., 0., 0., 0., 1., 0.];
+    let mut bin: Vec<u8> = positions.iter().flat_map(|x| x.to_le_bytes()).collect();
+    bin.extend(indices.iter().flat_map(|x| x.to_le_bytes()));
+    bin
+}
+
+/// Buffers follow the meshes' rule: a file inside the `.gltf`'s folder (itself inside the
+/// package root), never an absolute path, a `..`, a URI scheme or a link out of the folder.
+/// `/etc/passwd` as a buffer was read before, and an index error echoed four of its bytes.
+#[test]
+fn gltf_buffers_stay_inside_the_gltf_folder() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let meshes = dir.path().join("pkg/meshes");
+    std::fs::create_dir_all(meshes.join("sub")).expect("mkdir");
+    // A secret outside the package, shaped as a buffer whose indices spell "SECR".
+    let mut secret = triangle_buffer([0, 1, 2]);
+    secret.truncate(36);
+    secret.extend_from_slice(b"SECRSECRSECR");
+    let secret_path = dir.path().join("secret.bin");
+    std::fs::write(&secret_path, &secret).expect("secret");
+    let secret_index = u32::from_le_bytes(*b"SECR").to_string();
+    let load = |uri: &str| {
+        let gltf = meshes.join("a.gltf");
+        std::fs::write(&gltf, one_triangle_gltf(uri, 48)).expect("gltf");
+        TriMesh::load(&gltf, [1.0; 3])
+    };
+    let absolute = secret_path.to_str().expect("utf-8").to_string();
+    let file_uri = format!("file://{absolute}");
+    for uri in [
+        absolute.as_str(),
+        "../../secret.bin",
+        "sub/../../../secret.bin",
+        "/etc/passwd",
+        "../../../../../../../../etc/passwd",
+        file_uri.as_str(),
+        "http://example.invalid/b.bin",
+        "",
+    ] {
+        let err = load(uri).expect_err(uri);
+        assert!(err.contains("buffer"), "{uri}: {err}");
+        assert!(!err.contains(&secret_index), "{uri}: {err}");
+    }
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(&secret_path, meshes.join("link.bin")).expect("symlink");
+        let err = load("link.bin").expect_err("a link out of the folder");
+        assert!(err.contains("resolves outside"), "{err}");
+    }
+    // A FIFO beside the .gltf is refused before it is opened (a read would block).
+    #[cfg(unix)]
+    {
+        let fifo = meshes.join("fifo.bin");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            let err = load("fifo.bin").expect_err("a FIFO");
+            assert!(err.contains("not a regular file"), "{err}");
+        }
+    }
+    // Inside the folder, in a subfolder too, it loads.
+    std::fs::write(meshes.join("sub/ok.bin"), triangle_buffer([0, 1, 2])).expect("bin");
+    let mesh = load("sub/ok.bin").expect("a buffer in a subfolder");
+    assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+    // An index past the vertices names its position, not its value (the file's bytes).
+    std::fs::write(meshes.join("sub/bad.bin"), &secret).expect("bin");
+    let err = load("sub/bad.bin").expect_err("indices past the vertices");
+    assert!(err.contains("index number 0 points past"), "{err}");
+    assert!(!err.contains(&secret_index), "{err}");
+}
+
+/// glTF nodes form trees. A 2.5 kB file whose nodes each list the next two as children has
+/// 2^63 paths from its root: walked once per path it allocated 6 GB and aborted. A node
+/// reached twice (two parents, listed twice in the scene, or a loop) is refused at once.
+#[test]
+fn gltf_nodes_shared_by_two_parents_are_refused() {
+    use base64::Engine as _;
+    let bin = triangle_buffer([0, 1, 2]);
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bin)
+    );
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&one_triangle_gltf(&uri, 48)).expect("json");
+    let n = 64;
+    let nodes: Vec<serde_json::Value> = (0..n)
+        .map(|k| {
+            let children: Vec<usize> = [k + 1, k + 2].into_iter().filter(|&c| c < n).collect();
+            if children.is_empty() {
+                serde_json::json!({"mesh": 0})
+            } else {
+                serde_json::json!({"mesh": 0, "children": children})
+            }
+        })
+        .collect();
+    doc["nodes"] = serde_json::Value::Array(nodes);
+    let text = doc.to_string();
+    assert!(text.len() < 4096, "a small file: {} bytes", text.len());
+    // Each node is visited at most once, so the refusal comes after at most 64 visits.
+    let err = TriMesh::from_bytes(text.as_bytes(), Path::new("dag.gltf"), [1.0; 3])
+        .expect_err("a node with two parents");
+    assert!(err.contains("reached twice"), "{err}");
+    // The same node twice among the scene's roots.
+    doc["nodes"] = serde_json::json!([{"mesh": 0}]);
+    doc["scenes"] = serde_json::json!([{"nodes": [0, 0]}]);
+    let err = TriMesh::from_bytes(
+        doc.to_string().as_bytes(),
+        Path::new("twice.gltf"),
+        [1.0; 3],
+    )
+    .expect_err("a root listed twice");
+    assert!(err.contains("reached twice"), "{err}");
+    // A tree of the same nodes loads: each node once, each with its own triangle.
+    doc["scenes"] = serde_json::json!([{"nodes": [0]}]);
+    doc["nodes"] = serde_json::json!([{"mesh": 0, "children": [1, 2]}, {"mesh": 0}, {"mesh": 0}]);
+    let mesh = TriMesh::from_bytes(doc.to_string().as_bytes(), Path::new("tree.gltf"), [1.0; 3])
+        .expect("a tree");
+    assert_eq!(mesh.triangles.len(), 3);
+}

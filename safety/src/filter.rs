@@ -37,6 +37,10 @@ impl std::fmt::Display for FilterMode {
 /// m/s: ISO 13855's 2.0 m/s for hands and arms near a hazard.
 pub const DETECTION_APPROACH_M_S: f64 = 2.0;
 
+/// The longest `anticipation_s` and `escape_horizon_s`, s: at ISO 13855's 2.0 m/s a hand
+/// crosses a work-cell in about a second, and the settings measured are 0.1 to 0.15 s.
+pub const MAX_HORIZON_S: f64 = 3.0;
+
 /// Settings of the filter (the `[safety]` table of an evaluation file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -82,8 +86,8 @@ pub struct FilterConfig {
     /// Escape-aware margin: where the arm can move a pair's witness point away from the
     /// human at only `e` m/s (joint velocity limits, along the normal), the pair keeps
     /// `escape_horizon_s * max(0, 2.0 - e)` m beyond d_min (2.0 m/s: ISO 13855's approach
-    /// speed), so that it starts giving way before a hand can outrun it. s; 0 turns it off.
-    /// Default 0.
+    /// speed), so that it starts giving way before a hand can outrun it. s; 0 turns it off;
+    /// at most [`MAX_HORIZON_S`]. Default 0.
     pub escape_horizon_s: f64,
     /// Anticipation: the filter guards each moving human part also where it will be if it
     /// keeps its estimated velocity for up to this long, s (copies of its capsule along that
@@ -91,7 +95,8 @@ pub struct FilterConfig {
     /// that the arm starts giving way while the hand is still setting off, not once it is
     /// there; a resting part costs nothing. The rows of the part where it is now stay as
     /// they are. QP only: speed and separation monitoring counts the human's travel in its
-    /// protective separation distance already. 0 turns it off. Default 0.
+    /// protective separation distance already. 0 turns it off; at most
+    /// [`MAX_HORIZON_S`]. Default 0.
     pub anticipation_s: f64,
     /// The QP keeps each link this far from the cell's static obstacles
     /// ([`SafetyFilter::set_obstacles`]) while it evades the human, m. Default 0.02.
@@ -170,6 +175,19 @@ impl FilterConfig {
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(key, format!("must be finite and >= 0, got {v}")));
+            }
+        }
+        // A horizon of seconds guards where a part would be after crossing the cell: a
+        // mistake (1e9 was accepted), not a setting.
+        for (key, v) in [
+            ("safety.anticipation_s", self.anticipation_s),
+            ("safety.escape_horizon_s", self.escape_horizon_s),
+        ] {
+            if v > MAX_HORIZON_S {
+                return Err(invalid(
+                    key,
+                    format!("{v} s is beyond the limit of {MAX_HORIZON_S} s"),
+                ));
             }
         }
         if !(self.max_relaxation_m_s.is_finite() && self.max_relaxation_m_s >= 0.0) {

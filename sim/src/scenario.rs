@@ -22,6 +22,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use workcell_robots::HumanLook;
+use workcell_robots::input::{MAX_CONFIG_BYTES, read_text_file};
 use workcell_robots::math::{Pose, pose_from_xyz_rpy};
 
 use crate::error::{Result, SimError};
@@ -581,9 +582,9 @@ fn check_speed(speed_scale: f64, acceleration: f64) -> Result<(), String> {
     Ok(())
 }
 
-/// Reads a text file; errors name it.
+/// Reads a configuration file: a regular file of bounded size, in UTF-8; errors name it.
 pub(crate) fn read_text(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| SimError::Io {
+    read_text_file(path, MAX_CONFIG_BYTES).map_err(|source| SimError::Io {
         path: path.to_path_buf(),
         source,
     })

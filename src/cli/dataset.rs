@@ -19,9 +19,10 @@ pub struct GenerateArgs {
     pub config: Option<PathBuf>,
     /// Output folder. A run into a folder of the same configuration completes it (finished
     /// sequences are kept); a folder of another configuration is refused.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Print the configuration with every default filled in, then exit.
+    #[arg(long, required_unless_present = "print_defaults")]
+    pub out: Option<PathBuf>,
+    /// Print the configuration (`--config`'s, else the defaults) with every default filled
+    /// in, then exit.
     #[arg(long)]
     pub print_defaults: bool,
     /// The renderer: `cpu` (the software rasterizer) or `gpu` (wgpu, feature `gpu`). The
@@ -144,13 +145,18 @@ pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
 
 pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     if args.print_defaults {
-        say_inline!("{}", DatasetConfig::default().to_toml());
+        let config = match &args.config {
+            Some(path) => DatasetConfig::from_file(path)?,
+            None => DatasetConfig::default(),
+        };
+        say_inline!("{}", config.to_toml());
         return Ok(ExitCode::SUCCESS);
     }
     let path = args
         .config
         .clone()
         .context("--config FILE is required (see configs/dataset.toml)")?;
+    let out = args.out.as_ref().context("--out DIR is required")?;
     let splits = args
         .splits
         .iter()
@@ -202,7 +208,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
         "{bar:40} {pos}/{len} sequences, {elapsed} (eta {eta})",
     );
     let start = Instant::now();
-    let report = generator.generate(&args.out, &|done| bar.set_position(done as u64))?;
+    let report = generator.generate(out, &|done| bar.set_position(done as u64))?;
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
     let m = &report.manifest;
@@ -213,7 +219,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
         report.generated,
         m.width_px,
         m.height_px,
-        args.out.display()
+        out.display()
     );
     for split in Split::ALL {
         let k = m.sequences.iter().filter(|s| s.split == split).count();
@@ -243,14 +249,18 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     if missing > 0 {
         say!("  {missing} frames show no forearm (out of view after every camera draw)");
     }
-    say!("look at it: workcell dataset show {}", args.out.display());
+    say!("look at it: workcell dataset show {}", out.display());
     Ok(ExitCode::SUCCESS)
 }
 
 /// What names weights in a dataset's stamp: the file's name and a hash of its bytes, so that
 /// a folder made with other weights is not completed with these.
 fn weights_stamp(path: &std::path::Path) -> Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let bytes = workcell::robots::input::read_regular_file(
+        path,
+        workcell::perception::weights::MAX_WEIGHTS_BYTES,
+    )
+    .with_context(|| format!("reading {}", path.display()))?;
     // FNV-1a, 64 bits: a fingerprint, not a defence.
     let hash = bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
         (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)

@@ -235,6 +235,17 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     if args.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
+    // Episode i has seed SEED + i: the last one must not wrap around to seed 0.
+    let last_episode = u64::try_from(args.episodes - 1).unwrap_or(u64::MAX);
+    if args.seed.checked_add(last_episode).is_none() {
+        bail!(
+            "--seed {}: {} episodes would need seeds past the largest, {} (at most --seed {})",
+            args.seed,
+            args.episodes,
+            u64::MAX,
+            u64::MAX - last_episode
+        );
+    }
     let evaluation = Evaluation::from_file_with(path, &overrides)?;
     let mode = match args.filter {
         FilterArg::None => FilterMode::None,
@@ -262,7 +273,8 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
     let mut results: Vec<_> = slice
         .par_iter()
         .filter_map(|&episode| {
-            let seed = args.seed.wrapping_add(episode as u64);
+            // Checked above: SEED + episodes - 1 fits.
+            let seed = args.seed + episode as u64;
             let mut shown = 0u64;
             let result = run_episode(&evaluation, mode, episode, seed, None, |fraction| {
                 let now = (fraction * 100.0) as u64;
@@ -475,7 +487,11 @@ pub fn write_report(dir: &Path, record: &RunRecord, command: &str, out: &Path) -
     });
     for (episode, file) in listed {
         let glb_path = dir.join(file);
-        let glb = fs::read(&glb_path).with_context(|| format!("reading {}", glb_path.display()))?;
+        let glb = workcell::robots::input::read_regular_file(
+            &glb_path,
+            workcell::robots::input::MAX_MESH_BYTES,
+        )
+        .with_context(|| format!("reading {}", glb_path.display()))?;
         let m = episodes.iter().find(|m| m.episode == *episode);
         let label = m.map_or_else(
             || format!("episode {episode}"),

@@ -59,11 +59,17 @@ const STAGE_PREFIX: &str = ".workcell-partial-";
 /// into place together by [`OutputDir::commit`], after the old run's outputs are removed. A
 /// run that is interrupted (Ctrl-C, an error, SIGKILL) leaves the previous run's files as
 /// they were, never a mix of two runs; the next run removes a stale staging folder.
+///
+/// One run at a time writes into a folder: the run holds an exclusive lock on the folder
+/// (`flock`, released when the run ends, however it ends), and a second run into the same
+/// folder is refused at once instead of deleting the first one's staging folder.
 pub struct OutputDir {
     out: std::path::PathBuf,
     stage: std::path::PathBuf,
     outputs: &'static [&'static str],
     committed: bool,
+    /// The folder, opened and locked; `None` where folders cannot be locked.
+    _lock: Option<std::fs::File>,
 }
 
 impl OutputDir {
@@ -78,6 +84,8 @@ impl OutputDir {
     ) -> anyhow::Result<Self> {
         use anyhow::Context as _;
         prepare_out(out, force, outputs)?;
+        let lock = lock_folder(out)?;
+        // Staging folders here now are stale: their runs no longer hold the lock.
         let entries =
             std::fs::read_dir(out).with_context(|| format!("listing {}", out.display()))?;
         for entry in entries.flatten() {
@@ -96,6 +104,7 @@ impl OutputDir {
             stage,
             outputs,
             committed: false,
+            _lock: lock,
         })
     }
 
@@ -139,6 +148,26 @@ impl OutputDir {
     }
 }
 
+/// An exclusive lock on the folder `out`, held while the returned file is open; `None` where
+/// the platform or file system cannot lock a folder (the run goes on unlocked).
+///
+/// # Errors
+/// Another process holds the lock: another run is writing into `out`.
+fn lock_folder(out: &std::path::Path) -> anyhow::Result<Option<std::fs::File>> {
+    let Ok(folder) = std::fs::File::open(out) else {
+        return Ok(None);
+    };
+    match folder.try_lock() {
+        Ok(()) => Ok(Some(folder)),
+        Err(std::fs::TryLockError::WouldBlock) => anyhow::bail!(
+            "another workcell run is writing into {}: wait for it to finish or choose \
+             another --out",
+            out.display()
+        ),
+        Err(std::fs::TryLockError::Error(_)) => Ok(None),
+    }
+}
+
 impl Drop for OutputDir {
     fn drop(&mut self) {
         if !self.committed {
@@ -175,8 +204,8 @@ pub fn count_in<const LO: usize, const HI: usize>(text: &str) -> Result<usize, S
     }
 }
 
-/// The limit of `--threads`.
-pub const MAX_THREADS: usize = 256;
+/// The limit of `--threads` (and of a training recipe's `threads`).
+pub const MAX_THREADS: usize = workcell::perception::backend::MAX_THREADS;
 
 /// A dataset split by name.
 ///
@@ -251,6 +280,39 @@ mod tests {
         assert_eq!(
             std::fs::read_to_string(out.join("summary.md")).expect("new"),
             "new"
+        );
+    }
+
+    /// Two runs into one folder: the second is refused at once, naming the folder, and the
+    /// first one's staging folder survives it (the second removed it, and the first failed
+    /// with a bare "No such file or directory"). Once the first ends, the folder is free.
+    #[cfg(unix)]
+    #[test]
+    fn a_second_run_into_the_same_folder_is_refused_while_the_first_runs() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("run");
+        let first = OutputDir::create(&out, true, &OUTPUTS).expect("first");
+        std::fs::write(first.path().join("summary.md"), "first").expect("write");
+        let err = OutputDir::create(&out, true, &OUTPUTS)
+            .err()
+            .expect("the second run is refused")
+            .to_string();
+        assert!(
+            err.contains("another workcell run is writing into"),
+            "{err}"
+        );
+        assert!(first.path().join("summary.md").is_file());
+        first.commit().expect("the first run commits");
+        assert_eq!(
+            std::fs::read_to_string(out.join("summary.md")).expect("first"),
+            "first"
+        );
+        let second = OutputDir::create(&out, true, &OUTPUTS).expect("free again");
+        std::fs::write(second.path().join("summary.md"), "second").expect("write");
+        second.commit().expect("commit");
+        assert_eq!(
+            std::fs::read_to_string(out.join("summary.md")).expect("second"),
+            "second"
         );
     }
 

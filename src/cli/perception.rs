@@ -20,8 +20,8 @@ pub struct TrainArgs {
     /// Run folder: checkpoints, metrics.csv, loss_curve.svg, procnet.safetensors (or
     /// baseline.safetensors). A folder holding a checkpoint of the same configuration is
     /// resumed.
-    #[arg(long)]
-    pub out: PathBuf,
+    #[arg(long, required_unless_present = "print_defaults")]
+    pub out: Option<PathBuf>,
     /// `procnet`: the configuration's network as written. `baseline`: its feed-forward
     /// stand-in for the paper's PoseCNN, a single-frame encoder-decoder of the same
     /// parameter count (plain convolution cells, no prediction loss), trained by the same
@@ -41,7 +41,8 @@ pub struct TrainArgs {
     /// Stop after this many steps of this run (checkpointed; the same command resumes).
     #[arg(long, value_parser = super::count_in::<1, 10_000_000>)]
     pub stop_after: Option<usize>,
-    /// Print the configuration with every default filled in, then exit.
+    /// Print the configuration (`--config`'s, else the defaults) with every default filled
+    /// in, then exit.
     #[arg(long)]
     pub print_defaults: bool,
 }
@@ -108,7 +109,11 @@ fn format_channels(c: &[usize]) -> String {
 
 pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     if args.print_defaults {
-        say_inline!("{}", TrainConfig::default().to_toml());
+        let config = match &args.config {
+            Some(path) => TrainConfig::from_file(path)?,
+            None => TrainConfig::default(),
+        };
+        say_inline!("{}", config.to_toml());
         return Ok(ExitCode::SUCCESS);
     }
     let path = args
@@ -155,7 +160,8 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
         );
     }
     backend::set_threads(config.threads);
-    let trainer = Trainer::new(config, &args.out)?;
+    let out = args.out.as_ref().context("--out DIR is required")?;
+    let trainer = Trainer::new(config, out)?;
     let progress = super::progress_bar(
         trainer.config.steps as u64,
         "{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}",

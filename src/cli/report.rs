@@ -33,6 +33,19 @@ pub struct MergeArgs {
 /// A folder without a readable run record, shards of different evaluations, a shard twice
 /// or missing, and I/O errors, each naming the folder or file.
 pub fn merge_shards(args: &MergeArgs) -> Result<ExitCode> {
+    // Writing into a shard's folder would replace the very record being merged.
+    if let Ok(out) = args.out.canonicalize() {
+        for dir in &args.shards {
+            if dir.canonicalize().is_ok_and(|d| d == out) {
+                anyhow::bail!(
+                    "--out {} is the shard folder {}: the merged report would overwrite that \
+                     shard's record; choose another --out",
+                    args.out.display(),
+                    dir.display()
+                );
+            }
+        }
+    }
     let records = args
         .shards
         .iter()
@@ -51,8 +64,12 @@ pub fn merge_shards(args: &MergeArgs) -> Result<ExitCode> {
             std::fs::create_dir_all(parent)
                 .with_context(|| format!("creating {}", parent.display()))?;
         }
-        std::fs::copy(&from, &to)
-            .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
+        let bytes = workcell::robots::input::read_regular_file(
+            &from,
+            workcell::robots::input::MAX_MESH_BYTES,
+        )
+        .with_context(|| format!("reading {}", from.display()))?;
+        std::fs::write(&to, bytes).with_context(|| format!("writing {}", to.display()))?;
     }
     finish_report(out, &record, &args.out, args.fail_on_violation)
 }

@@ -101,6 +101,8 @@ pub struct AddArgs {
 pub fn add(args: &AddArgs) -> Result<ExitCode> {
     use rand::{Rng, SeedableRng};
 
+    // The name becomes folder names: checked before any file is touched.
+    workcell::robots::assets::check_robot_name(&args.name)?;
     if CATALOGUE.iter().any(|e| e.name == args.name) {
         bail!(
             "'{}' is a built-in robot's name; choose another --name",

@@ -24,6 +24,7 @@ pub mod report;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use workcell_robots::input::{MAX_CONFIG_BYTES, read_text_file};
 use workcell_safety::FilterConfig;
 use workcell_sim::Scenario;
 
@@ -36,12 +37,16 @@ pub use perception::{
 };
 
 /// An evaluation file: the cell, the task, perception and the safety filter's settings.
+/// The shortest task an evaluation runs, s: 25 ticks of the default 4 ms control period.
+pub const MIN_TASK_S: f64 = 0.1;
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct EvaluationConfig {
     /// The cell's scenario file, relative to this file. Default `default.toml`.
     pub cell: String,
-    /// Length of the task: the first `task_s` seconds of the robot's nominal motion. Default 12.
+    /// Length of the task: the first `task_s` seconds of the robot's nominal motion, from
+    /// [`MIN_TASK_S`] to 3,600. Default 12.
     pub task_s: f64,
     /// Plays the cell's human motions at this speed instead of the cell's
     /// `human.speed_scale` (the generated motions peak at `human.peak_speed_m_s`; ISO 13855
@@ -160,7 +165,7 @@ impl Evaluation {
     /// of range, and a `d_min_m` that no cell could keep (larger than the distance between
     /// the robot's and the human's bases plus their reach).
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        let text = read_text_file(path, MAX_CONFIG_BYTES).map_err(|source| Error::Io {
             path: path.to_path_buf(),
             source,
         })?;
@@ -174,7 +179,7 @@ impl Evaluation {
     /// As [`Evaluation::from_file`], and for an override that is not `KEY=VALUE` or names a
     /// key inside a value that is not a table.
     pub fn from_file_with(path: &Path, overrides: &[String]) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        let text = read_text_file(path, MAX_CONFIG_BYTES).map_err(|source| Error::Io {
             path: path.to_path_buf(),
             source,
         })?;
@@ -234,6 +239,14 @@ impl Evaluation {
         };
         positive("task_s", c.task_s)?;
         positive("control_period_s", c.control_period_s)?;
+        // Lower bound: a task of a few ticks has no motion to evaluate, and its ratios are
+        // noise (1e-300 printed a 300-digit task-time ratio).
+        if c.task_s < MIN_TASK_S {
+            return Err(Error::config(
+                "task_s",
+                format!("{:?} is below the limit of {MIN_TASK_S} s", c.task_s),
+            ));
+        }
         // Upper bounds: an episode of more than an hour, or a controller slower than 10 Hz,
         // is no evaluation of a collaborative cell (and 1e6 s hung the run).
         for (key, v, most) in [

@@ -10,6 +10,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use workcell_robots::input::{MAX_CONFIG_BYTES, read_text_file};
 
 use super::{EpisodeMetrics, EpisodeTrace};
 use crate::error::{Error, Result};
@@ -123,7 +124,7 @@ impl RunRecord {
     /// this format.
     pub fn read(dir: &Path) -> Result<Self> {
         let path = dir.join(RUN_RECORD);
-        let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
+        let text = read_text_file(&path, MAX_CONFIG_BYTES).map_err(|source| Error::Io {
             path: path.clone(),
             source,
         })?;
@@ -139,18 +140,124 @@ impl RunRecord {
                 format.format
             )));
         }
-        serde_json::from_str(&text).map_err(|e| parse(e.to_string()))
+        let record: Self = serde_json::from_str(&text).map_err(|e| parse(e.to_string()))?;
+        record.check().map_err(parse)?;
+        Ok(record)
     }
 
-    /// The record as JSON.
+    /// A record must be the record of its episodes: every number finite where a number is
+    /// measured, each episode's seed its own (`first_seed + episode`), the episodes exactly its
+    /// shard's slice, and the counts agreeing with the separations they were counted from
+    /// (a separation below d_min is a violation, one at or below 0 a contact, and the other
+    /// way round). A record edited by hand into "no violation" is refused, not reported.
     ///
     /// # Errors
-    /// Never for records this crate makes; serde's error otherwise.
+    /// A message naming the field (`metrics[i] (episode e).key`) and what is wrong with it.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let s = &self.settings;
+        if s.shards == 0 || self.shard == 0 || self.shard > s.shards {
+            return Err(format!(
+                "shard {} of {}: needs 1 <= shard <= shards",
+                self.shard, s.shards
+            ));
+        }
+        if s.episodes == 0 {
+            return Err("settings.episodes: 0 episodes".into());
+        }
+        let last = u64::try_from(s.episodes - 1).unwrap_or(u64::MAX);
+        if s.first_seed.checked_add(last).is_none() {
+            return Err(format!(
+                "settings.first_seed: {} episodes from seed {} pass the largest seed",
+                s.episodes, s.first_seed
+            ));
+        }
+        for (key, v) in [
+            ("d_min_m", s.d_min_m),
+            ("near_m", s.near_m),
+            ("pfl_distance_m", s.pfl_distance_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("settings.{key} = {v}: must be finite and >= 0"));
+            }
+        }
+        for (part, v) in &s.contact_speed_limits {
+            if !(v.is_finite() && *v > 0.0) {
+                return Err(format!(
+                    "settings.contact_speed_limits: {part} = {v}: must be finite and > 0"
+                ));
+            }
+        }
+        // The settings repeat what the evaluation says: they must say the same.
+        let config: super::EvaluationConfig = toml::from_str(&s.evaluation_toml)
+            .map_err(|e| format!("settings.evaluation_toml is not an evaluation: {e}"))?;
+        if config.safety.d_min_m.to_bits() != s.d_min_m.to_bits() {
+            return Err(format!(
+                "settings.d_min_m = {} contradicts the evaluation's safety.d_min_m = {}",
+                s.d_min_m, config.safety.d_min_m
+            ));
+        }
+        if config.near_m.to_bits() != s.near_m.to_bits() {
+            return Err(format!(
+                "settings.near_m = {} contradicts the evaluation's near_m = {}",
+                s.near_m, config.near_m
+            ));
+        }
+        let expected =
+            shard_episodes(self.shard, s.shards, s.episodes).map_err(|e| e.to_string())?;
+        let got: Vec<usize> = self.metrics.iter().map(|m| m.episode).collect();
+        if got != expected {
+            return Err(format!(
+                "metrics: shard {}/{} holds episodes {}, not its slice of {} episodes",
+                self.shard,
+                s.shards,
+                abbreviate(&got),
+                expected.len()
+            ));
+        }
+        for (i, m) in self.metrics.iter().enumerate() {
+            check_episode(m, s).map_err(|e| format!("metrics[{i}] (episode {}).{e}", m.episode))?;
+        }
+        for t in &self.traces {
+            if !got.contains(&t.episode) {
+                return Err(format!(
+                    "traces: episode {} is not among the record's episodes",
+                    t.episode
+                ));
+            }
+        }
+        for (episode, file) in &self.replays {
+            if !got.contains(episode) {
+                return Err(format!(
+                    "replays: episode {episode} is not among the record's episodes"
+                ));
+            }
+            // The file is copied out of the shard's folder into the merged one: a plain
+            // relative path, never one that leaves either folder.
+            let plain = !file.is_empty()
+                && Path::new(file)
+                    .components()
+                    .all(|c| matches!(c, std::path::Component::Normal(_)));
+            if !plain {
+                return Err(format!(
+                    "replays: episode {episode}'s file {file:?} is not a path inside the folder"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The record as JSON: only a record that passes [`RunRecord::check`], so that what is
+    /// written is what [`RunRecord::read`] reads back.
+    ///
+    /// # Errors
+    /// Never for records this crate makes; the check's or serde's error otherwise.
     pub fn to_json(&self) -> Result<String> {
-        serde_json::to_string(self).map_err(|e| Error::Parse {
+        let error = |message: String| Error::Parse {
             path: PathBuf::from(RUN_RECORD),
-            message: e.to_string(),
-        })
+            message,
+        };
+        self.check().map_err(error)?;
+        serde_json::to_string(self).map_err(|e| error(e.to_string()))
     }
 
     /// The traces kept for the plots, paired with their metrics, worst first.
@@ -167,6 +274,99 @@ impl RunRecord {
             })
             .collect()
     }
+}
+
+/// At most a few of `items`, for a message.
+fn abbreviate(items: &[usize]) -> String {
+    let shown: Vec<String> = items.iter().take(5).map(ToString::to_string).collect();
+    if items.len() > shown.len() {
+        format!("{}, ... ({} in all)", shown.join(", "), items.len())
+    } else {
+        format!("[{}]", shown.join(", "))
+    }
+}
+
+/// One episode's metrics against themselves and the run's settings; the error starts with
+/// the field's name.
+fn check_episode(m: &EpisodeMetrics, s: &RunSettings) -> std::result::Result<(), String> {
+    let seed = s.first_seed + m.episode as u64;
+    if m.seed != seed {
+        return Err(format!(
+            "seed = {}: episode {} of a run from seed {} has seed {seed}",
+            m.seed, m.episode, s.first_seed
+        ));
+    }
+    // Measured quantities: finite and not negative.
+    for (key, v) in [
+        ("violation_s", m.violation_s),
+        ("violation_moving_s", m.violation_moving_s),
+        ("nominal_task_s", m.nominal_task_s),
+        ("peak_speed_near_human_m_s", m.peak_speed_near_human_m_s),
+        ("peak_human_speed_m_s", m.peak_human_speed_m_s),
+        (
+            "peak_human_acceleration_m_s2",
+            m.peak_human_acceleration_m_s2,
+        ),
+        ("simulated_s", m.simulated_s),
+        ("wall_s", m.wall_s),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(format!("{key} = {v}: must be finite and >= 0"));
+        }
+    }
+    // Approach speeds may be negative (moving away) but are numbers.
+    let approaches = [("peak_approach_speed_m_s", m.peak_approach_speed_m_s)]
+        .into_iter()
+        .chain(
+            m.peak_approach_by_part_m_s
+                .iter()
+                .map(|&v| ("peak_approach_by_part_m_s", v)),
+        );
+    for (key, v) in approaches {
+        if !v.is_finite() {
+            return Err(format!("{key} = {v}: must be finite"));
+        }
+    }
+    if let Some(t) = m.task_time_s
+        && !(t.is_finite() && t > 0.0)
+    {
+        return Err(format!("task_time_s = {t}: must be finite and > 0"));
+    }
+    // NaN: no tick had an estimate; a number is a mean distance.
+    if !(m.perception_error_m.is_nan()
+        || (m.perception_error_m.is_finite() && m.perception_error_m >= 0.0))
+    {
+        return Err(format!(
+            "perception_error_m = {}: a distance (or NaN without estimates)",
+            m.perception_error_m
+        ));
+    }
+    // The separation: a number, or +inf when no pair ever came within range.
+    let d = m.min_separation_m;
+    if d.is_nan() || d == f64::NEG_INFINITY {
+        return Err(format!("min_separation_m = {d}: must be a number"));
+    }
+    // The counts were counted from the separations whose smallest this is.
+    let below = d < s.d_min_m;
+    if below != (m.violations > 0) || below != (m.violation_s > 0.0) {
+        return Err(format!(
+            "violations = {} ({} s below d_min) contradicts min_separation_m = {d} against              d_min_m = {}",
+            m.violations, m.violation_s, s.d_min_m
+        ));
+    }
+    if m.violation_moving_s > m.violation_s * (1.0 + 1e-9) {
+        return Err(format!(
+            "violation_moving_s = {}: more than the {} s below d_min",
+            m.violation_moving_s, m.violation_s
+        ));
+    }
+    let contacts = m.contacts_moving + m.contacts_standing;
+    if (d <= 0.0) != (contacts > 0) {
+        return Err(format!(
+            "contacts_moving + contacts_standing = {contacts} contradicts min_separation_m = {d}"
+        ));
+    }
+    Ok(())
 }
 
 #[derive(Deserialize)]
@@ -188,6 +388,9 @@ pub fn merge(shards: Vec<(PathBuf, RunRecord)>) -> Result<(RunRecord, Vec<PathBu
     let settings = first.settings.clone();
     let mut seen = vec![None::<&Path>; settings.shards];
     for (dir, record) in &shards {
+        record
+            .check()
+            .map_err(|e| bad(format!("{}: {e}", dir.display())))?;
         if record.settings != settings {
             let what = differing_setting(&settings, &record.settings);
             return Err(bad(format!(
@@ -227,19 +430,8 @@ pub fn merge(shards: Vec<(PathBuf, RunRecord)>) -> Result<(RunRecord, Vec<PathBu
     let mut metrics: Vec<EpisodeMetrics> = Vec::with_capacity(settings.episodes);
     let mut traces = Vec::new();
     let mut replays = Vec::new();
+    // Each record holds exactly its slice ([`RunRecord::check`]).
     for (dir, record) in &shards {
-        let expected = shard_episodes(record.shard, settings.shards, settings.episodes)?;
-        let got: Vec<usize> = record.metrics.iter().map(|m| m.episode).collect();
-        if got != expected {
-            return Err(bad(format!(
-                "{}: shard {}/{} holds {} episodes, not the {} its slice has",
-                dir.display(),
-                record.shard,
-                settings.shards,
-                got.len(),
-                expected.len()
-            )));
-        }
         metrics.extend(record.metrics.iter().cloned());
         traces.extend(record.traces.iter().cloned());
         replays.extend(
@@ -284,27 +476,57 @@ pub fn merge(shards: Vec<(PathBuf, RunRecord)>) -> Result<(RunRecord, Vec<PathBu
     Ok((merged, dirs))
 }
 
-/// The name of the first setting in which `a` and `b` differ.
+/// The name of the first setting in which `a` and `b` differ ("the settings" when none
+/// does). Every field is named here: a field added to [`RunSettings`] does not compile
+/// until it is.
 fn differing_setting(a: &RunSettings, b: &RunSettings) -> &'static str {
-    if a.evaluation_toml != b.evaluation_toml {
+    let RunSettings {
+        evaluation_file,
+        evaluation_toml,
+        robot,
+        filter,
+        perception_arg,
+        overrides,
+        perception,
+        first_seed,
+        episodes,
+        shards,
+        replays_per_shard,
+        d_min_m,
+        near_m,
+        pfl_distance_m,
+        contact_speed_limits,
+    } = a;
+    let same_f64 = |x: &f64, y: &f64| x.to_bits() == y.to_bits();
+    if *evaluation_toml != b.evaluation_toml {
         "the evaluation (evaluation.toml)"
-    } else if a.filter != b.filter {
+    } else if !same_f64(d_min_m, &b.d_min_m) {
+        "d_min_m"
+    } else if !same_f64(near_m, &b.near_m) {
+        "near_m"
+    } else if !same_f64(pfl_distance_m, &b.pfl_distance_m) {
+        "pfl_distance_m"
+    } else if *filter != b.filter {
         "--filter"
-    } else if a.perception_arg != b.perception_arg || a.perception != b.perception {
+    } else if *perception_arg != b.perception_arg || *perception != b.perception {
         "--perception"
-    } else if a.overrides != b.overrides {
+    } else if *overrides != b.overrides {
         "--set"
-    } else if a.first_seed != b.first_seed {
+    } else if first_seed != &b.first_seed {
         "--seed"
-    } else if a.episodes != b.episodes {
+    } else if episodes != &b.episodes {
         "--episodes"
-    } else if a.shards != b.shards {
+    } else if shards != &b.shards {
         "the number of shards"
-    } else if a.replays_per_shard != b.replays_per_shard {
+    } else if replays_per_shard != &b.replays_per_shard {
         "--gltf"
-    } else if a.evaluation_file != b.evaluation_file {
+    } else if *evaluation_file != b.evaluation_file {
         "the evaluation file's path"
-    } else {
+    } else if *robot != b.robot {
         "the robot"
+    } else if *contact_speed_limits != b.contact_speed_limits {
+        "the contact speed limits"
+    } else {
+        "the settings"
     }
 }

@@ -85,13 +85,16 @@ pub fn depth_mm_bytes(depth_m: &[f32]) -> Vec<u8> {
         .collect()
 }
 
+/// The largest image side read or written, pixels.
+pub const MAX_IMAGE_SIDE: u32 = 4096;
+/// The largest PNG file read, in bytes: a 4,096-pixel square of 16-bit RGBA stored without
+/// compression is 128 MiB.
+pub const MAX_PNG_BYTES: u64 = 160 << 20;
+
 /// Decodes an 8-bit grey or RGB PNG into `(width, height, kind, pixels)`.
 ///
 /// # Errors
 /// [`RenderError::Dataset`] naming `path` for a file that is not such a PNG.
-/// The largest image side read or written, pixels.
-pub const MAX_IMAGE_SIDE: u32 = 4096;
-
 pub fn decode_png(bytes: &[u8], path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
     let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     let mut reader = decoder
@@ -141,10 +144,7 @@ pub fn read_png(path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
         source,
     };
     // A FIFO or a device is never opened (a read would block or never end).
-    if !std::fs::metadata(path).map_err(io)?.is_file() {
-        return Err(dataset_error(path, "not a regular file"));
-    }
-    let bytes = std::fs::read(path).map_err(io)?;
+    let bytes = workcell_robots::input::read_regular_file(path, MAX_PNG_BYTES).map_err(io)?;
     decode_png(&bytes, path)
 }
 

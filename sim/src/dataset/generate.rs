@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
+use workcell_robots::input::{MAX_CONFIG_BYTES, read_regular_file, read_text_file};
 use workcell_robots::math::{Pose, Vector};
 
 use workcell_render::dataset::{
@@ -1023,7 +1024,7 @@ impl Generator {
             let names: Vec<&str> = self.splits.iter().map(|s| s.name()).collect();
             config_text += &format!("\n# splits: {}\n", names.join(", "));
         }
-        match std::fs::read_to_string(&stamp) {
+        match read_text_file(&stamp, MAX_CONFIG_BYTES) {
             Ok(existing) if existing != config_text => {
                 return Err(SimError::Dataset {
                     path: out.to_path_buf(),
@@ -1152,7 +1153,7 @@ impl Generator {
 }
 
 fn read_entry(path: &Path) -> Result<SequenceEntry> {
-    let bytes = std::fs::read(path).map_err(|source| SimError::Io {
+    let bytes = read_regular_file(path, MAX_CONFIG_BYTES).map_err(|source| SimError::Io {
         path: path.to_path_buf(),
         source,
     })?;

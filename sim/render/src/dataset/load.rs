@@ -10,6 +10,7 @@ use crate::dataset::labels::{
 use crate::error::{RenderError, Result};
 use crate::image::{PixelKind, read_png};
 use crate::occlusion::OCCLUDER_DEPTH_M;
+use workcell_robots::input::{MAX_CONFIG_BYTES, read_regular_file};
 
 /// An opened dataset: its manifest and root folder.
 #[derive(Debug, Clone)]
@@ -99,7 +100,7 @@ impl Dataset {
     pub fn open(root: impl AsRef<Path>) -> Result<Self> {
         let root = root.as_ref().to_path_buf();
         let path = root.join("manifest.json");
-        let bytes = std::fs::read(&path).map_err(|e| {
+        let bytes = read_regular_file(&path, MAX_CONFIG_BYTES).map_err(|e| {
             invalid(
                 &path,
                 format!(
@@ -195,10 +196,11 @@ impl Dataset {
     /// [`RenderError::Io`] or [`RenderError::Dataset`] naming the file.
     pub fn frame_labels(&self, entry: &SequenceEntry, f: usize) -> Result<FrameLabels> {
         let path = self.sequence_dir(entry)?.join(&frame_files(f)[5]);
-        let bytes = std::fs::read(&path).map_err(|source| RenderError::Io {
-            path: path.clone(),
-            source,
-        })?;
+        let bytes =
+            read_regular_file(&path, MAX_CONFIG_BYTES).map_err(|source| RenderError::Io {
+                path: path.clone(),
+                source,
+            })?;
         serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))
     }
 
@@ -332,10 +334,11 @@ impl Dataset {
                 );
             }
             let path = dir.join(&names[5]);
-            let bytes = std::fs::read(&path).map_err(|source| RenderError::Io {
-                path: path.clone(),
-                source,
-            })?;
+            let bytes =
+                read_regular_file(&path, MAX_CONFIG_BYTES).map_err(|source| RenderError::Io {
+                    path: path.clone(),
+                    source,
+                })?;
             let labels: FrameLabels =
                 serde_json::from_slice(&bytes).map_err(|e| invalid(&path, e))?;
             s.labels.push(labels);
