@@ -780,3 +780,68 @@ fn run_records_that_lie_are_refused() {
     refused_in(dir.path(), &args, "is the shard folder");
     assert_eq!(std::fs::read(&run_json).expect("run.json"), before);
 }
+
+/// Every file the product reads goes through the one bounded reader
+/// (`workcell_robots::input`): no other code of the library crates or the binary opens a file
+/// for reading by itself (test modules, after the first `#[cfg(test)]`, may).
+#[test]
+fn every_file_is_read_through_the_bounded_reader() {
+    let readers = [
+        "fs::read(",
+        "fs::read_to_string(",
+        "File::open(",
+        "fs::copy(",
+        "OpenOptions::new().read",
+    ];
+    // The reader itself, and the lock on an output folder (opened, never read).
+    let allowed = [
+        ("robots/src/input.rs", "File::open("),
+        ("src/cli/mod.rs", "File::open("),
+    ];
+    let mut found = Vec::new();
+    let mut stack: Vec<PathBuf> = [
+        "src",
+        "robots/src",
+        "sim/src",
+        "sim/render/src",
+        "perception/src",
+        "safety/src",
+    ]
+    .iter()
+    .map(|d| root().join(d))
+    .collect();
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).expect("source folder").flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                stack.push(path);
+                continue;
+            }
+            if path.extension().is_none_or(|e| e != "rs") {
+                continue;
+            }
+            let source = std::fs::read_to_string(&path).expect("source");
+            let product = source.split("#[cfg(test)]").next().unwrap_or_default();
+            let relative = path
+                .strip_prefix(root())
+                .expect("inside")
+                .to_string_lossy()
+                .replace('\\', "/");
+            for (n, line) in product.lines().enumerate() {
+                if line.trim_start().starts_with("//") {
+                    continue;
+                }
+                for reader in readers {
+                    if line.contains(reader) && !allowed.contains(&(relative.as_str(), reader)) {
+                        found.push(format!("{relative}:{}: {}", n + 1, line.trim()));
+                    }
+                }
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "files read around the bounded reader:\n{}",
+        found.join("\n")
+    );
+}

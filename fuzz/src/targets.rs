@@ -17,12 +17,13 @@ use workcell::sim::Scenario;
 use workcell::sim::dataset::DatasetConfig;
 
 /// Every target, by the name of its corpus folder.
-pub const TARGETS: [&str; 12] = [
+pub const TARGETS: [&str; 13] = [
     "urdf",
     "urdf_rapier",
     "stl",
     "obj",
     "dae",
+    "gltf",
     "png",
     "scenario",
     "evaluation",
@@ -65,6 +66,12 @@ pub fn run(target: &str, data: &[u8]) {
         }
         "stl" | "obj" | "dae" => {
             let _ = TriMesh::from_bytes(data, Path::new(&format!("fuzz.{target}")), [1.0; 3]);
+        }
+        "gltf" => {
+            // Beside the project's test meshes: a buffer URI may name one of them (or try to
+            // leave the folder).
+            let path = root().join("robots/tests/fixtures/meshes/fuzz.gltf");
+            let _ = TriMesh::from_bytes(data, &path, [1.0; 3]);
         }
         "png" => {
             let _ = decode_png(data, Path::new("fuzz.png"));

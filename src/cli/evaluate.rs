@@ -517,8 +517,13 @@ pub fn write_report(dir: &Path, record: &RunRecord, command: &str, out: &Path) -
     };
     if let Some(bundle) = &viewer {
         let to = dir.join(VIEWER_JS);
-        fs::copy(bundle, &to)
-            .with_context(|| format!("copying {} to {}", bundle.display(), to.display()))?;
+        // WORKCELL_VIEWER_JS names it: a regular file of bounded size like any other input.
+        let js = workcell::robots::input::read_regular_file(
+            bundle,
+            workcell::robots::input::MAX_CONFIG_BYTES,
+        )
+        .with_context(|| format!("reading {}", bundle.display()))?;
+        fs::write(&to, js).with_context(|| format!("writing {}", to.display()))?;
     }
     write(
         "summary.html",

@@ -530,3 +530,50 @@ fn differing_setting(a: &RunSettings, b: &RunSettings) -> &'static str {
         "the settings"
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn settings() -> RunSettings {
+        RunSettings {
+            evaluation_file: "eval.toml".into(),
+            evaluation_toml: "task_s = 2.0\n".into(),
+            robot: "ur5e".into(),
+            filter: "qp".into(),
+            perception_arg: None,
+            overrides: Vec::new(),
+            perception: "noisy camera".into(),
+            first_seed: 1,
+            episodes: 4,
+            shards: 2,
+            replays_per_shard: 0,
+            d_min_m: 0.1,
+            near_m: 0.5,
+            pfl_distance_m: 0.5,
+            contact_speed_limits: vec![("hand".into(), 1.35)],
+        }
+    }
+
+    /// The first setting that differs is the one named: a changed d_min_m was reported as
+    /// "the robot" (every field not listed fell through to it).
+    #[test]
+    fn the_differing_setting_is_named() {
+        let a = settings();
+        let cases: [(fn(&mut RunSettings), &str); 5] = [
+            (|s| s.d_min_m = 0.2, "d_min_m"),
+            (|s| s.near_m = 0.6, "near_m"),
+            (|s| s.pfl_distance_m = 0.0, "pfl_distance_m"),
+            (|s| s.robot = "panda".into(), "the robot"),
+            (
+                |s| s.contact_speed_limits.clear(),
+                "the contact speed limits",
+            ),
+        ];
+        for (edit, expected) in cases {
+            let mut b = settings();
+            edit(&mut b);
+            assert_eq!(differing_setting(&a, &b), expected);
+        }
+    }
+}
