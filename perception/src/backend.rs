@@ -90,7 +90,6 @@ pub const MAX_THREADS: usize = 256;
 /// Sets the number of CPU threads of both backends (rayon for flex, LibTorch's intra-op
 /// pool for tch, and the threads of a camera stream's forward pass on flex,
 /// [`on_stream_threads`]). Call it once, before the first tensor operation.
-
 pub fn set_threads(threads: usize) {
     let threads = threads.max(1);
     STREAM_THREADS.store(threads, Ordering::Relaxed);

@@ -560,7 +560,8 @@ mod tests {
     #[test]
     fn the_differing_setting_is_named() {
         let a = settings();
-        let cases: [(fn(&mut RunSettings), &str); 5] = [
+        type Edit = fn(&mut RunSettings);
+        let cases: [(Edit, &str); 5] = [
             (|s| s.d_min_m = 0.2, "d_min_m"),
             (|s| s.near_m = 0.6, "near_m"),
             (|s| s.pfl_distance_m = 0.0, "pfl_distance_m"),
