@@ -944,7 +944,7 @@ impl Trainer {
                 })?;
             let record =
                 OptimizerRecord::load(&optimizer_path).map_err(|e| PerceptionError::Weights {
-                    path: files.checkpoint_optimizer(start),
+                    path: optimizer_path.clone(),
                     message: format!("cannot load the optimizer state: {e:?}"),
                 })?;
             optim = optim.load_record(record);

@@ -512,13 +512,13 @@ fn differing_setting(a: &RunSettings, b: &RunSettings) -> &'static str {
         "--perception"
     } else if *overrides != b.overrides {
         "--set"
-    } else if first_seed != &b.first_seed {
+    } else if *first_seed != b.first_seed {
         "--seed"
-    } else if episodes != &b.episodes {
+    } else if *episodes != b.episodes {
         "--episodes"
-    } else if shards != &b.shards {
+    } else if *shards != b.shards {
         "the number of shards"
-    } else if replays_per_shard != &b.replays_per_shard {
+    } else if *replays_per_shard != b.replays_per_shard {
         "--gltf"
     } else if *evaluation_file != b.evaluation_file {
         "the evaluation file's path"
