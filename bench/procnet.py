@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""ProcNet in PyTorch: the project's own second implementation of perception/src/model.rs.
+"""ProcNet in PyTorch: the project's own second implementation of procnet/src/model.rs.
 
 It reads the same safetensors weights (the same parameter names) and the same configuration
 (the JSON stored in the weight file's metadata under "config"), so that
 
   * `reference` prints the outputs the Rust tests compare against
-    (perception/tests/reference.rs embeds the command and the values), and
+    (procnet/tests/reference.rs embeds the command and the values), and
   * `bench` times a training step and per-frame inference side by side with the Rust
     backends (bench/procnet_bench.py runs both).
 
@@ -160,7 +160,7 @@ def decoder_groups(c):
 
 
 def reference_input(t, b, h, w):
-    """The deterministic test sequence of perception/tests/reference.rs (same formula)."""
+    """The deterministic test sequence of procnet/tests/reference.rs (same formula)."""
     ti = torch.arange(t, dtype=torch.float64).view(t, 1, 1, 1, 1)
     bi = torch.arange(b, dtype=torch.float64).view(1, b, 1, 1, 1)
     ci = torch.arange(3, dtype=torch.float64).view(1, 1, 3, 1, 1)

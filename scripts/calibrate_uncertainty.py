@@ -21,7 +21,13 @@ it reports the coverage there too, which is the honest figure: the calibration w
 the first.
 
     scripts/calibrate_uncertainty.py VALIDATION.csv [TEST.csv] [--target 0.99]
-        [--pool VALIDATION2.csv TEST2.csv]...
+        [--pool VALIDATION2.csv TEST2.csv]... [--write WEIGHTS --depth|--no-depth]
+
+`--write WEIGHTS` puts the chosen calibration into the calibration file beside the weights
+(`procnet-cpu.safetensors` has `procnet-cpu.calibration.toml`), with the weights' SHA-256,
+as the section of a fit with (`--depth`) or without (`--no-depth`) the depth image; the
+other section of an existing file of the same weights is kept. workcell applies a
+calibration to the weights of its hash only (`Calibration::of_weights`).
 
 `--pool` adds a second source of the same masks' frames (the tracker's own crops beside the
 stored ones, say): the calibration is chosen on every validation CSV together, and each
@@ -33,8 +39,12 @@ Standard library only.
 
 import argparse
 import csv
+import hashlib
+import math
+import os
 import statistics
 import sys
+import tomllib
 
 SCALES = [0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 10.0, 15.0, 20.0]
 # Where each band of the hidden share starts after the first (perception's HIDDEN_BANDS).
@@ -134,6 +144,65 @@ def calibrate(frames, target):
     return rows, min(rows, key=lambda r: r[1])
 
 
+def calibration_path(weights):
+    """The calibration file beside `weights`: the extension replaced (as workcell does)."""
+    return os.path.splitext(weights)[0] + ".calibration.toml"
+
+
+def toml_float(x):
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return repr(float(x))
+
+
+def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain=math.inf,
+                      confirmed_floor_m=0.0):
+    """Writes `calibration` ((scale, floor, hidden floors)) as `section` (`with_depth` or
+    `without_depth`) of the calibration file beside `weights`; returns its path."""
+    with open(weights, "rb") as f:
+        sha = hashlib.sha256(f.read()).hexdigest()
+    path = calibration_path(weights)
+    doc = {}
+    if os.path.exists(path):
+        with open(path, "rb") as f:
+            doc = tomllib.load(f)
+        if doc.get("weights_sha256") != sha:
+            sys.exit(
+                f"{path} holds the calibration of other weights "
+                f"({doc.get('weights_sha256')}, these are {sha}): remove it first"
+            )
+    scale, floor, hidden = calibration
+    doc[section] = {
+        "scale": scale,
+        "floor_m": floor,
+        "hidden_floors_m": list(hidden),
+        "confirm_min_gain": confirm_min_gain,
+        "confirmed_floor_m": confirmed_floor_m,
+    }
+    lines = [
+        f"# The pose bound's calibration for {os.path.basename(weights)}: "
+        "scripts/calibrate_uncertainty.py --write.",
+        f'weights_sha256 = "{sha}"',
+        "fitted_on = " + '"' + fitted_on.replace("\\", "\\\\").replace('"', '\\"') + '"',
+    ]
+    for name in ("with_depth", "without_depth"):
+        if name in doc:
+            c = doc[name]
+            lines += [
+                "",
+                f"[{name}]",
+                f"scale = {toml_float(c['scale'])}",
+                f"floor_m = {toml_float(c['floor_m'])}",
+                "hidden_floors_m = [" + ", ".join(toml_float(h) for h in c["hidden_floors_m"]) + "]",
+                f"confirm_min_gain = {toml_float(c['confirm_min_gain'])}",
+                f"confirmed_floor_m = {toml_float(c['confirmed_floor_m'])}",
+            ]
+    with open(path + ".tmp", "w") as f:
+        f.write("\n".join(lines) + "\n")
+    os.replace(path + ".tmp", path)
+    return path
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("validation")
@@ -147,7 +216,19 @@ def main():
         metavar=("VALIDATION", "TEST"),
         help="another source's CSVs, pooled into the calibration, reported on their own",
     )
+    parser.add_argument("--write", metavar="WEIGHTS", help="write the calibration beside WEIGHTS")
+    depth = parser.add_mutually_exclusive_group()
+    depth.add_argument("--depth", dest="depth", action="store_true", default=None,
+                       help="with --write: the calibration of a fit that reads depth")
+    depth.add_argument("--no-depth", dest="depth", action="store_false",
+                       help="with --write: the calibration of a fit of the masks alone")
+    parser.add_argument("--confirm-min-gain", type=float, default=math.inf,
+                        help="with --write: the gain from which a confirmed fit is a pose")
+    parser.add_argument("--confirmed-floor-m", type=float, default=0.0,
+                        help="with --write: the least bound of a confirmed pose, m")
     args = parser.parse_args()
+    if args.write and args.depth is None:
+        sys.exit("--write needs --depth or --no-depth: which fit the calibration is for")
     if not 0.0 < args.target < 1.0:
         sys.exit("--target is a fraction in (0, 1)")
     if args.pool and not args.test:
@@ -195,6 +276,19 @@ def main():
                 f"{100 * coverage(own, best[0]):.2f} % of {len(own)}" if own else "no frames"
             )
         print(f"  from {100 * ([0.0] + HIDDEN_BANDS)[b]:.0f} %: " + "; ".join(cells))
+    if args.write:
+        fitted_on = f"{len(val)} frames of {', '.join(v for v, _ in sources)}, target {args.target}"
+        if test:
+            fitted_on += f"; {100 * coverage(test, best[0]):.2f} % of {len(test)} test frames within"
+        path = write_calibration(
+            args.write,
+            "with_depth" if args.depth else "without_depth",
+            best[0],
+            fitted_on,
+            args.confirm_min_gain,
+            args.confirmed_floor_m,
+        )
+        print(f"\nwrote {path}")
     if len(sources) > 1:
         print("\ncoverage per source (validation, test)")
         for (v_path, t_path), (v, t) in zip(sources, loaded):

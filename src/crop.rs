@@ -12,8 +12,9 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use workcell_perception::pose::{ArmFitConfig, Calibration, MaskOrigin};
-use workcell_perception::{ArmTracker, Backend, ProcNet};
+use workcell_perception::ArmTracker;
+use workcell_perception::pose::{ArmFitConfig, Calibration};
+use workcell_procnet::{Backend, ProcNet};
 use workcell_render::Camera;
 use workcell_render::dataset::HumanLabel;
 use workcell_render::roi::{Roi, RoiKind};
@@ -54,10 +55,11 @@ impl TrackerCrop {
         counts: Arc<CropCounts>,
     ) -> Result<Self> {
         let net = ProcNet::load(weights, Backend::Flex)?;
-        let masks = MaskOrigin::network(net.config().reads_depth());
-        let fit = Calibration::measured(masks, true)
-            .unwrap_or_else(|| unreachable!("every network's masks are calibrated with depth"))
-            .apply(ArmFitConfig::default());
+        let found = Calibration::of_weights(weights, true)?;
+        if let Some(w) = found.warning() {
+            tracing::warn!("{w}");
+        }
+        let fit = found.calibration.apply(ArmFitConfig::default());
         let tracker = ArmTracker::new(human, X_WH, fit)?.with_network(net)?;
         Ok(Self { tracker, counts })
     }
@@ -73,7 +75,7 @@ impl TrackerCrop {
         weights: &Path,
         counts: Arc<CropCounts>,
     ) -> Result<Arc<CropFactory>> {
-        let (human, X_WH) = workcell_perception::arm::human_of(label)?;
+        let (human, X_WH) = workcell_perception::dataset::human_of(label)?;
         Self::new(&human, &X_WH, weights, counts.clone())?;
         let weights = weights.to_path_buf();
         Ok(Arc::new(move || {

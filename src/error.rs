@@ -52,6 +52,8 @@ pub enum Error {
     #[error(transparent)]
     Perception(#[from] workcell_perception::PerceptionError),
     #[error(transparent)]
+    ProcNet(#[from] workcell_procnet::ProcNetError),
+    #[error(transparent)]
     Safety(#[from] workcell_safety::SafetyError),
 }
 

@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 pub use workcell_perception as perception;
+pub use workcell_procnet as procnet;
 pub use workcell_render as render;
 pub use workcell_robots as robots;
 pub use workcell_safety as safety;

@@ -1109,12 +1109,12 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         (
             "procnet",
             "perception.depth=false",
-            "perception/weights/procnet-cpu.safetensors) + articulated render-and-compare, ",
+            "procnet/weights/procnet-cpu.safetensors) + articulated render-and-compare, ",
         ),
         (
             "procnet",
             "perception.depth=true",
-            "perception/weights/procnet-depth.safetensors) + articulated render-and-compare \
+            "procnet/weights/procnet-depth.safetensors) + articulated render-and-compare \
              with depth (RGB-D)",
         ),
         (
@@ -1229,36 +1229,42 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         &format!("{cell_line}control_period_s = 1e6\n"),
         "control_period_s: 1000000 is above the limit of 0.1",
     );
+    // A key of the controller at the top level (where it was before the `[controller]`
+    // table) says where it went.
     bad(
-        &format!("{cell_line}command_lead_rad = 0.0\n"),
-        "command_lead_rad: must be > 0",
+        &format!("{cell_line}catch_up_speed = 1.5\n"),
+        "catch_up_speed is a key of the [controller] table now",
     );
     bad(
-        &format!("{cell_line}catch_up_speed = 0.5\n"),
-        "catch_up_speed: must be within 1 (off) and 3",
+        &format!("{cell_line}[controller]\ncommand_lead_rad = 0.0\n"),
+        "controller.command_lead_rad: must be > 0",
     );
     bad(
-        &format!("{cell_line}catch_up_speed = nan\n"),
-        "catch_up_speed: must be within 1 (off) and 3",
+        &format!("{cell_line}[controller]\ncatch_up_speed = 0.5\n"),
+        "controller.catch_up_speed: must be within 1 (off) and 3",
     );
     bad(
-        &format!("{cell_line}catch_up_beyond_m = 0.05\n"),
-        "catch_up_beyond_m: must be above safety.d_min_m = 0.1 m",
+        &format!("{cell_line}[controller]\ncatch_up_speed = nan\n"),
+        "controller.catch_up_speed: must be within 1 (off) and 3",
     );
     bad(
-        &format!("{cell_line}catch_up_beyond_m = nan\n"),
-        "catch_up_beyond_m: must be above safety.d_min_m",
+        &format!("{cell_line}[controller]\ncatch_up_margin_m = 0.0\n"),
+        "controller.catch_up_margin_m: must be > 0 m beyond d_min",
     );
     bad(
-        &format!("{cell_line}yield_after_s = -1.0\n"),
-        "yield_after_s: must be >= 0",
+        &format!("{cell_line}[controller]\ncatch_up_margin_m = nan\n"),
+        "controller.catch_up_margin_m: must be > 0 m beyond d_min",
     );
     bad(
-        &format!("{cell_line}yield_resume_m = 0.0\n"),
-        "yield_resume_m",
+        &format!("{cell_line}[controller]\nyield_after_s = -1.0\n"),
+        "controller.yield_after_s: must be >= 0",
     );
     bad(
-        &format!("{cell_line}yield_motion = \"jump\"\n"),
+        &format!("{cell_line}[controller]\nyield_resume_m = 0.0\n"),
+        "controller.yield_resume_m",
+    );
+    bad(
+        &format!("{cell_line}[controller]\nyield_motion = \"jump\"\n"),
         "yield_motion",
     );
     // Each key in range, together contradictory: pairs would enter the filter inside d_min.
@@ -1700,12 +1706,12 @@ fn bench_perception_prints_each_stage() {
         "| **network + fit** | 4 |",
         // With depth and no weights named, the shipped network that reads depth.
         "RGB-D, weights ",
-        "perception/weights/procnet-depth.safetensors, network and fit on 2 thread(s)",
+        "procnet/weights/procnet-depth.safetensors, network and fit on 2 thread(s)",
     ] {
         assert!(table.contains(row), "no {row:?} in\n{table}");
     }
     // The stream's first frame is read three times before itself (`VIEW_READS`) and gives
-    // a pose too (docs/perception.md, "A new view read three times").
+    // a pose too (experiments/perception.md, "A new view read three times").
     assert!(table.contains("4 of 4 frames gave an estimate"), "{table}");
     let frames = |stage: &str| -> usize {
         table

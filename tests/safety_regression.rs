@@ -235,8 +235,8 @@ fn reacting_evaluation() -> Evaluation {
 /// toward the path (no yielding), re-timing only with no part in view, no anticipation.
 fn pressing_evaluation() -> Evaluation {
     let mut evaluation = reacting_evaluation();
-    evaluation.config.yield_after_s = f64::INFINITY;
-    evaluation.config.catch_up_beyond_m = f64::INFINITY;
+    evaluation.config.controller.yield_after_s = f64::INFINITY;
+    evaluation.config.controller.catch_up_margin_m = f64::INFINITY;
     evaluation
 }
 
@@ -279,7 +279,7 @@ fn the_servo_does_not_outrun_the_filter() {
     };
     let bounded = peak(&evaluation);
     let mut open_loop = evaluation.clone();
-    open_loop.config.command_lead_rad = f64::INFINITY;
+    open_loop.config.controller.command_lead_rad = f64::INFINITY;
     let unbounded = peak(&open_loop);
     eprintln!(
         "forearm limit {limit:.3} m/s; peak approach {bounded:.3} m/s bounded, \
@@ -304,11 +304,11 @@ fn catching_up_wins_back_time_but_never_near_the_human() {
     let mut evaluation = reacting_evaluation();
     let run = |evaluation: &Evaluation| run_qp(evaluation, 5);
     // Re-timing only while no part is within the detection distance (the next test covers
-    // `catch_up_beyond_m`).
-    evaluation.config.catch_up_beyond_m = f64::INFINITY;
-    evaluation.config.catch_up_speed = 1.0;
+    // `catch_up_margin_m`).
+    evaluation.config.controller.catch_up_margin_m = f64::INFINITY;
+    evaluation.config.controller.catch_up_speed = 1.0;
     let (planned, planned_trace) = run(&evaluation);
-    evaluation.config.catch_up_speed = 1.75;
+    evaluation.config.controller.catch_up_speed = 1.75;
     let (retimed, trace) = run(&evaluation);
     let (t_planned, t_retimed) = (
         planned.task_time_s.expect("finishes"),
@@ -331,7 +331,7 @@ fn catching_up_wins_back_time_but_never_near_the_human() {
     assert_eq!(retimed.violations, 0);
 }
 
-/// Re-timing beside the human: with `catch_up_beyond_m` the task also runs faster than
+/// Re-timing beside the human: with `catch_up_margin_m` the task also runs faster than
 /// planned while every part the filter sees is beyond that distance, not only when none is
 /// within its detection distance, and wins back more of the time the filter cost. Seed 5 of
 /// the README's evaluation (the hand lingers on the tool's path): the task finishes sooner,
@@ -344,9 +344,9 @@ fn catching_up_wins_back_time_but_never_near_the_human() {
 fn catching_up_beside_the_human_wins_back_more_time_and_keeps_out_of_reach() {
     let mut evaluation = reacting_evaluation();
     let run = |evaluation: &Evaluation| run_qp(evaluation, 5);
-    evaluation.config.catch_up_beyond_m = f64::INFINITY;
+    evaluation.config.controller.catch_up_margin_m = f64::INFINITY;
     let (clear_only, clear_trace) = run(&evaluation);
-    evaluation.config.catch_up_beyond_m = 0.4;
+    evaluation.config.controller.catch_up_margin_m = 0.3;
     let (beside, trace) = run(&evaluation);
     let (t_clear, t_beside) = (
         clear_only.task_time_s.expect("finishes"),
@@ -395,13 +395,13 @@ fn yielding_keeps_the_arm_out_of_reach_instead_of_waiting_at_the_barrier() {
     let d_min = evaluation.config.safety.d_min_m;
     let run = |evaluation: &Evaluation| run_qp(evaluation, 836).0;
     let waiting = run(&evaluation);
-    evaluation.config.yield_after_s = 0.5;
-    evaluation.config.yield_resume_m = 0.3;
-    evaluation.config.yield_motion = YieldMotion::Hold;
+    evaluation.config.controller.yield_after_s = 0.5;
+    evaluation.config.controller.yield_resume_m = 0.3;
+    evaluation.config.controller.yield_motion = YieldMotion::Hold;
     let holding = run(&evaluation);
-    evaluation.config.yield_after_s = 0.1;
-    evaluation.config.yield_resume_m = 0.2;
-    evaluation.config.yield_motion = YieldMotion::Retreat;
+    evaluation.config.controller.yield_after_s = 0.1;
+    evaluation.config.controller.yield_resume_m = 0.2;
+    evaluation.config.controller.yield_motion = YieldMotion::Retreat;
     let retreating = run(&evaluation);
     eprintln!(
         "min separation {:.3} m waiting, {:.3} m holding, {:.3} m backing away",

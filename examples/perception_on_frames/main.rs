@@ -10,8 +10,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use workcell::perception::pose::{ArmFitConfig, ArmMasks, Calibration, MaskOrigin};
-use workcell::perception::{ArmTracker, Backend, ProcNet};
+use workcell::perception::ArmTracker;
+use workcell::perception::pose::{ArmFitConfig, ArmMasks, Calibration};
+use workcell::procnet::{Backend, ProcNet};
 use workcell::render::dataset::{FrameLabels, Manifest};
 use workcell::render::image::{PixelKind, read_png};
 use workcell::render::{Camera, Class};
@@ -49,19 +50,21 @@ fn main() -> anyhow::Result<()> {
     model.retain_visuals(|g| human.look.shows(g.name.as_deref()));
     let X_WH = Pose::from(&human.X_WH);
     // The radius to inflate the capsules by, as measured for these masks and this camera
-    // (docs/perception.md): 99 % of the validation split's frames within it. With depth the
-    // shipped network reads the depth image too.
-    let masks = if true_masks {
-        MaskOrigin::Rendered
+    // (experiments/perception.md): 99 % of the validation split's frames within it. A network's
+    // calibration is the file beside its weights. With depth the shipped network reads the
+    // depth image too.
+    let weights = workcell::procnet::weights::shipped_path(depth);
+    let calibration = if true_masks {
+        Calibration::true_masks(depth)
     } else {
-        MaskOrigin::network(depth)
+        let found = Calibration::of_weights(&weights, depth)?;
+        if let Some(w) = found.warning() {
+            eprintln!("warning: {w}");
+        }
+        found.calibration
     };
-    let config = Calibration::measured(masks, depth)
-        .context("no calibration was measured for these masks without depth")?
-        .apply(ArmFitConfig::default());
-    let mut tracker = ArmTracker::new(&model, &X_WH, config)?;
+    let mut tracker = ArmTracker::new(&model, &X_WH, calibration.apply(ArmFitConfig::default()))?;
     if !true_masks {
-        let weights = workcell::perception::weights::shipped_path(depth);
         tracker = tracker.with_network(ProcNet::load(&weights, Backend::Flex)?)?;
     }
 

@@ -8,8 +8,8 @@
 
 use std::path::Path;
 
-use workcell::perception::train::TrainConfig;
-use workcell::perception::weights;
+use workcell::procnet::train::TrainConfig;
+use workcell::procnet::weights;
 use workcell::render::dataset::Dataset;
 use workcell::render::image::decode_png;
 use workcell::robots::{PackageMap, RobotModel, TriMesh};

@@ -1,37 +1,21 @@
-//! ProcNet for workcell: a predictive-coding network (PredNet layers with hGRU, ConvLSTM or
-//! convolutional cells and a segmentation decoder) that segments the human arm in camera
-//! frames of the work-cell and stays robust when the arm is partly hidden.
+//! The human arm's pose in camera frames, for the work-cell's safety filter: the pose search
+//! that fits the human model's joints to ProcNet's masks by render-and-compare ([`pose`]),
+//! and the runtime tracker that turns frames of one camera into the arm's capsules with an
+//! uncertainty ([`ArmTracker`]), the same beside a real camera as in the simulator. The
+//! network itself (model, training, segmentation evaluation) is `workcell-procnet`, below
+//! this crate; [`eval`] measures the pose on a dataset's sequences.
 //!
-//! The model is written once; the [`Device`](burn::tensor::Device) picks the backend at run
-//! time: `flex` (pure Rust, the default), LibTorch (feature `tch`).
+//! Modules import one way: [`pose`] < [`tracker`] < [`eval`]; [`dataset`] (the humans a
+//! dataset's manifest records) is read by [`eval`] only.
 
-pub mod arm;
-pub mod backend;
-pub mod bench;
-pub mod cells;
-pub mod config;
-pub mod data;
+pub mod dataset;
 mod error;
 pub mod eval;
-pub mod image;
-mod infer;
-pub mod loss;
-pub mod model;
-pub mod nn;
-pub mod ops;
 pub mod pose;
 #[cfg(test)]
 mod test_util;
-pub mod train;
-pub mod weights;
+pub mod tracker;
 
-pub use arm::{
-    ArmEstimate, ArmModel, ArmOutcome, ArmTracker, DEFAULT_INPUT_PX, NoEstimate, PartCapsule,
-    RoiMasks,
-};
-pub use backend::Backend;
-pub use config::{Activation, CellKind, ProcNetConfig};
 pub use error::{PerceptionError, Result};
-pub use infer::{Masks, ProcNet, VIEW_READS};
-pub use model::{ProcNetModel, ProcNetState, StepOutput};
-pub use train::{TrainConfig, Trainer};
+pub use pose::{ArmModel, PartCapsule};
+pub use tracker::{ArmEstimate, ArmOutcome, ArmTracker, DEFAULT_INPUT_PX, NoEstimate, RoiMasks};

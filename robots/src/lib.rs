@@ -31,6 +31,7 @@ mod kinematics;
 pub mod math;
 mod mesh;
 mod model;
+pub mod output;
 mod package;
 mod urdf;
 

@@ -30,7 +30,7 @@ use parry3d_f64::shape::Shape;
 use workcell_robots::LinkId;
 use workcell_robots::math::{Pose, Vector};
 
-use crate::human::HumanPart;
+use workcell_robots::HumanPart;
 
 /// Separating-axis bound of a capsule pair along `n` (unit, from B toward A): at most the
 /// true signed distance for every `n` (see the module documentation).

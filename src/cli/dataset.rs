@@ -38,7 +38,7 @@ pub struct GenerateArgs {
     #[arg(long, default_value = "dataset")]
     pub crop: String,
     /// With `--crop tracker`: the tracker's ProcNet weights [default: the shipped network
-    /// for a camera with depth, perception/weights/procnet-depth.safetensors].
+    /// for a camera with depth, procnet/weights/procnet-depth.safetensors].
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Make only the sequences of these splits (comma-separated: train, validation, test)
@@ -180,7 +180,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
             }
         }
         "tracker" => {
-            let side = workcell::perception::arm::DEFAULT_INPUT_PX;
+            let side = workcell::perception::DEFAULT_INPUT_PX;
             let stored = generator.config.input_px;
             if stored as usize != side {
                 anyhow::bail!(
@@ -191,7 +191,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
             let weights = args
                 .weights
                 .clone()
-                .unwrap_or_else(|| PathBuf::from(workcell::perception::weights::SHIPPED_DEPTH));
+                .unwrap_or_else(|| PathBuf::from(workcell::procnet::weights::SHIPPED_DEPTH));
             let factory = TrackerCrop::factory(&generator.human(), &weights, counts.clone())
                 .with_context(|| format!("the tracker's network, {}", weights.display()))?;
             let name = format!(
@@ -258,7 +258,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
 fn weights_stamp(path: &std::path::Path) -> Result<String> {
     let bytes = workcell::robots::input::read_regular_file(
         path,
-        workcell::perception::weights::MAX_WEIGHTS_BYTES,
+        workcell::procnet::weights::MAX_WEIGHTS_BYTES,
     )
     .with_context(|| format!("reading {}", path.display()))?;
     // FNV-1a, 64 bits: a fingerprint, not a defence.

@@ -612,7 +612,7 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
         overrides.push("perception.depth = true".into());
     }
     let evaluation = Evaluation::from_file_with(&args.evaluation, &overrides)?;
-    workcell::perception::backend::set_threads(args.threads);
+    workcell::procnet::backend::set_threads(args.threads);
     let bar = super::progress_bar(
         args.frames as u64,
         "{spinner} frames [{bar:40}] {pos}/{len}",

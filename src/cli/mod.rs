@@ -205,7 +205,7 @@ pub fn count_in<const LO: usize, const HI: usize>(text: &str) -> Result<usize, S
 }
 
 /// The limit of `--threads` (and of a training recipe's `threads`).
-pub const MAX_THREADS: usize = workcell::perception::backend::MAX_THREADS;
+pub const MAX_THREADS: usize = workcell::procnet::backend::MAX_THREADS;
 
 /// A dataset split by name.
 ///

@@ -4,10 +4,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use workcell::perception::eval::{FrameRecord, evaluate};
-use workcell::perception::train::{TrainConfig, Trainer, read_metrics};
-use workcell::perception::{Backend, backend, weights};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
+use workcell::procnet::eval::{FrameRecord, evaluate};
+use workcell::procnet::train::{TrainConfig, Trainer, read_metrics};
+use workcell::procnet::{Backend, backend, weights};
 use workcell::render::dataset::{PredictionPanel, prediction_sheet};
 use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::Dataset;
@@ -60,7 +60,7 @@ pub struct TrainingReportArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct EvalSegmentationArgs {
-    /// ProcNet weights (safetensors), e.g. perception/weights/procnet-cpu.safetensors.
+    /// ProcNet weights (safetensors), e.g. procnet/weights/procnet-cpu.safetensors.
     #[arg(long)]
     pub weights: PathBuf,
     /// Dataset folder.
@@ -92,8 +92,8 @@ pub struct EvalSegmentationArgs {
     /// Write every scored frame's forearm to this CSV file: sequence, frame, camera,
     /// occlusion, true forearm pixels, Dice loss (probabilities and thresholded), the
     /// ceiling at the model's input, the mean luma of the forearm's pixels in view
-    /// (`scripts/luma_gap.py` reads it) and the thresholded Dice loss with the elbow and the
-    /// wrist in the right place (`scripts/part_boundaries.py` reads it).
+    /// (`experiments/scripts/luma_gap.py` reads it) and the thresholded Dice loss with the elbow and the
+    /// wrist in the right place (`experiments/scripts/part_boundaries.py` reads it).
     #[arg(long)]
     pub frames: Option<PathBuf>,
 }
@@ -205,7 +205,7 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
 }
 
 fn write_loss_curve(
-    metrics: &[workcell::perception::train::StepMetrics],
+    metrics: &[workcell::procnet::train::StepMetrics],
     path: &std::path::Path,
 ) -> Result<()> {
     let x: Vec<f64> = metrics.iter().map(|m| m.step as f64).collect();
@@ -540,7 +540,7 @@ pub struct BenchArgs {
 
 /// Prints one JSON line per backend: seconds per training step and per inference frame.
 pub fn bench(args: &BenchArgs) -> Result<ExitCode> {
-    use workcell::perception::ProcNetConfig;
+    use workcell::procnet::ProcNetConfig;
     let mut config = match &args.weights {
         Some(w) => weights::read_config(w)?,
         None => ProcNetConfig::preset(&args.preset)?,
@@ -566,7 +566,7 @@ pub fn bench(args: &BenchArgs) -> Result<ExitCode> {
     }
     for name in args.backends.split(',').filter(|n| !n.trim().is_empty()) {
         let b = Backend::parse(name.trim())?;
-        let t = workcell::perception::bench::time(&config, b, args.batch, args.frames, args.iters)?;
+        let t = workcell::procnet::bench::time(&config, b, args.batch, args.frames, args.iters)?;
         // The convolutions' arithmetic over the time a frame took: how near the backend runs
         // to the machine's peak.
         let gflops = 2.0 * config.macs_per_frame() as f64 / t.infer_frame_s / 1e9;

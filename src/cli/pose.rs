@@ -6,13 +6,15 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use workcell::perception::pose::eval::{
+use workcell::perception::eval::{
     GroundTruthAtSize, GroundTruthMasks, MaskSource, NetworkMasks, PoseEvaluation, PoseMethod,
     VisibleMasks, compare_markdown, evaluate_pose,
 };
-use workcell::perception::pose::{ArmFitConfig, Calibration, HIDDEN_BANDS, MaskOrigin, PoseConfig};
-use workcell::perception::{Backend, ProcNet, backend};
+use workcell::perception::pose::{
+    ArmFitConfig, BoundSource, Calibration, HIDDEN_BANDS, PoseConfig,
+};
 use workcell::plot::{Panel, svg_panels, svg_to_png};
+use workcell::procnet::{Backend, ProcNet, backend};
 use workcell::render::dataset::{PredictionPanel, prediction_sheet};
 use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::Dataset;
@@ -36,7 +38,7 @@ pub struct EvalPoseArgs {
     #[arg(long, default_value = "procnet")]
     pub masks: String,
     /// Network weights for --masks procnet or baseline [default: the shipped
-    /// perception/weights/procnet-cpu.safetensors, procnet-depth.safetensors with --depth
+    /// procnet/weights/procnet-cpu.safetensors, procnet-depth.safetensors with --depth
     /// (the network that reads the depth image too), or baseline-cpu-64.safetensors].
     #[arg(long)]
     pub weights: Option<PathBuf>,
@@ -83,6 +85,19 @@ pub struct EvalPoseArgs {
     pub out: PathBuf,
 }
 
+/// The weights of `--masks procnet` or `baseline`: `--weights`, else the shipped ProcNet
+/// (the one that reads depth with `--depth`) or the shipped baseline, both 64x64 networks of
+/// the cpu preset.
+fn network_weights(kind: &str, args: &EvalPoseArgs) -> PathBuf {
+    args.weights.clone().unwrap_or_else(|| {
+        PathBuf::from(if kind == "procnet" {
+            workcell::procnet::weights::shipped(args.depth)
+        } else {
+            "procnet/weights/baseline-cpu-64.safetensors"
+        })
+    })
+}
+
 /// The mask source of one `--masks` entry.
 fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
     Ok(match kind {
@@ -99,14 +114,7 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
             Box::new(GroundTruthAtSize { size })
         }
         "procnet" | "baseline" => {
-            // The shipped ProcNet and baseline, both 64x64 networks of the cpu preset.
-            let weights = args.weights.clone().unwrap_or_else(|| {
-                PathBuf::from(if kind == "procnet" {
-                    workcell::perception::weights::shipped(args.depth)
-                } else {
-                    "perception/weights/baseline-cpu-64.safetensors"
-                })
-            });
+            let weights = network_weights(kind, args);
             // The error names the file already.
             let net = ProcNet::load(&weights, Backend::parse(&args.backend)?)?;
             if net.config().is_feed_forward() != (kind == "baseline") {
@@ -222,14 +230,23 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
     let mut evaluations = Vec::with_capacity(kinds.len());
     let mut written = Vec::new();
     for (kind, source) in kinds.iter().zip(&mut sources) {
-        // The bound of "within the bound": the calibration measured for these masks, where
-        // there is one (the shipped ProcNet's, or true masks').
-        let calibration = match *kind {
-            "gt" => Calibration::measured(MaskOrigin::Rendered, args.depth),
-            "procnet" if args.weights.is_none() => {
-                Calibration::measured(MaskOrigin::network(args.depth), args.depth)
+        // The bound of "within the bound": the one the closed loop would use for these
+        // masks. True masks have theirs; a network's is the calibration file beside its
+        // weights, or the conservative bound where it has none (said, and warned of).
+        let (calibration, uncalibrated) = match *kind {
+            "gt" => (Some(Calibration::true_masks(args.depth)), None),
+            "procnet" | "baseline" => {
+                let found = Calibration::of_weights(&network_weights(kind, args), args.depth)?;
+                if let Some(w) = found.warning() {
+                    eprintln!("warning: {w}");
+                }
+                let why = match found.source {
+                    BoundSource::Uncalibrated { why } => Some(why),
+                    BoundSource::Calibrated { .. } => None,
+                };
+                (Some(found.calibration), why)
             }
-            _ => None,
+            _ => (None, None),
         };
         let method = match &method {
             PoseMethod::Articulated { config, depth } => {
@@ -256,9 +273,13 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         let bound = match (&method, calibration) {
             (PoseMethod::Paper { .. }, _) => String::new(),
             (_, Some(c)) => format!(
-                "\nThe bound is the one calibrated for these masks (`Calibration::measured`): \
+                "\nThe bound is {}: \
                  {:.2} cm plus {} times the curvature's spread, the hypotheses' spread where it \
                  is larger{}.\n",
+                uncalibrated.as_ref().map_or_else(
+                    || "the one calibrated for these masks".to_string(),
+                    |why| format!("the conservative one of uncalibrated masks ({why})")
+                ),
                 100.0 * c.floor_m,
                 c.scale,
                 if c.hidden_floors_m.iter().any(|&f| f > c.floor_m) {

@@ -11,17 +11,11 @@ use workcell_safety::{
 use workcell_sim::{CellModel, CellState, RobotCommand, step};
 
 use super::{EpisodeMetrics, EpisodeTrace, Evaluation, EvaluationConfig};
-use super::{HumanPerception, PerceptionInput, YieldMotion};
+use super::{HumanPerception, PerceptionInput, TaskController};
 use crate::error::Result;
 
 /// A robot point slower than this counts as standing, m/s.
 const MOVING_M_S: f64 = 0.05;
-
-/// How fast the task's re-timed speed may rise, 1/s (it falls at once).
-const CATCH_UP_RAMP_PER_S2: f64 = 1.0;
-
-/// A yielding robot backs away at most at this fraction of its joints' velocity limits.
-const RETREAT_SPEED: f64 = 0.5;
 
 /// One closed-loop episode of `evaluation` with `filter` and the perception of the
 /// evaluation file, seeded with `seed` (the cell's seed is replaced by it, so the robot's
@@ -114,17 +108,26 @@ fn run(
     loop {
         let t = run.state.time_s();
         run.observe(t, dt)?;
-        if run.progress >= c.task_s || t >= timeout_s {
-            if run.progress >= c.task_s {
+        let progress = run.controller.progress();
+        if progress >= c.task_s || t >= timeout_s {
+            if progress >= c.task_s {
                 run.metrics.task_time_s = Some(t);
             }
             break;
         }
-        run.bound_command_lead();
-        let rate = run.nominal(t, dt);
+        run.controller
+            .bound_command_lead(&mut run.q_cmd, run.state.reference_q());
+        let rate = run.controller.nominal(
+            t,
+            dt,
+            &run.model.robot_motion,
+            &run.q_cmd,
+            run.filter.pairs(),
+            &c.safety,
+        );
         run.perceive_and_filter(t, dt);
         run.advance(substeps, dt_physics)?;
-        run.progress = (run.progress + rate * dt).min(c.task_s);
+        run.controller.advance(rate, dt, c.task_s);
         on_tick((t / c.task_s).min(1.0));
     }
     let recording = run.recording.take().map(|(_, r)| r);
@@ -146,30 +149,11 @@ struct Run<'a> {
     /// The human's end point velocities at the last tick (two per part), m/s.
     human_v_prev: Vec<Vector>,
     estimate: HumanEstimate,
-    q_ref: Vec<f64>,
-    qd_ref: Vec<f64>,
-    qdd_ref: Vec<f64>,
-    qdot_nom: Vec<f64>,
+    /// The task controller: the nominal command before the filter.
+    controller: TaskController,
     /// The servos' position command: the filtered velocity integrated.
     q_cmd: Vec<f64>,
     jacobian: Jacobian,
-    /// How far along the task trajectory the robot is, s.
-    progress: f64,
-    /// The task's speed against its plan (re-timing; 1 unless catching up).
-    speed: f64,
-    /// No human part within the filter's detection distance at the last tick.
-    clear: bool,
-    /// The task may run faster than planned: `clear`, or every part seen beyond
-    /// `catch_up_beyond_m` with no row relaxed, at the last tick.
-    may_catch_up: bool,
-    /// The filter's smallest seen distance at the last tick (infinite: none in view), m.
-    seen_m: f64,
-    /// How long the task has been held off its path near the human, s.
-    blocked_s: f64,
-    /// Yielding to the human (see `yield_after_s`).
-    yielding: bool,
-    /// The retreat's joint speed limits (`RETREAT_SPEED` of the joints' own).
-    v_retreat: Vec<f64>,
     metrics: EpisodeMetrics,
     trace: EpisodeTrace,
     /// Below d_min at the last tick.
@@ -212,11 +196,8 @@ impl<'a> Run<'a> {
         let mut robot_kinematics = KinematicState::new(robot);
         robot_kinematics.X_WB = model.X_WR;
         let q_cmd = state.q().to_vec();
-        let v_retreat = robot
-            .velocity_limits()
-            .iter()
-            .map(|v| if *v > 0.0 { RETREAT_SPEED * v } else { 1.0 })
-            .collect();
+        let controller =
+            TaskController::new(c.controller, &robot.velocity_limits(), c.safety.d_min_m);
         let metrics = EpisodeMetrics {
             episode,
             seed,
@@ -254,20 +235,9 @@ impl<'a> Run<'a> {
             truth: HumanEstimate::default(),
             human_v_prev: Vec::new(),
             estimate: HumanEstimate::default(),
-            q_ref: vec![0.0; dof],
-            qd_ref: vec![0.0; dof],
-            qdd_ref: vec![0.0; dof],
-            qdot_nom: vec![0.0; dof],
+            controller,
             q_cmd,
             jacobian: Jacobian::zeros(dof),
-            progress: 0.0,
-            speed: 1.0,
-            clear: true,
-            may_catch_up: true,
-            seen_m: f64::INFINITY,
-            blocked_s: 0.0,
-            yielding: false,
-            v_retreat,
             metrics,
             trace: EpisodeTrace::default(),
             below: false,
@@ -421,117 +391,6 @@ impl<'a> Run<'a> {
         Ok(())
     }
 
-    /// Anti-windup: the position command may lead the servos' reference by at most
-    /// `command_lead_rad` per joint. Integrated open-loop, the command ran ahead while the
-    /// servo's acceleration limit held the reference back (a sudden evasion), and the servo
-    /// then caught up at up to `sqrt(2 a e)` beyond anything the filter commanded: the
-    /// forearm and hand limits of power and force limiting were exceeded that way in 5 of
-    /// 1,000 episodes (docs/safety.md, "Peak approach per body region").
-    fn bound_command_lead(&mut self) {
-        let e_max = self.c.command_lead_rad;
-        for (q_cmd, r) in self.q_cmd.iter_mut().zip(self.state.reference_q()) {
-            *q_cmd = r + (*q_cmd - r).clamp(-e_max, e_max);
-        }
-    }
-
-    /// The nominal controller: tracks the task trajectory at the progress variable, which
-    /// advances only as fast as the robot keeps up, and faster than planned (up to
-    /// `catch_up_speed`) while the task is behind schedule and no human part is near
-    /// (`may_catch_up`). Sets `qdot_nom`; returns the rate at which progress advances.
-    fn nominal(&mut self, t: f64, dt: f64) -> f64 {
-        let c = self.c;
-        // The speed ramps up gently (the trajectory's accelerations grow with its square) and
-        // drops to the plan's at once when a human part comes into view: ramped down over
-        // 75 ms, it let the arm approach the hand at 0.95 m/s instead of 0.72 (100 seeds)
-        // and seed 64 (perfect perception) come to 0.092 m.
-        let target = if self.may_catch_up && self.progress < t - dt {
-            c.catch_up_speed
-        } else {
-            1.0
-        };
-        self.speed = if target > self.speed {
-            (self.speed + CATCH_UP_RAMP_PER_S2 * dt).min(target)
-        } else {
-            target
-        };
-        self.model.robot_motion.sample(
-            self.progress,
-            &mut self.q_ref,
-            &mut self.qd_ref,
-            &mut self.qdd_ref,
-        );
-        let error = self
-            .q_ref
-            .iter()
-            .zip(&self.q_cmd)
-            .map(|(r, q)| (r - q).abs())
-            .fold(0.0, f64::max);
-        let tracking = (1.0 - error / c.progress_tolerance_rad).clamp(0.0, 1.0);
-        if self.yielding {
-            self.yielding = self.seen_m < c.yield_resume_m
-                && !(c.yield_motion == YieldMotion::Hold && self.path_is_clear());
-        } else if tracking < 0.5 && !self.clear {
-            self.blocked_s += dt;
-            self.yielding = self.blocked_s >= c.yield_after_s;
-        } else {
-            self.blocked_s = 0.0;
-        }
-        if self.yielding {
-            self.blocked_s = 0.0;
-            match c.yield_motion {
-                YieldMotion::Hold => self.qdot_nom.fill(0.0),
-                YieldMotion::Retreat => self.retreat(),
-            }
-            return 0.0;
-        }
-        let rate = tracking * self.speed;
-        for j in 0..self.qdot_nom.len() {
-            self.qdot_nom[j] =
-                rate * self.qd_ref[j] + c.tracking_gain_per_s * (self.q_ref[j] - self.q_cmd[j]);
-        }
-        rate
-    }
-
-    /// Whether the task's pull toward its path at the plan's speed (the command it would
-    /// resume with) is one that every human pair row of the last tick allows. Writes that
-    /// pull into `qdot_nom`, which the caller then sets.
-    fn path_is_clear(&mut self) -> bool {
-        let gain = self.c.tracking_gain_per_s;
-        for (j, v) in self.qdot_nom.iter_mut().enumerate() {
-            *v = self.qd_ref[j] + gain * (self.q_ref[j] - self.q_cmd[j]);
-        }
-        let safety = &self.c.safety;
-        self.filter.pairs().iter().filter(|p| !p.obstacle).all(|p| {
-            p.approach_m_s(&self.qdot_nom)
-                <= p.approach_bound_m_s(safety.gamma_per_s, safety.d_min_m)
-        })
-    }
-
-    /// A yielding robot's nominal command: away from the human, the joint direction that
-    /// moves the seen pairs' robot points out along their normals (the closest pairs
-    /// weighted most), scaled to the largest step that keeps every joint within its retreat
-    /// speed (zero when no pair is in view).
-    fn retreat(&mut self) {
-        self.qdot_nom.fill(0.0);
-        for p in self.filter.pairs().iter().filter(|p| !p.obstacle) {
-            let w = 1.0 / (p.pair.distance_m.max(0.0) + 0.05);
-            for (v, a) in self.qdot_nom.iter_mut().zip(&p.normal_jacobian) {
-                *v += w * a;
-            }
-        }
-        let scale = self
-            .qdot_nom
-            .iter()
-            .zip(&self.v_retreat)
-            .filter(|(g, _)| g.abs() > 1e-12)
-            .map(|(g, v)| v / g.abs())
-            .fold(f64::INFINITY, f64::min);
-        let scale = if scale.is_finite() { scale } else { 0.0 };
-        for g in &mut self.qdot_nom {
-            *g *= scale;
-        }
-    }
-
     /// Perception's estimate at `t`, its error against the truth, and the filter's command.
     fn perceive_and_filter(&mut self, t: f64, dt: f64) {
         self.perception.estimate(
@@ -551,16 +410,11 @@ impl<'a> Run<'a> {
         let out = self.filter.tick(
             &self.model.robot,
             self.state.q(),
-            &self.qdot_nom,
+            self.controller.command(),
             &self.estimate,
             dt,
         );
-        // Clear: the filter saw the human (no brake for a missing estimate) and no part near.
-        self.clear = out.active_pairs == 0 && out.status == FilterStatus::Pass;
-        self.seen_m = out.min_distance_m;
-        self.may_catch_up = self.clear
-            || (out.min_distance_m > self.c.catch_up_beyond_m
-                && matches!(out.status, FilterStatus::Pass | FilterStatus::Modified));
+        self.controller.observe(&out);
         tracing::trace!(
             episode = self.metrics.episode,
             t,
@@ -584,7 +438,13 @@ impl<'a> Run<'a> {
                 }
             }
         }
-        let nominal_norm = self.qdot_nom.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let nominal_norm = self
+            .controller
+            .command()
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt();
         let command_norm = self
             .filter
             .command()
@@ -594,7 +454,7 @@ impl<'a> Run<'a> {
             .sqrt();
         self.trace.t_s.push(t);
         self.trace.perception_error_m.push(tick_error);
-        self.trace.task_speed.push(self.speed);
+        self.trace.task_speed.push(self.controller.speed());
         self.trace.command_rad_s.push(command_norm);
         self.trace.speed_scale.push(if nominal_norm > 1e-6 {
             (command_norm / nominal_norm).min(2.0)

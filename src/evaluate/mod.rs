@@ -12,11 +12,11 @@
 //!     true separation: exact robot link shapes against the true human capsules
 //! ```
 
+mod controller;
 mod episode;
 pub mod html;
 pub mod lossless;
 pub mod perception;
-pub mod procnet;
 pub mod record;
 pub mod replay;
 pub mod report;
@@ -30,7 +30,9 @@ use workcell_sim::Scenario;
 
 use crate::error::{Error, Result};
 
+pub use controller::{ControllerConfig, TaskController, YieldMotion};
 pub use episode::{Recording, record_episode, run_episode};
+pub use perception::procnet;
 pub use perception::{
     Foresight, GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig,
     PerceptionInput, PerceptionKind,
@@ -56,51 +58,9 @@ pub struct EvaluationConfig {
     pub timeout_factor: f64,
     /// Control period, s (a multiple of the cell's time step). Default 0.004.
     pub control_period_s: f64,
-    /// Gain of the nominal controller's position feedback, 1/s. Default 5.
-    pub tracking_gain_per_s: f64,
-    /// The task pauses while the tracking error exceeds this, rad. Default 0.05.
-    pub progress_tolerance_rad: f64,
-    /// How far the position command may run ahead of the servos' reference, rad (anti-windup).
-    /// The controller integrates the filtered velocity into the position command; when the
-    /// servo's acceleration limit holds its reference back (a sudden evasion), an unbounded
-    /// command runs ahead, and the servo later catches up at up to `sqrt(2 a e)` beyond any
-    /// velocity the filter commanded. Default 0.002: in free motion the reference trails the
-    /// command by under 1 mrad, and a 2 mrad lead is caught up at 0.2 rad/s at most (10
-    /// rad/s^2). `inf` turns the bound off.
-    pub command_lead_rad: f64,
-    /// Re-timing: while the task is behind its schedule (progress below the time elapsed)
-    /// and the filter sees no human part within its detection distance, the task may run up
-    /// to this many times its planned speed, winning back time the filter cost. The joints'
-    /// velocity limits, the filter's rows and power and force limiting still bound every
-    /// command; the speed drops back to 1 on the tick a part is within the detection
-    /// distance (or within `catch_up_beyond_m`, when set). Default 1 (off); at most 3.
-    pub catch_up_speed: f64,
-    /// Re-timing beside the human: the task may also run faster than its plan while every
-    /// human part the filter sees is farther than this (on the inflated estimate, m) and the
-    /// filter relaxed none of its rows; the speed drops back to the plan's on the tick a part
-    /// comes closer. The filter's rows and power and force limiting still bound every
-    /// command. Default inf: only while no part is within the detection distance.
-    /// `configs/evaluate.toml` sets 0.4: over 100 seeds the task time falls from 1.169 to
-    /// 1.100 of unfiltered with yielding on (docs/safety.md, "Throughput").
-    pub catch_up_beyond_m: f64,
-    /// Yielding: when the task has been held off its path near the human (tracking rate below
-    /// half, a human part within the filter's detection distance) for this long, s, the
-    /// robot stops pulling toward its path. Pulling presses the arm against the barrier,
-    /// where it slides along the inflated estimate into corners between the human and the
-    /// furniture (the obstacle rows hold it there), and a hand that then comes on even at
-    /// 0.5 m/s cannot be escaped: the four episodes of 1,000 below d_min with the pull on
-    /// were such cases (docs/safety.md, "Where the last four come from"). What the robot
-    /// does instead is `yield_motion`. Default inf (off). Holding after 0.5 s kept those
-    /// four above d_min, but over the 1,000 seeds 2 others came below it (one a reach at
-    /// 1.7 m/s, faster than the arm can back away) and the task took 1.174 times as long
-    /// instead of 1.148; `configs/evaluate.toml` holds after 0.5 s beside
-    /// `catch_up_beyond_m = 0.4`: 1 of 1,000 below d_min, task time 1.102.
-    pub yield_after_s: f64,
-    /// The robot resumes its task once the filter's seen distance is above this, m.
-    /// Default 0.3.
-    pub yield_resume_m: f64,
-    /// What a yielding robot does. Default `hold`.
-    pub yield_motion: YieldMotion,
+    /// The task controller: its tracking, re-timing (catch-up) and yielding (the
+    /// `[controller]` table; [`ControllerConfig`]).
+    pub controller: ControllerConfig,
     /// "Near the human" for the peak speed metric: true separation below this, m. Default 0.3.
     pub near_m: f64,
     pub perception: PerceptionConfig,
@@ -115,14 +75,7 @@ impl Default for EvaluationConfig {
             human_speed_scale: None,
             timeout_factor: 3.0,
             control_period_s: 0.004,
-            tracking_gain_per_s: 5.0,
-            progress_tolerance_rad: 0.05,
-            command_lead_rad: 0.002,
-            catch_up_speed: 1.0,
-            catch_up_beyond_m: f64::INFINITY,
-            yield_after_s: f64::INFINITY,
-            yield_resume_m: 0.3,
-            yield_motion: YieldMotion::Hold,
+            controller: ControllerConfig::default(),
             near_m: 0.3,
             perception: PerceptionConfig::default(),
             safety: FilterConfig::default(),
@@ -130,23 +83,21 @@ impl Default for EvaluationConfig {
     }
 }
 
-/// What a robot does while it yields to the human (`yield_after_s`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum YieldMotion {
-    /// Stands where it is (its nominal command is zero; the filter still moves it out of
-    /// the human's way), and resumes as soon as the seen distance is above
-    /// `yield_resume_m` or its pull toward the path is one every human pair row allows.
-    #[default]
-    Hold,
-    /// Backs away: the joint direction that moves the seen pairs' robot points out along
-    /// their normals (the closest weighted most), at up to half the joints' speed limits,
-    /// until the seen distance is above `yield_resume_m`. Over 1,000 seeds (0.1 s, 0.2 m,
-    /// beside an earlier re-timing) it left 2 episodes below d_min instead of 6, but 10
-    /// went beyond a body region's transient contact speed on the way back to the path
-    /// (the hand approached at up to 1.93 m/s against 1.35; docs/safety.md).
-    Retreat,
-}
+/// The keys that moved from the top of an evaluation file into `[controller]`, with their
+/// names there (`catch_up_beyond_m`, a distance, became a margin beyond `d_min`).
+const MOVED_TO_CONTROLLER: [(&str, &str); 8] = [
+    ("tracking_gain_per_s", "tracking_gain_per_s"),
+    ("progress_tolerance_rad", "progress_tolerance_rad"),
+    ("command_lead_rad", "command_lead_rad"),
+    ("catch_up_speed", "catch_up_speed"),
+    (
+        "catch_up_beyond_m",
+        "catch_up_margin_m (beyond safety.d_min_m)",
+    ),
+    ("yield_after_s", "yield_after_s"),
+    ("yield_resume_m", "yield_resume_m"),
+    ("yield_motion", "yield_motion"),
+];
 
 /// An evaluation file with its cell loaded.
 #[derive(Debug, Clone)]
@@ -192,9 +143,20 @@ impl Evaluation {
     /// # Errors
     /// As [`Evaluation::from_file`], without the I/O of the file itself.
     pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
-        let mut config: EvaluationConfig = toml::from_str(text).map_err(|e| Error::Parse {
-            path: path.to_path_buf(),
-            message: e.to_string(),
+        let mut config: EvaluationConfig = toml::from_str(text).map_err(|e| {
+            let mut message = e.to_string();
+            if let Some((old, new)) = MOVED_TO_CONTROLLER
+                .iter()
+                .find(|(old, _)| message.contains(&format!("unknown field `{old}`")))
+            {
+                message = format!(
+                    "{old} is a key of the [controller] table now (controller.{new}); {message}"
+                );
+            }
+            Error::Parse {
+                path: path.to_path_buf(),
+                message,
+            }
         })?;
         // Paths inside the file are relative to the file.
         let dir = path.parent().unwrap_or(Path::new("."));
@@ -261,36 +223,7 @@ impl Evaluation {
                 ));
             }
         }
-        positive("tracking_gain_per_s", c.tracking_gain_per_s)?;
-        positive("progress_tolerance_rad", c.progress_tolerance_rad)?;
-        if c.command_lead_rad.is_nan() || c.command_lead_rad <= 0.0 {
-            return Err(Error::config(
-                "command_lead_rad",
-                format!("must be > 0 (inf: no bound), got {}", c.command_lead_rad),
-            ));
-        }
-        if !(1.0..=3.0).contains(&c.catch_up_speed) {
-            return Err(Error::config(
-                "catch_up_speed",
-                format!("must be within 1 (off) and 3, got {}", c.catch_up_speed),
-            ));
-        }
-        if c.catch_up_beyond_m.is_nan() || c.catch_up_beyond_m <= c.safety.d_min_m {
-            return Err(Error::config(
-                "catch_up_beyond_m",
-                format!(
-                    "must be above safety.d_min_m = {} m (inf: only with no part in view), got {}",
-                    c.safety.d_min_m, c.catch_up_beyond_m
-                ),
-            ));
-        }
-        if c.yield_after_s.is_nan() || c.yield_after_s < 0.0 {
-            return Err(Error::config(
-                "yield_after_s",
-                format!("must be >= 0 (inf: off), got {}", c.yield_after_s),
-            ));
-        }
-        positive("yield_resume_m", c.yield_resume_m)?;
+        c.controller.validate()?;
         positive("near_m", c.near_m)?;
         if !(c.timeout_factor.is_finite() && c.timeout_factor >= 1.0) {
             return Err(Error::config(

@@ -104,6 +104,34 @@ class Calibrate(unittest.TestCase):
             self.assertNotEqual(lone.returncode, 0)
             self.assertIn("--pool needs", lone.stderr)
 
+    def test_the_calibration_is_written_beside_the_weights_with_their_hash(self):
+        import hashlib
+        import math
+        import tomllib
+
+        with tempfile.TemporaryDirectory() as d:
+            weights = os.path.join(d, "mine.safetensors")
+            with open(weights, "wb") as f:
+                f.write(b"weights")
+            sha = hashlib.sha256(b"weights").hexdigest()
+            write = calibrate_uncertainty.write_calibration
+            path = write(weights, "with_depth", (1.0, 0.02, [0.03, 0.04, 0.3]), 'val "a"')
+            self.assertEqual(path, os.path.join(d, "mine.calibration.toml"))
+            write(weights, "without_depth", (0.0, 0.4, [0.0, 0.0, 0.0]), "val b", 0.2, 0.65)
+            with open(path, "rb") as f:
+                doc = tomllib.load(f)
+            self.assertEqual(doc["weights_sha256"], sha)
+            self.assertEqual(doc["fitted_on"], "val b")
+            # The first section is kept beside the second.
+            self.assertEqual(doc["with_depth"]["hidden_floors_m"], [0.03, 0.04, 0.3])
+            self.assertTrue(math.isinf(doc["with_depth"]["confirm_min_gain"]))
+            self.assertEqual(doc["without_depth"]["floor_m"], 0.4)
+            self.assertEqual(doc["without_depth"]["confirmed_floor_m"], 0.65)
+            # Other weights are refused rather than given this file.
+            with open(weights, "wb") as f:
+                f.write(b"other weights")
+            with self.assertRaises(SystemExit):
+                write(weights, "with_depth", (1.0, 0.02, [0.03, 0.04, 0.3]), "c")
 
 if __name__ == "__main__":
     unittest.main()

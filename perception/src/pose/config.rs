@@ -1,7 +1,8 @@
 //! Settings of the pose search.
 
 /// Settings of the pose search.
-#[derive(Debug, Clone, PartialEq)]
+// Serialize: the docs' stated defaults are checked against it (tests/defaults.rs).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PoseConfig {
     /// A fit whose gain is below this is no pose (and ends a track). Default 0.3.
     pub min_gain: f64,

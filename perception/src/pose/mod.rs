@@ -55,16 +55,18 @@
 //! Spin about the forearm's axis is weakly observable (two thin bones side by side); it is
 //! reported, and evaluated, on its own.
 
+mod arm;
 mod articulated;
 mod config;
-pub mod eval;
 mod image;
 mod model;
 mod search;
 
+pub use arm::{ArmModel, POSE_MESH_SEGMENTS, PartCapsule};
 pub use articulated::{
-    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmGain, ArmMasks, ArticulatedArm, Calibration,
-    FITTED_PARTS, HIDDEN_BANDS, HIDDEN_MARGIN_M, MaskOrigin,
+    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmGain, ArmMasks, ArticulatedArm, BoundSource,
+    Calibration, CalibrationFile, FITTED_PARTS, HIDDEN_BANDS, HIDDEN_MARGIN_M,
+    MAX_CALIBRATION_BYTES, NetworkCalibration, calibration_path, file_sha256,
 };
 pub use config::PoseConfig;
 pub use image::f_m;

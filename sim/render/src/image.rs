@@ -1,8 +1,7 @@
 //! PNG files: encoding, decoding, and atomic writes (a killed run leaves no half-written file
 //! under the final name).
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::error::{RenderError, Result};
 
@@ -153,24 +152,10 @@ pub fn read_png(path: &Path) -> Result<(u32, u32, PixelKind, Vec<u8>)> {
 /// # Errors
 /// [`RenderError::Write`] naming the file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let io = |source| RenderError::Write {
+    workcell_robots::output::write_atomic(path, bytes).map_err(|source| RenderError::Write {
         path: path.to_path_buf(),
         source,
-    };
-    let tmp = temporary_name(path);
-    let mut file = std::fs::File::create(&tmp).map_err(io)?;
-    file.write_all(bytes).map_err(io)?;
-    file.sync_data().map_err(io)?;
-    drop(file);
-    std::fs::rename(&tmp, path).map_err(io)
-}
-
-/// `dir/.name.tmp` for `dir/name`.
-pub(crate) fn temporary_name(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map_or_else(|| "file".into(), |n| n.to_string_lossy().into_owned());
-    path.with_file_name(format!(".{name}.tmp"))
+    })
 }
 
 /// Encodes and writes a PNG atomically.

@@ -1,0 +1,293 @@
+//! The bound's calibration: what the fit measured for one source of masks, and where it
+//! comes from. A network's calibration is a file beside its weights
+//! (`procnet-cpu.safetensors` has `procnet-cpu.calibration.toml`), holding the weights' SHA-256:
+//! it is applied to those weights only. Weights without one get [`Calibration::UNCALIBRATED`],
+//! a stated conservative bound, and a warning; a file of other weights is refused.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::*;
+use crate::error::{PerceptionError, Result};
+
+/// What the fit measured for one source of masks: the uncertainty's calibration (`scale`,
+/// `floor_m` and `hidden_floors_m` of [`ArmFitConfig`], fitted on the validation split so that
+/// 99 % of its frames have the forearm's centre and wrist within the bound, in each band of
+/// [`ArmFit::hidden_share`]: `scripts/calibrate_uncertainty.py`, on the per-frame CSV of
+/// `workcell eval pose --split validation`), and whether a faint fit confirmed by the frame
+/// before is a pose, with the floor of its bound (docs/perception.md).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    pub scale: f64,
+    pub floor_m: f64,
+    /// The floors where a quarter, a half, three quarters of the forearm's region is
+    /// hidden ([`Calibration::floor_at`]).
+    pub hidden_floors_m: [f64; 3],
+    /// [`ArmFitConfig::confirm_min_gain`]: infinity where confirmed fits of these masks
+    /// were measured to be wrong too often to be poses.
+    pub confirm_min_gain: f64,
+    /// The least bound of a confirmed pose, m: such fits are right or far off (the masks'
+    /// faint arm, or a consistent wrong one), and the curvature tells neither.
+    pub confirmed_floor_m: f64,
+}
+
+/// Where [`ArmFit::hidden_share`] starts each band of [`Calibration::hidden_floors_m`].
+pub const HIDDEN_BANDS: [f64; 3] = [0.25, 0.5, 0.75];
+
+/// The largest calibration file read, bytes.
+pub const MAX_CALIBRATION_BYTES: u64 = 1 << 20;
+
+/// A calibration file: the weights it was measured on (their SHA-256), what it was fitted
+/// on, and the calibration of a fit with and without the depth image (either may be
+/// missing: never measured).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationFile {
+    /// The SHA-256 of the weights file, lower-case hex.
+    pub weights_sha256: String,
+    /// The split, frames and command the calibration was fitted on (and checked on).
+    pub fitted_on: String,
+    /// A fit that reads the depth image.
+    pub with_depth: Option<Calibration>,
+    /// A fit of the masks alone.
+    pub without_depth: Option<Calibration>,
+}
+
+/// Where the bound of a network's fit comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BoundSource {
+    /// The calibration file beside the weights, measured on them.
+    Calibrated { path: PathBuf, fitted_on: String },
+    /// No calibration was measured for these weights (or for this use of them):
+    /// [`Calibration::UNCALIBRATED`]; `why` says what is missing.
+    Uncalibrated { why: String },
+}
+
+/// A network's calibration as found beside its weights, and where it came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetworkCalibration {
+    pub calibration: Calibration,
+    pub source: BoundSource,
+}
+
+impl NetworkCalibration {
+    /// What a user should be told, where the bound is not a measured one.
+    #[must_use]
+    pub fn warning(&self) -> Option<String> {
+        match &self.source {
+            BoundSource::Calibrated { .. } => None,
+            BoundSource::Uncalibrated { why } => Some(format!(
+                "{why}: the pose bound is the conservative {:.2} m plus the curvature's spread \
+                 (calibrate these weights: scripts/calibrate_uncertainty.py --write)",
+                Calibration::UNCALIBRATED.floor_m
+            )),
+        }
+    }
+}
+
+/// The calibration file beside `weights`: the same name with `.calibration.toml` for its
+/// extension.
+#[must_use]
+pub fn calibration_path(weights: &Path) -> PathBuf {
+    weights.with_extension("calibration.toml")
+}
+
+/// The SHA-256 of the file at `path`, lower-case hex.
+///
+/// # Errors
+/// The file is not a regular file of at most `max_bytes`, or cannot be read.
+pub fn file_sha256(path: &Path, max_bytes: u64) -> Result<String> {
+    let bytes = workcell_robots::input::read_regular_file(path, max_bytes).map_err(|e| {
+        PerceptionError::Calibration {
+            path: path.to_path_buf(),
+            message: format!("cannot hash: {e}"),
+        }
+    })?;
+    Ok(Sha256::digest(&bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
+
+impl Calibration {
+    /// The bound of a fit whose masks' calibration was never measured: at least 0.45 m,
+    /// plus the curvature's spread, in every band, and no faint fit taken for a pose. It
+    /// lies above every bound measured for the shipped networks (the largest: 40.6 cm, the
+    /// RGB network's fit without depth) and the true masks' (38.5 cm without depth).
+    pub const UNCALIBRATED: Self = Self {
+        scale: 1.0,
+        floor_m: 0.45,
+        hidden_floors_m: [0.45; 3],
+        confirm_min_gain: f64::INFINITY,
+        confirmed_floor_m: 0.0,
+    };
+
+    /// The calibration measured for the fit of true masks (each part's pixels in the
+    /// rendered frame), with or without the depth image.
+    #[must_use]
+    pub fn true_masks(depth: bool) -> Self {
+        // The validation split (docs/perception.md), the renders as row spans: true masks
+        // with depth, 3,828 frames, 99 % within half the curvature's spread plus 1.68 cm where
+        // under half the forearm's region is hidden (1,584 frames), 1.74 cm up to three
+        // quarters (437), 33.8 cm beyond (1,807: the mirror, where the occluder hides the
+        // forearm's depth); without depth, the mirror's misses, 38.5 cm. True masks give no
+        // faint fits confirmed by the frame before.
+        let (scale, floor_m, hidden_floors_m) = if depth {
+            (0.5, 0.0168, [0.0168, 0.0174, 0.3381])
+        } else {
+            (0.0, 0.3851, [0.0; 3])
+        };
+        Self {
+            scale,
+            floor_m,
+            hidden_floors_m,
+            confirm_min_gain: f64::INFINITY,
+            confirmed_floor_m: 0.0,
+        }
+    }
+
+    /// The calibration of the network whose weights are at `weights`, for a fit with or
+    /// without the depth image: from the calibration file beside them
+    /// ([`calibration_path`]) when it holds these weights' hash, else
+    /// [`Calibration::UNCALIBRATED`] with the reason ([`NetworkCalibration::warning`]).
+    ///
+    /// # Errors
+    /// The calibration file exists but cannot be read or parsed, holds values out of range,
+    /// or was measured on other weights (its hash is not theirs).
+    pub fn of_weights(weights: &Path, depth: bool) -> Result<NetworkCalibration> {
+        let path = calibration_path(weights);
+        let bad = |message: String| PerceptionError::Calibration {
+            path: path.clone(),
+            message,
+        };
+        let text = match workcell_robots::input::read_text_file(&path, MAX_CALIBRATION_BYTES) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Ok(NetworkCalibration {
+                    calibration: Self::UNCALIBRATED,
+                    source: BoundSource::Uncalibrated {
+                        why: format!("{} has no calibration beside it", weights.display()),
+                    },
+                });
+            }
+            Err(e) => return Err(bad(format!("cannot read: {e}"))),
+        };
+        let file: CalibrationFile = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        let hash = file_sha256(weights, workcell_procnet::weights::MAX_WEIGHTS_BYTES)?;
+        if !file.weights_sha256.eq_ignore_ascii_case(&hash) {
+            return Err(bad(format!(
+                "measured on weights with SHA-256 {}, but {} has {hash}: these weights need \
+                 their own calibration (scripts/calibrate_uncertainty.py --write), or remove \
+                 the file to use the conservative bound",
+                file.weights_sha256,
+                weights.display()
+            )));
+        }
+        let (which, measured) = if depth {
+            ("with_depth", file.with_depth)
+        } else {
+            ("without_depth", file.without_depth)
+        };
+        match measured {
+            Some(c) => {
+                c.check().map_err(|m| bad(format!("{which}.{m}")))?;
+                Ok(NetworkCalibration {
+                    calibration: c,
+                    source: BoundSource::Calibrated {
+                        path,
+                        fitted_on: file.fitted_on,
+                    },
+                })
+            }
+            None => Ok(NetworkCalibration {
+                calibration: Self::UNCALIBRATED,
+                source: BoundSource::Uncalibrated {
+                    why: format!(
+                        "{} holds no calibration of a fit {} the depth image",
+                        path.display(),
+                        if depth { "with" } else { "without" }
+                    ),
+                },
+            }),
+        }
+    }
+
+    /// Whether every value is one a bound can have: finite, non-negative lengths and scale
+    /// (the gain threshold may be infinite: no confirmed fit is a pose). The key of the
+    /// first that is not, with why.
+    fn check(&self) -> std::result::Result<(), String> {
+        let lengths = [
+            ("scale", self.scale),
+            ("floor_m", self.floor_m),
+            ("hidden_floors_m[0]", self.hidden_floors_m[0]),
+            ("hidden_floors_m[1]", self.hidden_floors_m[1]),
+            ("hidden_floors_m[2]", self.hidden_floors_m[2]),
+            ("confirmed_floor_m", self.confirmed_floor_m),
+        ];
+        for (key, v) in lengths {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{key}: {v} is not a finite value >= 0"));
+            }
+        }
+        if self.confirm_min_gain.is_nan() || self.confirm_min_gain < 0.0 {
+            return Err(format!(
+                "confirm_min_gain: {} is not a value >= 0",
+                self.confirm_min_gain
+            ));
+        }
+        Ok(())
+    }
+
+    /// `config` with this calibration.
+    #[must_use]
+    pub fn apply(self, config: ArmFitConfig) -> ArmFitConfig {
+        ArmFitConfig {
+            uncertainty_scale: self.scale,
+            uncertainty_floor_m: self.floor_m,
+            uncertainty_hidden_floors_m: self.hidden_floors_m,
+            confirm_min_gain: self.confirm_min_gain,
+            uncertainty_confirmed_floor_m: self.confirmed_floor_m,
+            ..config
+        }
+    }
+
+    /// The radius of a fit whose curvature spreads the forearm's centre and wrist by
+    /// `sigma_m`, whose hypotheses lie `spread_m` apart and whose forearm's region is
+    /// `hidden_share` hidden, under this calibration (what [`ArmFit::uncertainty_m`]
+    /// reports): `scale sigma + floor`, or the spread where that is larger; for a pose
+    /// `confirmed` below the gain threshold, at least `confirmed_floor_m`.
+    #[must_use]
+    pub fn radius(&self, sigma_m: f64, spread_m: f64, hidden_share: f64, confirmed: bool) -> f64 {
+        let r = (self.scale * sigma_m + self.floor_at(hidden_share)).max(spread_m);
+        if confirmed {
+            r.max(self.confirmed_floor_m)
+        } else {
+            r
+        }
+    }
+
+    /// The floor for a forearm's region `hidden_share` hidden: `floor_m` below the first of
+    /// [`HIDDEN_BANDS`], else the band's floor, never below a less hidden band's.
+    #[must_use]
+    pub fn floor_at(&self, hidden_share: f64) -> f64 {
+        let bands = HIDDEN_BANDS.iter().filter(|&&b| hidden_share >= b).count();
+        self.hidden_floors_m[..bands]
+            .iter()
+            .fold(self.floor_m, |a, &b| a.max(b))
+    }
+
+    /// The calibration `config` carries.
+    #[must_use]
+    pub fn of(config: &ArmFitConfig) -> Self {
+        Self {
+            scale: config.uncertainty_scale,
+            floor_m: config.uncertainty_floor_m,
+            hidden_floors_m: config.uncertainty_hidden_floors_m,
+            confirm_min_gain: config.confirm_min_gain,
+            confirmed_floor_m: config.uncertainty_confirmed_floor_m,
+        }
+    }
+}

@@ -1,0 +1,120 @@
+//! The fit's settings ([`ArmFitConfig`]) and their defaults.
+
+/// Settings of the articulated fit.
+// Serialize: the docs' stated defaults are checked against it (tests/defaults.rs).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ArmFitConfig {
+    /// A fit whose gain is below this is no pose (and ends a track), unless it is
+    /// confirmed (`confirm_min_gain`). Default 0.3.
+    pub min_gain: f64,
+    /// When nothing reaches `min_gain`, the best fit with a gain from this up to `min_gain`
+    /// (tracked or found by the global search) is a pose if the frame before confirms it:
+    /// that frame's pose, or its own best such fit, put the forearm's centre and wrist within
+    /// `confirm_m` of this one's (in the world frame). Masks that show the arm faintly give
+    /// such fits frame after frame in one place; masks that miss the arm give them here and
+    /// there. Measured per source of masks ([`Calibration::confirm_min_gain`]). Default
+    /// infinity: off.
+    pub confirm_min_gain: f64,
+    /// How near the frame before must put the forearm's centre and wrist to confirm a fit
+    /// below `min_gain`, m. Default 0.1 (at 30 Hz, 3 m/s).
+    pub confirm_m: f64,
+    /// Grid points per joint in the global search. Default 12.
+    pub grid: usize,
+    /// Grid cells climbed by the global search. Default 10.
+    pub refine: usize,
+    /// Climb iterations at most. Default 40.
+    pub max_iterations: usize,
+    /// First step of the climb, rad. Default 0.05.
+    pub initial_step_rad: f64,
+    /// The climb stops when its step falls below this, rad (the Newton refinement finishes
+    /// what it leaves). Default 0.005.
+    pub min_step_rad: f64,
+    /// Random probes per climb iteration. Default 2.
+    pub random_probes: usize,
+    /// `alpha`: the cost of a rendered pixel per pixel of distance to its part's mask.
+    /// Default 0.05.
+    pub distance_weight: f64,
+    /// Distances are capped at this many pixels. Default 16.
+    pub distance_cap_px: f32,
+    /// The constant-velocity prior's spread per joint, rad. Default 0.15.
+    pub prior_sigma_rad: f64,
+    /// `w`: the prior's weight, in gain per sigma squared. Default 0.01.
+    pub prior_weight: f64,
+    /// Samples per pixel side of the renders of the final refinement and its score. Default 2.
+    pub supersample: u32,
+    /// Samples per pixel side of the renders while climbing and searching: a quarter of the
+    /// pixels at 1 against 2 (the refinement then finishes at `supersample`). Default 1.
+    pub climb_supersample: u32,
+    /// Mask values above this are a part's support. Default 0.5.
+    pub threshold: f32,
+    /// Hypotheses tracked at most: the best fit and those within `ambiguity_gain` of its
+    /// gain that put the forearm elsewhere. Default 3.
+    pub hypotheses: usize,
+    /// A hypothesis this far below the best gain is dropped. Default 0.05.
+    pub ambiguity_gain: f64,
+    /// Hypotheses whose forearm centres and wrists are all within this are one, m.
+    /// Default 0.03.
+    pub distinct_m: f64,
+    /// Step of the central differences of the score's Hessian at the fit, rad. Default 0.02.
+    pub hessian_step_rad: f64,
+    /// Newton steps on the score's local quadratic after the climb, at most. Default 3.
+    pub newton_steps: usize,
+    /// The curvature part of the uncertainty is scaled by this. Default 1.
+    pub uncertainty_scale: f64,
+    /// Added to the scaled curvature part, m: the error that no curvature shows (masks
+    /// that put the arm a little off everywhere). Default 0.
+    pub uncertainty_floor_m: f64,
+    /// The floor instead where the depth image shows something in front of the arm over a
+    /// quarter, a half or three quarters of the forearm's region ([`ArmFit::hidden_share`];
+    /// [`Calibration::floor_at`]), m. Default 0 (the floor alone).
+    pub uncertainty_hidden_floors_m: [f64; 3],
+    /// The least uncertainty of a pose confirmed below `min_gain`
+    /// ([`Calibration::confirmed_floor_m`]), m. Default 0.
+    pub uncertainty_confirmed_floor_m: f64,
+    /// The global search runs, beside the tracked hypotheses, when their best gain is below
+    /// this: a track that explains the masks this poorly has likely followed a wrong
+    /// optimum. Default 0.55.
+    pub search_below_gain: f64,
+    /// With a depth image: the spread of a part's seen surface about its model's, m.
+    /// Default 0.03.
+    pub depth_sigma_m: f64,
+    /// With a depth image: the score a part's axis points lose at one `depth_sigma_m` of
+    /// disagreement (mean over the points that land on their part's mask; at most 9 sigma
+    /// squared each). Default 0.05.
+    pub depth_weight: f64,
+}
+
+impl Default for ArmFitConfig {
+    fn default() -> Self {
+        Self {
+            min_gain: 0.3,
+            confirm_min_gain: f64::INFINITY,
+            confirm_m: 0.1,
+            grid: 12,
+            refine: 10,
+            max_iterations: 40,
+            initial_step_rad: 0.05,
+            min_step_rad: 0.005,
+            random_probes: 2,
+            distance_weight: 0.05,
+            distance_cap_px: 16.0,
+            prior_sigma_rad: 0.15,
+            prior_weight: 0.01,
+            supersample: 2,
+            climb_supersample: 1,
+            threshold: 0.5,
+            hypotheses: 3,
+            ambiguity_gain: 0.05,
+            distinct_m: 0.03,
+            hessian_step_rad: 0.02,
+            newton_steps: 3,
+            uncertainty_scale: 1.0,
+            uncertainty_floor_m: 0.0,
+            uncertainty_hidden_floors_m: [0.0; 3],
+            uncertainty_confirmed_floor_m: 0.0,
+            search_below_gain: 0.55,
+            depth_sigma_m: 0.03,
+            depth_weight: 0.05,
+        }
+    }
+}

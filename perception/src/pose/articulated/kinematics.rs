@@ -1,0 +1,163 @@
+//! The arm's kinematic model as the fit moves it ([`ArticulatedArm`]).
+
+use std::sync::Arc;
+
+use workcell_render::RenderMesh;
+use workcell_robots::math::{Pose, Vector};
+use workcell_robots::{LinkId, RobotModel, Shape};
+
+use super::*;
+use crate::error::{PerceptionError, Result};
+use crate::pose::{POSE_MESH_SEGMENTS, RigidModel};
+
+/// The human model as the fit moves it: its joints, its arm parts' meshes, its base pose.
+#[derive(Debug, Clone)]
+pub struct ArticulatedArm {
+    pub(super) human: RobotModel,
+    pub(super) X_WH: Pose,
+    pub(super) links: [LinkId; 3],
+    pub(super) meshes: [Option<Arc<RenderMesh>>; 3],
+    /// Each part's box axis and size, for the depth term.
+    pub(super) models: [Option<RigidModel>; 3],
+    pub(super) limits: Vec<[f64; 2]>,
+    pub(super) forearm: RigidModel,
+    /// The shoulder (the upper arm's link origin), world frame, and the radius about it
+    /// that holds every point of the three parts whatever the joints, m.
+    pub(super) shoulder_W: Vector,
+    pub(super) reach_m: f64,
+}
+
+impl ArticulatedArm {
+    /// The arm of `human` (in the look it is seen in: its visuals are what is rendered)
+    /// standing with its base at `X_WH`.
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when the model has no joints, an arm part has no link of
+    /// its name, or the forearm has no visual geometry.
+    pub fn new(human: &RobotModel, X_WH: &Pose) -> Result<Self> {
+        let missing = |message: String| PerceptionError::Input {
+            message: format!("human model {}: {message}", human.name()),
+        };
+        if human.dof() == 0 {
+            return Err(missing("no joints to fit".into()));
+        }
+        let mut links = [0; 3];
+        let mut meshes: [Option<Arc<RenderMesh>>; 3] = [None, None, None];
+        let mut models: [Option<RigidModel>; 3] = [None, None, None];
+        for (i, part) in FITTED_PARTS.into_iter().enumerate() {
+            let link = human
+                .link_id(part.link_name())
+                .ok_or_else(|| missing(format!("no link named {part}")))?;
+            let pieces: Vec<(RenderMesh, bool)> = human.links()[link]
+                .visuals
+                .iter()
+                .map(|g| {
+                    let mesh =
+                        RenderMesh::from_geometry_with(g, [0.85, 0.72, 0.62], POSE_MESH_SEGMENTS);
+                    (mesh, !matches!(g.shape, Shape::Mesh { .. }))
+                })
+                .collect();
+            let mut mesh = RenderMesh::default();
+            for (piece, _) in &pieces {
+                mesh.append(piece, &Pose::IDENTITY);
+            }
+            links[i] = link;
+            if !mesh.is_empty() {
+                // The parts' geometry from every visual; their renders from the outside ones.
+                models[i] = Some(RigidModel::new(Arc::new(mesh))?);
+                meshes[i] = Some(Arc::new(RenderMesh::outer_union(&pieces)));
+            }
+        }
+        let forearm = models[1]
+            .clone()
+            .ok_or_else(|| missing("the forearm link has no visual geometry".into()))?;
+        let limits = human
+            .position_limits()
+            .into_iter()
+            .map(|[lo, hi]| {
+                let (lo, hi) = (lo.max(-std::f64::consts::PI), hi.min(std::f64::consts::PI));
+                if lo <= hi { [lo, hi] } else { [0.0, 0.0] }
+            })
+            .collect::<Vec<_>>();
+        // The reach: each part's farthest box corner from its link's origin, plus the
+        // distances between consecutive parts' origins, which their joints leave unchanged
+        // (a URDF joint sits at its child link's origin, fixed in its parent's frame).
+        let middle: Vec<f64> = limits.iter().map(|[lo, hi]| 0.5 * (lo + hi)).collect();
+        let k = human.fk(*X_WH, &middle)?;
+        let origin = |i: usize| k.link_pose(links[i]).translation;
+        let (mut chain, mut reach_m) = (0.0, 0.0f64);
+        for (i, model) in models.iter().enumerate() {
+            if i > 0 {
+                chain += (origin(i) - origin(i - 1)).length();
+            }
+            if let Some(model) = model {
+                let far = model
+                    .corners_O
+                    .iter()
+                    .map(|c| c.length())
+                    .fold(0.0, f64::max);
+                reach_m = reach_m.max(chain + far);
+            }
+        }
+        Ok(Self {
+            human: human.clone(),
+            X_WH: *X_WH,
+            links,
+            meshes,
+            models,
+            limits,
+            forearm,
+            shoulder_W: origin(0),
+            reach_m,
+        })
+    }
+
+    /// The nearest camera-frame depth any point of the arm can have for a camera at
+    /// `X_WC`, m: the shoulder's depth less the arm's reach. A depth image that shows a
+    /// surface nearer than this shows something in front of the arm.
+    #[must_use]
+    pub fn nearest_depth_m(&self, X_WC: &Pose) -> f64 {
+        X_WC.inverse().transform_point(self.shoulder_W).z - self.reach_m
+    }
+
+    /// Joints fitted.
+    #[must_use]
+    pub fn dof(&self) -> usize {
+        self.limits.len()
+    }
+
+    /// Each joint's range, rad (clamped to +-pi).
+    #[must_use]
+    pub fn limits(&self) -> &[[f64; 2]] {
+        &self.limits
+    }
+
+    /// The links of the upper arm, the forearm and the hand ([`FITTED_PARTS`]).
+    #[must_use]
+    pub fn part_links(&self) -> [LinkId; 3] {
+        self.links
+    }
+
+    /// The forearm as the paper's pose search and its error metric see it.
+    #[must_use]
+    pub fn forearm(&self) -> &RigidModel {
+        &self.forearm
+    }
+
+    /// The link frames of the upper arm, the forearm and the hand in the camera frame (the
+    /// camera at `X_WC`) at configuration `q`.
+    ///
+    /// # Errors
+    /// `q` has the wrong length or a value that is not finite.
+    pub fn part_poses(&self, q: &[f64], X_WC: &Pose) -> Result<[Pose; 3]> {
+        let k = self.human.fk(self.X_WH, q)?;
+        let X_CW = X_WC.inverse();
+        Ok(self.links.map(|l| X_CW * *k.link_pose(l)))
+    }
+
+    pub(super) fn clamp(&self, q: &mut [f64]) {
+        for (v, [lo, hi]) in q.iter_mut().zip(&self.limits) {
+            *v = v.clamp(*lo, *hi);
+        }
+    }
+}

@@ -1,0 +1,95 @@
+//! The masks the fit reads ([`ArmMasks`]): one probability image per fitted part.
+
+use workcell_render::Class;
+use workcell_robots::HumanPart;
+
+use super::*;
+use crate::error::{PerceptionError, Result};
+
+/// What a frame shows of the arm: a probability plane per part and one for the background.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmMasks {
+    pub width: usize,
+    pub height: usize,
+    /// Upper arm, forearm, hand ([`FITTED_PARTS`]), row-major, values in [0, 1].
+    pub parts: [Vec<f32>; 3],
+    /// That a pixel shows nothing that could hide the arm.
+    pub background: Vec<f32>,
+    /// A depth camera's image: the camera-frame z of the surface each pixel shows, m (0 or
+    /// not finite where it has none). With it the depth agreement joins the score.
+    pub depth_m: Option<Vec<f32>>,
+}
+
+impl ArmMasks {
+    /// From a class image ([`Class`] ids, as the dataset stores them).
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when `classes` is not `width x height`.
+    pub fn from_classes(classes: &[u8], width: usize, height: usize) -> Result<Self> {
+        check_len(classes.len(), width, height)?;
+        let plane = |c: Class| -> Vec<f32> {
+            classes
+                .iter()
+                .map(|&v| f32::from(u8::from(v == c as u8)))
+                .collect()
+        };
+        Ok(Self {
+            width,
+            height,
+            parts: FITTED_PARTS.map(|p| plane(Class::of_part(p))),
+            background: plane(Class::Background),
+            depth_m: None,
+        })
+    }
+
+    /// From a network's per-class probabilities (independent sigmoids): the background is
+    /// one less the largest class's probability. A part the network has no class for is
+    /// empty.
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when a plane is not `width x height`.
+    pub fn from_planes(width: usize, height: usize, planes: &[(Class, &[f32])]) -> Result<Self> {
+        let n = width * height;
+        for (_, p) in planes {
+            check_len(p.len(), width, height)?;
+        }
+        let mut background = vec![1.0f32; n];
+        for (_, p) in planes {
+            for (b, &v) in background.iter_mut().zip(*p) {
+                *b = b.min(1.0 - v);
+            }
+        }
+        let part = |part: HumanPart| {
+            planes
+                .iter()
+                .find(|(c, _)| c.human_part() == Some(part))
+                .map_or_else(|| vec![0.0; n], |(_, p)| p.to_vec())
+        };
+        Ok(Self {
+            width,
+            height,
+            parts: FITTED_PARTS.map(part),
+            background,
+            depth_m: None,
+        })
+    }
+
+    /// The forearm's plane.
+    #[must_use]
+    pub fn forearm(&self) -> &[f32] {
+        &self.parts[1]
+    }
+}
+
+pub(super) fn check_len(len: usize, width: usize, height: usize) -> Result<()> {
+    if len == width * height {
+        Ok(())
+    } else {
+        Err(PerceptionError::Input {
+            message: format!(
+                "a mask of {len} values for a {width}x{height} image ({} pixels)",
+                width * height
+            ),
+        })
+    }
+}

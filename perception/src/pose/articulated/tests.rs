@@ -1,0 +1,565 @@
+//! The articulated fit's tests.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use workcell_render::{Camera, Class, MaskBatch, RenderMesh, Renderer, SpanBatch};
+use workcell_robots::RobotModel;
+use workcell_robots::math::{Pose, Vector};
+
+use super::*;
+use crate::pose::{NoPose, POSE_MESH_SEGMENTS};
+use workcell_render::CpuRenderer;
+
+/// The catalogue's human at the origin, seen from about 2.5 m in front, 128x128, through
+/// a 25-degree lens pointed near the arm.
+fn setup() -> (ArticulatedArm, Camera) {
+    let human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+    let arm = ArticulatedArm::new(&human, &Pose::IDENTITY).expect("arm");
+    let camera = Camera::look_at(
+        [2.5, -0.9, 0.7],
+        [0.1, -0.2, 0.3],
+        [0.0, 0.0, 1.0],
+        128,
+        128,
+        25.0,
+    )
+    .expect("camera");
+    (arm, camera)
+}
+
+/// Configurations seen by [`far_camera`]: the arm raised, forward and to the side.
+const FAR_CONFIGURATIONS: [[f64; 3]; 3] = [[0.4, 0.8, 1.2], [1.0, 0.3, 0.6], [0.2, 1.4, 0.4]];
+
+/// The same human from about 8.4 m through a 6-degree lens: nearly an orthographic view.
+fn far_camera() -> Camera {
+    Camera::look_at(
+        [8.0, -2.5, 1.5],
+        [0.1, -0.2, 0.3],
+        [0.0, 0.0, 1.0],
+        128,
+        128,
+        6.0,
+    )
+    .expect("camera")
+}
+
+/// The class image and the depth of the arm at `q`, its three parts rendered together
+/// (z-buffered).
+fn observe(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> (Vec<u8>, Vec<f32>) {
+    let poses = arm.part_poses(q, &camera.X_WC).expect("poses");
+    let mut scene = workcell_render::Scene::default();
+    for p in 0..3 {
+        let Some(mesh) = &arm.meshes[p] else { continue };
+        scene.push(workcell_render::SceneObject {
+            name: FITTED_PARTS[p].name().into(),
+            class: Class::of_part(FITTED_PARTS[p]),
+            mesh: mesh.clone(),
+            texture: 0.0,
+            X_WO: camera.X_WC * poses[p],
+        });
+    }
+    let mut frame = workcell_render::Frame::new();
+    CpuRenderer::new()
+        .render(&scene, camera, &mut frame)
+        .expect("render");
+    (frame.classes(&scene), frame.depth_m.clone())
+}
+
+#[test]
+fn sums_over_spans_are_the_sums_over_the_covered_samples() {
+    let (w, h) = (7, 5);
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut plane = || -> Vec<f32> { (0..w * h).map(|_| rng.random::<f32>() - 0.3).collect() };
+    let (a, b) = (plane(), plane());
+    let sums = RowSums::new(&a, &b, w);
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    for ss in 1..=3 {
+        for _ in 0..20 {
+            let spans: Vec<[u32; 2]> = (0..h * ss)
+                .map(|_| {
+                    let x = rng.random_range(0..(w * ss) as u32);
+                    let y = rng.random_range(0..(w * ss) as u32);
+                    if rng.random::<f32>() < 0.2 {
+                        SpanBatch::EMPTY
+                    } else {
+                        [x.min(y), x.max(y)]
+                    }
+                })
+                .collect();
+            let mut expected = [0.0f64; 2];
+            for (fy, &[first, last]) in spans.iter().enumerate() {
+                for x in first as usize..=last as usize {
+                    if first > last {
+                        break;
+                    }
+                    let i = (fy / ss) * w + x / ss;
+                    expected[0] += f64::from(a[i]);
+                    expected[1] += f64::from(b[i]);
+                }
+            }
+            let got = sums.over(&spans, ss);
+            for k in 0..2 {
+                assert!(
+                    (got[k] - expected[k]).abs() < 1e-9,
+                    "ss {ss}: {got:?} {expected:?}"
+                );
+            }
+        }
+    }
+}
+
+/// The parts' renders (their outside triangles) cover the pixels that every visual of
+/// their link covers, at the fit's 2x2 samples a pixel.
+#[test]
+fn each_part_renders_as_its_visuals_do() {
+    let (arm, camera) = setup();
+    let human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+    let fine = camera.resized(256, 256).expect("camera");
+    let mut renderer = CpuRenderer::new();
+    let (mut a, mut b) = (MaskBatch::new(), MaskBatch::new());
+    for p in 0..3 {
+        let mut all = RenderMesh::default();
+        for g in &human.links()[arm.links[p]].visuals {
+            all.append(
+                &RenderMesh::from_geometry_with(g, [0.5; 3], POSE_MESH_SEGMENTS),
+                &Pose::IDENTITY,
+            );
+        }
+        let outer = arm.meshes[p].as_ref().expect("mesh");
+        // 270 of 504, 276 of 672 and 178 of 1,368 triangles.
+        assert!(
+            10 * outer.len() < 6 * all.len(),
+            "{} of {}",
+            outer.len(),
+            all.len()
+        );
+        let poses: Vec<Pose> = (0..12)
+            .map(|k| {
+                let t = f64::from(k) / 12.0;
+                let q = [1.2 * t - 0.2, 1.6 * (1.0 - t), 2.0 * t];
+                arm.part_poses(&q, &camera.X_WC).expect("poses")[p]
+            })
+            .collect();
+        renderer
+            .render_masks(&all, &fine, &poses, &mut a)
+            .expect("render");
+        renderer
+            .render_masks(outer, &fine, &poses, &mut b)
+            .expect("render");
+        assert!(a.data.contains(&1), "part {p} in view");
+        assert_eq!(a, b, "part {p}");
+    }
+}
+
+fn classes(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> Vec<u8> {
+    observe(arm, camera, q).0
+}
+
+fn distance_cm(arm: &ArticulatedArm, camera: &Camera, a: &[f64], b: &[f64]) -> f64 {
+    let pa = arm.part_poses(a, &camera.X_WC).expect("a")[1];
+    let pb = arm.part_poses(b, &camera.X_WC).expect("b")[1];
+    let m = arm.forearm();
+    100.0 * (m.centre(&pa) - m.centre(&pb)).length()
+}
+
+#[test]
+fn distance_transform_of_one_pixel_is_the_chamfer_distance() {
+    let (w, h) = (9, 7);
+    let mut inside = vec![false; w * h];
+    inside[3 * w + 4] = true;
+    let d = distance_transform(&inside, w, h, 100.0);
+    assert_eq!(d[3 * w + 4], 0.0);
+    assert_eq!(d[3 * w + 7], 3.0); // three pixels right
+    assert!((d[0] - (3.0 * std::f32::consts::SQRT_2 + 1.0)).abs() < 1e-5); // (0,0): 4 left, 3 up
+    let capped = distance_transform(&inside, w, h, 2.0);
+    assert_eq!(capped[0], 2.0);
+    assert!(
+        distance_transform(&vec![false; w * h], w, h, 5.0)
+            .iter()
+            .all(|&v| v == 5.0)
+    );
+}
+
+/// A v = lambda v for each pair, on a matrix with known eigenvalues (1, 2, 4: the
+/// rotation of diag(1, 2, 4) by an orthonormal basis).
+#[test]
+fn eigenpairs_of_a_symmetric_matrix() {
+    let basis = [
+        [1.0 / 3f64.sqrt(); 3],
+        [1.0 / 2f64.sqrt(), -1.0 / 2f64.sqrt(), 0.0],
+        [1.0 / 6f64.sqrt(), 1.0 / 6f64.sqrt(), -2.0 / 6f64.sqrt()],
+    ];
+    let lambda = [1.0, 2.0, 4.0];
+    let a: Vec<Vec<f64>> = (0..3)
+        .map(|i| {
+            (0..3)
+                .map(|j| (0..3).map(|k| lambda[k] * basis[k][i] * basis[k][j]).sum())
+                .collect()
+        })
+        .collect();
+    let (values, vectors) = symmetric_eigen(a.clone());
+    let mut sorted = values.clone();
+    sorted.sort_by(f64::total_cmp);
+    for (v, l) in sorted.iter().zip(lambda) {
+        assert!((v - l).abs() < 1e-12, "{values:?}");
+    }
+    for (l, v) in values.iter().zip(&vectors) {
+        for i in 0..3 {
+            let av: f64 = (0..3).map(|j| a[i][j] * v[j]).sum();
+            assert!((av - l * v[i]).abs() < 1e-12);
+        }
+        assert!((v.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn masks_from_classes_and_from_probabilities_agree() {
+    let classes = [0u8, 3, 4, 5, 1, 2];
+    let m = ArmMasks::from_classes(&classes, 3, 2).expect("masks");
+    assert_eq!(m.parts[0], vec![0.0, 1.0, 0.0, 0.0, 0.0, 0.0]);
+    assert_eq!(m.forearm(), &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]);
+    // The robot and the torso are not background: they may hide the arm.
+    assert_eq!(m.background, vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let planes: Vec<(Class, Vec<f32>)> = [
+        Class::Robot,
+        Class::Torso,
+        Class::UpperArm,
+        Class::Forearm,
+        Class::Hand,
+    ]
+    .into_iter()
+    .map(|c| {
+        (
+            c,
+            classes
+                .iter()
+                .map(|&v| f32::from(u8::from(v == c as u8)))
+                .collect(),
+        )
+    })
+    .collect();
+    let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
+    assert_eq!(ArmMasks::from_planes(3, 2, &refs).expect("planes"), m);
+    assert!(ArmMasks::from_classes(&classes, 4, 2).is_err());
+}
+
+/// The fit from the masks of a known configuration finds it again: globally on the
+/// first frame, then tracking a moving arm.
+#[test]
+fn fits_the_arm_it_rendered() {
+    let (arm, camera) = setup();
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+    let path = |t: f64| vec![0.5 + 0.1 * t, 0.9 - 0.1 * t, 1.0 + 0.2 * t];
+    for k in 0..4 {
+        let truth = path(f64::from(k) * 0.3);
+        let masks =
+            ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
+        let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+        assert_eq!(fit.reacquired, k == 0);
+        let err = distance_cm(&arm, &camera, &fit.q, &truth);
+        assert!(
+            err < 1.5,
+            "frame {k}: {err:.2} cm, q {:?} vs {truth:?}",
+            fit.q
+        );
+        assert!(fit.gain > 0.9, "frame {k}: gain {}", fit.gain);
+    }
+}
+
+/// A track that explains the masks poorly (a gain between `min_gain` and
+/// `search_below_gain`) calls the global search beside it, which finds the arm; with the
+/// threshold at 0 the poor track is kept.
+#[test]
+fn a_poor_track_calls_the_global_search() {
+    let (arm, camera) = setup();
+    let truth = [0.5, 0.9, 1.0];
+    let masks = ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
+    // The climb stays where the track was: its gain is the track's.
+    let config = |search_below_gain| ArmFitConfig {
+        max_iterations: 0,
+        newton_steps: 0,
+        search_below_gain,
+        ..ArmFitConfig::default()
+    };
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config(0.55));
+    let poor = (1..40)
+        .map(|k| {
+            let d = 0.02 * f64::from(k);
+            vec![truth[0] + d, truth[1] - d, truth[2] + 0.5 * d]
+        })
+        .find(|q| {
+            let gain = fitter.gain_at(&camera, &masks, q).expect("gain");
+            gain.is_some_and(|g| (0.35..0.5).contains(&g.total))
+        })
+        .expect("a configuration that explains the masks poorly");
+    fitter.set_prior(&poor);
+    let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+    assert!(fit.reacquired);
+    let err = distance_cm(&arm, &camera, &fit.q, &truth);
+    assert!(err < 3.0, "{err:.2} cm off, q {:?}", fit.q);
+
+    let mut kept = ArmFitter::new(CpuRenderer::new(), arm.clone(), config(0.0));
+    kept.set_prior(&poor);
+    let fit = kept.fit(&camera, &masks).expect("fit").expect("a pose");
+    assert!(!fit.reacquired);
+    assert!(fit.gain < 0.5, "gain {}", fit.gain);
+}
+
+/// A fit below `min_gain` is a pose only when the frame before put the forearm within
+/// `confirm_m` of it. With `min_gain` above any gain (1 is a perfect fit), every fit here
+/// is such a fit: the first frame gives none, the next (the arm moved a little) a confirmed
+/// pose; a jump farther than `confirm_m` gives none until the frame after it; a reset
+/// forgets the frame before; with `confirm_min_gain` at `min_gain` nothing is a pose.
+#[test]
+fn a_fit_below_the_threshold_is_confirmed_by_the_frame_before() {
+    let (arm, camera) = setup();
+    let masks_of =
+        |q: &[f64]| ArmMasks::from_classes(&classes(&arm, &camera, q), 128, 128).expect("masks");
+    let config = ArmFitConfig {
+        min_gain: 1.5,
+        confirm_min_gain: 0.5,
+        ..ArmFitConfig::default()
+    };
+    let near = [vec![0.5, 0.9, 1.0], vec![0.52, 0.88, 1.02]];
+    let far = vec![0.5, 0.9, 1.8]; // the elbow bent 0.8 rad more: the wrist moves > 10 cm
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config.clone());
+    assert_eq!(
+        fitter.fit(&camera, &masks_of(&near[0])).expect("fit").err(),
+        Some(NoPose::PoorFit),
+        "the first frame has nothing to confirm it"
+    );
+    let fit = fitter
+        .fit(&camera, &masks_of(&near[1]))
+        .expect("fit")
+        .expect("a pose confirmed by the frame before");
+    assert!(fit.confirmed && fit.gain > 0.9, "gain {}", fit.gain);
+    let err = distance_cm(&arm, &camera, &fit.q, &near[1]);
+    assert!(err < 1.5, "{err:.2} cm off");
+    assert!(
+        fitter.fit(&camera, &masks_of(&far)).expect("fit").is_err(),
+        "a fit far from the frame before is not confirmed"
+    );
+    let fit = fitter
+        .fit(&camera, &masks_of(&far))
+        .expect("fit")
+        .expect("the frame after the jump confirms it");
+    assert!(fit.confirmed, "gain {}", fit.gain);
+    assert!(distance_cm(&arm, &camera, &fit.q, &far) < 1.5);
+    fitter.reset();
+    assert!(fitter.fit(&camera, &masks_of(&far)).expect("fit").is_err());
+
+    let mut off = ArmFitter::new(
+        CpuRenderer::new(),
+        arm.clone(),
+        ArmFitConfig {
+            confirm_min_gain: 1.5,
+            ..config
+        },
+    );
+    for q in &near {
+        assert!(off.fit(&camera, &masks_of(q)).expect("fit").is_err());
+    }
+}
+
+/// Far away the masks of the arm and of its mirror image are nearly the same: whichever
+/// the fit picks, its uncertainty reaches the truth.
+#[test]
+fn far_away_the_uncertainty_covers_the_mirror() {
+    let (arm, _) = setup();
+    let camera = far_camera();
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+    for truth in FAR_CONFIGURATIONS.map(|q| q.to_vec()) {
+        fitter.reset();
+        let masks =
+            ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
+        let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+        let err = distance_cm(&arm, &camera, &fit.q, &truth);
+        let truth_gain = fitter.gain_at(&camera, &masks, &truth).expect("gain");
+        assert!(
+            err < 2.0 || 100.0 * fit.uncertainty_m >= err,
+            "{truth:?}: {err:.1} cm off, uncertainty {:.1} cm; q {:?}, gain {:.4} (truth's {truth_gain:?})",
+            100.0 * fit.uncertainty_m,
+            fit.q,
+            fit.gain
+        );
+    }
+}
+
+/// Where the masks cannot tell the arm from its mirror, depth can: with the depth image
+/// the fit finds the true arm itself.
+#[test]
+fn depth_tells_the_arm_from_its_mirror() {
+    let (arm, _) = setup();
+    let camera = far_camera();
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+    for truth in FAR_CONFIGURATIONS.map(|q| q.to_vec()) {
+        fitter.reset();
+        let (classes, depth) = observe(&arm, &camera, &truth);
+        let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
+        masks.depth_m = Some(depth);
+        let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+        let err = distance_cm(&arm, &camera, &fit.q, &truth);
+        assert!(err < 2.0, "{truth:?}: {err:.1} cm off, q {:?}", fit.q);
+    }
+}
+
+/// Every point of every part lies within the reach of the shoulder, whatever the
+/// joints, and some configurations come near the reach's edge.
+#[test]
+fn the_reach_holds_the_arm_in_any_configuration() {
+    let (arm, _) = setup();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut farthest = 0.0f64;
+    for _ in 0..200 {
+        let q: Vec<f64> = arm
+            .limits()
+            .iter()
+            .map(|&[lo, hi]| rng.random_range(lo..=hi))
+            .collect();
+        let poses = arm.part_poses(&q, &Pose::IDENTITY).expect("poses");
+        for (p, mesh) in arm.meshes.iter().enumerate() {
+            let Some(mesh) = mesh else { continue };
+            for v in &mesh.positions {
+                let v = Vector::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+                let d = (poses[p].transform_point(v) - arm.shoulder_W).length();
+                assert!(
+                    d <= arm.reach_m + 1e-6,
+                    "{d} m past a reach of {}",
+                    arm.reach_m
+                );
+                farthest = farthest.max(d);
+            }
+        }
+    }
+    // The upper arm (0.3255 m to the elbow) and the forearm (0.2555 m to the wrist)
+    // with the hand: about 0.8 m.
+    assert!((0.7..0.9).contains(&arm.reach_m), "{}", arm.reach_m);
+    assert!(
+        farthest > 0.9 * arm.reach_m,
+        "{farthest} of {}",
+        arm.reach_m
+    );
+}
+
+/// A black occluder that a depth camera sees in front of the arm over half the
+/// forearm: the fit reports that share hidden (half), none when the depth image sees
+/// through the occluder, still finds the arm (the depth term skips the occluder), and
+/// its bound is the calibration's floor for a forearm half hidden.
+#[test]
+fn an_occluder_in_front_is_measured_and_widens_the_bound() {
+    let (arm, camera) = setup();
+    let truth = [0.5, 0.9, 1.0];
+    let (classes, depth) = observe(&arm, &camera, &truth);
+    let forearm = Class::Forearm as u8;
+    let pixels: Vec<usize> = (0..classes.len())
+        .filter(|&i| classes[i] == forearm)
+        .collect();
+    let centre = pixels.iter().fold([0.0, 0.0], |[x, y], &i| {
+        [x + (i % 128) as f64, y + (i / 128) as f64]
+    });
+    let centre = centre.map(|c| c / pixels.len() as f64);
+    let dist = |i: usize| ((i % 128) as f64 - centre[0]).hypot((i / 128) as f64 - centre[1]);
+    let mut radii: Vec<f64> = pixels.iter().map(|&i| dist(i)).collect();
+    radii.sort_by(f64::total_cmp);
+    let radius = radii[radii.len() / 2];
+    // The network calls the black disc background; the depth camera sees the disc.
+    let (mut hidden_classes, mut occluded_depth) = (classes.clone(), depth.clone());
+    let mut hidden = 0usize;
+    for &i in pixels.iter().filter(|&&i| dist(i) <= radius) {
+        hidden_classes[i] = Class::Background as u8;
+        occluded_depth[i] = 0.25;
+        hidden += 1;
+    }
+    let share = hidden as f64 / pixels.len() as f64;
+    assert!(
+        (0.45..0.6).contains(&share),
+        "{hidden} of {} hidden",
+        pixels.len()
+    );
+    let mut masks = ArmMasks::from_classes(&hidden_classes, 128, 128).expect("masks");
+    let calibration = Calibration {
+        scale: 0.0,
+        floor_m: 0.01,
+        hidden_floors_m: [0.1, 0.2, 0.3],
+        confirm_min_gain: f64::INFINITY,
+        confirmed_floor_m: 0.0,
+    };
+    let config = calibration.apply(ArmFitConfig::default());
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
+    masks.depth_m = Some(depth);
+    let seen_through = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+    assert_eq!(seen_through.hidden_share, 0.0);
+    masks.depth_m = Some(occluded_depth);
+    fitter.reset();
+    let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+    // Hidden pixels over themselves and the forearm's mask elsewhere.
+    assert!(
+        (fit.hidden_share - share).abs() < 1e-9,
+        "{} vs {share}",
+        fit.hidden_share
+    );
+    let err = distance_cm(&arm, &camera, &fit.q, &truth);
+    assert!(err < 2.0, "{err:.2} cm off, q {:?}", fit.q);
+    assert_eq!(fit.uncertainty_m, 0.2_f64.max(fit.spread_m));
+}
+
+/// The floor grows band by band with the hidden share, and never falls below a less
+/// hidden band's; a confirmed pose's bound is at least its own floor.
+#[test]
+fn the_floor_follows_the_hidden_share() {
+    let c = Calibration {
+        scale: 2.0,
+        floor_m: 0.05,
+        hidden_floors_m: [0.04, 0.2, 0.1],
+        confirm_min_gain: 0.2,
+        confirmed_floor_m: 0.6,
+    };
+    let floors: Vec<f64> = [0.0, 0.24, 0.25, 0.5, 0.74, 0.75, 1.0]
+        .iter()
+        .map(|&h| c.floor_at(h))
+        .collect();
+    assert_eq!(floors, [0.05, 0.05, 0.05, 0.2, 0.2, 0.2, 0.2]);
+    assert!((c.radius(0.01, 0.0, 0.5, false) - 0.22).abs() < 1e-12);
+    assert_eq!(c.radius(0.01, 0.5, 0.5, false), 0.5);
+    assert_eq!(c.radius(0.01, 0.5, 0.5, true), 0.6);
+    assert_eq!(c.radius(0.01, 0.7, 0.5, true), 0.7);
+    assert_eq!(Calibration::of(&c.apply(ArmFitConfig::default())), c);
+}
+
+#[test]
+fn bad_masks_are_no_pose_not_errors() {
+    let (arm, camera) = setup();
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm, ArmFitConfig::default());
+    let n = 128 * 128;
+    let empty = ArmMasks {
+        width: 128,
+        height: 128,
+        parts: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+        background: vec![1.0; n],
+        depth_m: None,
+    };
+    assert_eq!(
+        fitter.fit(&camera, &empty).expect("runs"),
+        Err(NoPose::Empty)
+    );
+    let mut nan = empty.clone();
+    nan.parts[1][77] = f32::NAN;
+    assert_eq!(
+        fitter.fit(&camera, &nan).expect("runs"),
+        Err(NoPose::NotAProbability)
+    );
+    // A blob far from anything the arm can reach: no configuration explains it.
+    let mut far = empty.clone();
+    for y in 0..6 {
+        for x in 0..6 {
+            far.parts[1][y * 128 + x] = 1.0;
+            far.background[y * 128 + x] = 0.0;
+        }
+    }
+    assert_eq!(
+        fitter.fit(&camera, &far).expect("runs"),
+        Err(NoPose::PoorFit)
+    );
+    let small = ArmMasks { width: 64, ..empty };
+    assert!(fitter.fit(&camera, &small).is_err());
+}

@@ -1,0 +1,733 @@
+//! The human's arm as perception models it, and the runtime that turns camera frames into
+//! arm estimates: [`ArmTracker`] takes a frame (or masks) and its camera and gives each part
+//! of the arm as a capsule in the world, with an uncertainty, or the reason why there is no
+//! estimate. It is what the closed loop calls and what a program beside a real camera calls,
+//! the same way.
+//!
+//! The parts are sized from the human model and placed where the articulated fit
+//! ([`crate::pose::ArmFitter`]) puts the model's links ([`crate::pose::ArmModel`]). The
+//! tracker knows nothing of datasets: a human model, its base pose, a camera and frames.
+
+use workcell_procnet::ProcNet;
+use workcell_procnet::image::{planar_rgb, planar_rgb_crop, resample};
+use workcell_render::roi::{self, Roi, RoiKind};
+use workcell_render::{Camera, Class, CpuRenderer};
+use workcell_robots::collision::{LinkCapsule, link_bounding_capsule};
+use workcell_robots::math::{Pose, Vector};
+use workcell_robots::{HumanPart, RobotModel};
+
+use crate::error::{PerceptionError, Result};
+use crate::pose::{
+    ArmFit, ArmFitConfig, ArmFitter, ArmMasks, ArmModel, ArticulatedArm, FITTED_PARTS, NoPose,
+    PartCapsule,
+};
+
+/// What the tracker knows of the arm in one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmEstimate {
+    /// Each part of the arm in the world, [`HumanPart::ARM`] order, not inflated.
+    pub parts: Vec<PartCapsule>,
+    /// The radius by which every capsule is to be inflated, m.
+    pub uncertainty_m: f64,
+    /// The forearm link's frame in the world.
+    pub X_WF: Pose,
+    /// The articulated fit behind it (joint angles, scores, renders), in the frame of the
+    /// region of interest's camera.
+    pub fit: ArmFit,
+}
+
+/// Why a frame gave no estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoEstimate {
+    /// The masks gave no pose (nothing seen, values that are not probabilities, no
+    /// configuration of the arm that explains them).
+    NoPose(NoPose),
+    /// The camera delivered no frame.
+    NoFrame,
+}
+
+impl std::fmt::Display for NoEstimate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NoEstimate::NoPose(reason) => write!(f, "no arm pose: {reason}"),
+            NoEstimate::NoFrame => write!(f, "the camera delivered no frame"),
+        }
+    }
+}
+
+/// The result of one frame: an estimate, or why there is none.
+pub type ArmOutcome = std::result::Result<ArmEstimate, NoEstimate>;
+
+/// Frames of one camera in, arm estimates out: ProcNet's mask of every arm part in the
+/// frame's region of interest, the articulated fit ([`ArmFitter`]) tracking the human
+/// model's joints from frame to frame, and each part's collision capsule where the fitted
+/// joints put it. With a depth image the depth agreement joins the fit.
+///
+/// ```no_run
+/// # use workcell_perception::{ArmTracker, Backend, ProcNet, pose::ArmFitConfig};
+/// # fn run(human: workcell_robots::RobotModel, X_WH: workcell_robots::math::Pose,
+/// #        camera: workcell_render::Camera, rgb: &[u8]) -> workcell_perception::Result<()> {
+/// let weights = std::path::Path::new("procnet/weights/procnet-cpu.safetensors");
+/// let net = ProcNet::load(weights, Backend::Flex)?;
+/// let mut tracker = ArmTracker::new(&human, &X_WH, ArmFitConfig::default())?.with_network(net)?;
+/// match tracker.track(&camera, rgb, None)? {
+///     Ok(estimate) => println!("{} parts, +-{:.3} m", estimate.parts.len(), estimate.uncertainty_m),
+///     Err(reason) => println!("no estimate: {reason}"),
+/// }
+/// # Ok(())
+/// # }
+/// ```
+pub struct ArmTracker {
+    arm: ArmModel,
+    fitter: ArmFitter<CpuRenderer>,
+    /// Each fitted part's collision capsule in its link's frame.
+    capsules: [Option<LinkCapsule>; 3],
+    net: Option<ProcNet>,
+    /// The last estimate's shoulder, elbow and wrist: the next region of interest follows
+    /// them.
+    joints_W: Option<[Vector; 3]>,
+    /// Frames in a row with a pose (a held frame, [`HOLD_REGION`], keeps the count): the
+    /// region follows the arm from [`CONFIRM_POSES`] on.
+    streak: usize,
+    /// Frames in a row without a pose while the region still follows the last estimate
+    /// (at most [`HOLD_REGION`]).
+    held: usize,
+    /// The focal length, px, of the last region the network read: a region of another
+    /// scale is another view, and the network's memory of the last one is dropped.
+    last_fx: Option<f64>,
+}
+
+/// A region whose scale differs from the last one's by more than this factor is another view.
+pub const VIEW_JUMP: f64 = 1.25;
+
+/// Whether a region seen at focal length `fx` (px) is another view than the last one, seen
+/// at `last_fx`: its scale differs by more than [`VIEW_JUMP`]. A recurrent network's memory
+/// of the last view is then of other pixels, and it starts afresh.
+#[must_use]
+pub fn view_jump(last_fx: Option<f64>, fx: f64) -> bool {
+    last_fx.is_some_and(|last| (fx / last).ln().abs() > VIEW_JUMP.ln())
+}
+
+/// Poses in a row before the region of interest follows the arm. A network that has just
+/// started on a view can give a confident pose of the wrong arm; a crop around it would
+/// keep the real one out of view for frames on end (measured: experiments/perception.md, "The
+/// deployed tracker's own crops").
+pub const CONFIRM_POSES: usize = 2;
+
+/// Frames without a pose for which the region keeps following the arm's last estimate
+/// before it falls back to the workspace. The network's first frames of a tracked crop can
+/// miss a far arm that its next frame finds; falling back at once starts it afresh on the
+/// workspace crop and then on the tracked one again (measured: experiments/perception.md, "A new
+/// view read three times").
+pub const HOLD_REGION: usize = 1;
+
+/// The side of the region of interest's image the fit reads (the networks' masks are
+/// resampled to it): the size of the datasets' stored regions.
+pub const DEFAULT_INPUT_PX: usize = 128;
+
+/// A frame's arm as the tracker's network sees it: the region of interest, the camera that
+/// sees exactly that region at [`DEFAULT_INPUT_PX`], and the masks there.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoiMasks {
+    pub roi: Roi,
+    pub camera: Camera,
+    pub masks: ArmMasks,
+}
+
+impl ArmTracker {
+    /// A tracker of the arm of `human` (in the look it is seen in: its visuals are what the
+    /// fit renders) standing with its base at `X_WH`, without a network: give it masks
+    /// ([`ArmTracker::track_masks`]).
+    ///
+    /// # Errors
+    /// As [`ArmModel::new`] and [`ArticulatedArm::new`].
+    pub fn new(human: &RobotModel, X_WH: &Pose, config: ArmFitConfig) -> Result<Self> {
+        let arm = ArmModel::new(human, X_WH)?;
+        let articulated = ArticulatedArm::new(human, X_WH)?;
+        let capsules = articulated
+            .part_links()
+            .map(|l| link_bounding_capsule(human, l));
+        Ok(Self {
+            arm,
+            fitter: ArmFitter::new(CpuRenderer::new(), articulated, config),
+            capsules,
+            net: None,
+            joints_W: None,
+            streak: 0,
+            held: 0,
+            last_fx: None,
+        })
+    }
+
+    /// The same tracker segmenting frames with `net` ([`ArmTracker::track`]).
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when the network has no forearm class.
+    pub fn with_network(mut self, net: ProcNet) -> Result<Self> {
+        if net.config().class_index(Class::Forearm).is_none() {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "the network has no forearm class (it has {:?})",
+                    net.config().classes
+                ),
+            });
+        }
+        self.net = Some(net);
+        Ok(self)
+    }
+
+    /// The arm it tracks.
+    #[must_use]
+    pub fn arm(&self) -> &ArmModel {
+        &self.arm
+    }
+
+    /// The articulated arm it fits.
+    #[must_use]
+    pub fn articulated(&self) -> &ArticulatedArm {
+        self.fitter.arm()
+    }
+
+    /// The network, if it has one.
+    #[must_use]
+    pub fn network(&self) -> Option<&ProcNet> {
+        self.net.as_ref()
+    }
+
+    /// Forgets the track and the network's state (a new camera stream).
+    pub fn reset(&mut self) {
+        self.fitter.reset();
+        self.joints_W = None;
+        self.streak = 0;
+        self.held = 0;
+        self.last_fx = None;
+        if let Some(net) = &mut self.net {
+            net.reset();
+        }
+    }
+
+    /// The region of `camera`'s image the next frame is read through: around the last
+    /// estimate's shoulder, elbow and wrist ([`Roi::of_joints`], the middle of
+    /// [`roi::TRACKED_MARGIN`]) once [`CONFIRM_POSES`] frames in a row gave a pose (and for
+    /// [`HOLD_REGION`] frames without one after that), else the sphere the forearm can reach
+    /// ([`Roi::of_sphere`]), else the whole frame.
+    #[must_use]
+    pub fn roi(&self, camera: &Camera) -> Roi {
+        self.region(camera).0
+    }
+
+    /// [`ArmTracker::roi`] and which of the three it is.
+    #[must_use]
+    pub fn region(&self, camera: &Camera) -> (Roi, RoiKind) {
+        let margin = 0.5 * (roi::TRACKED_MARGIN[0] + roi::TRACKED_MARGIN[1]);
+        self.joints_W
+            .filter(|_| self.streak >= CONFIRM_POSES)
+            .and_then(|joints| Roi::of_joints(camera, &joints, margin, roi::TRACKED_MIN_M))
+            .map(|r| (r, RoiKind::Tracked))
+            .or_else(|| {
+                let (shoulder, _) = self.arm.shoulder_W?;
+                Roi::of_sphere(camera, shoulder, self.arm.reach_m()?, roi::WORKSPACE_MARGIN)
+                    .map(|r| (r, RoiKind::Workspace))
+            })
+            .unwrap_or((Roi::frame(camera.width, camera.height), RoiKind::Frame))
+    }
+
+    /// The network's masks of a frame: the region of interest ([`ArmTracker::roi`])
+    /// resampled to [`DEFAULT_INPUT_PX`], segmented (at the network's input size), every
+    /// class's plane back at [`DEFAULT_INPUT_PX`]. `depth_m` is the depth camera's image
+    /// registered to `camera` ([`ArmTracker::track`]); a network that reads depth needs it,
+    /// and the masks carry the region's depth for the fit.
+    ///
+    /// # Errors
+    /// No network ([`ArmTracker::with_network`]), images of the wrong size, no depth image
+    /// for a network that reads depth, a network failure.
+    pub fn segment(
+        &mut self,
+        camera: &Camera,
+        rgb: &[u8],
+        depth_m: Option<&[f32]>,
+    ) -> Result<RoiMasks> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        check_len("an sRGB frame", rgb.len(), 3 * w * h, camera)?;
+        if let Some(d) = depth_m {
+            check_len("a depth image", d.len(), w * h, camera)?;
+        }
+        let roi = self.roi(camera);
+        let s = DEFAULT_INPUT_PX;
+        let size = roi.size as usize;
+        let input = resample(&planar_rgb_crop(rgb, w, h, &roi), 3, size, size, s, s);
+        let depth = depth_m.map(|d| roi.sample_nearest(d, w, h, s));
+        let roi_camera = roi.camera(camera, s as u32)?;
+        let mut masks = self.segment_planar(&roi_camera, &input, depth.as_deref())?;
+        masks.depth_m = depth;
+        Ok(RoiMasks {
+            roi,
+            masks,
+            camera: roi_camera,
+        })
+    }
+
+    /// The network's masks of a region already cut out at [`DEFAULT_INPUT_PX`]: `planar`
+    /// sRGB values scaled to [0, 1], `3 x side x side`, and the region's depth image.
+    fn segment_planar(
+        &mut self,
+        roi_camera: &Camera,
+        planar: &[f32],
+        depth_m: Option<&[f32]>,
+    ) -> Result<ArmMasks> {
+        let net = self.net.as_mut().ok_or_else(|| PerceptionError::Input {
+            message: "this tracker has no network; give it masks with track_masks".into(),
+        })?;
+        let s = DEFAULT_INPUT_PX;
+        let input = workcell_procnet::data::input_frame(planar, depth_m, s, s, net.config())?;
+        let planar = &*input;
+        // A stream's first frame is a new view too.
+        if self.last_fx.is_none() || view_jump(self.last_fx, roi_camera.fx) {
+            net.start_view(planar, s, s)?;
+        }
+        self.last_fx = Some(roi_camera.fx);
+        let planes = net.planes(planar, s, s)?;
+        let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
+        ArmMasks::from_planes(s, s, &refs)
+    }
+
+    /// One frame already read through the region of interest the tracker asked for
+    /// ([`ArmTracker::roi`]): what a camera that crops on the sensor, or a renderer that
+    /// draws only that region, delivers. `rgb` is interleaved sRGB bytes of `roi_camera`
+    /// (the camera that sees exactly the region at [`DEFAULT_INPUT_PX`] pixels a side,
+    /// [`Roi::camera`]), `depth_m` its depth image.
+    ///
+    /// # Errors
+    /// No network, a camera not [`DEFAULT_INPUT_PX`] square, images of the wrong size, a
+    /// network failure.
+    pub fn track_region(
+        &mut self,
+        roi_camera: &Camera,
+        rgb: &[u8],
+        depth_m: Option<&[f32]>,
+    ) -> Result<ArmOutcome> {
+        let s = DEFAULT_INPUT_PX;
+        if (roi_camera.width as usize, roi_camera.height as usize) != (s, s) {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "a region's camera of {}x{}, not the {s}x{s} the tracker reads",
+                    roi_camera.width, roi_camera.height
+                ),
+            });
+        }
+        check_len("an sRGB frame", rgb.len(), 3 * s * s, roi_camera)?;
+        if let Some(d) = depth_m {
+            check_len("a depth image", d.len(), s * s, roi_camera)?;
+        }
+        let planar = planar_rgb(rgb, s, s);
+        let mut masks = self.segment_planar(roi_camera, &planar, depth_m)?;
+        masks.depth_m = depth_m.map(<[f32]>::to_vec);
+        self.track_roi(roi_camera, &masks)
+    }
+
+    /// One frame: interleaved sRGB bytes (`width * height * 3`, row-major from the top left)
+    /// from `camera`, whose pose in the world is known, and optionally the depth camera's
+    /// image registered to it (camera-frame z, m, `width * height`; 0 where it has none).
+    ///
+    /// # Errors
+    /// As [`ArmTracker::segment`]; a depth image of the wrong size.
+    pub fn track(
+        &mut self,
+        camera: &Camera,
+        rgb: &[u8],
+        depth_m: Option<&[f32]>,
+    ) -> Result<ArmOutcome> {
+        let RoiMasks {
+            camera: roi_camera,
+            masks,
+            ..
+        } = self.segment(camera, rgb, depth_m)?;
+        self.track_roi(&roi_camera, &masks)
+    }
+
+    /// One frame given as masks at the camera's resolution (a perfect segmenter's, or
+    /// another network's), read through the region of interest as [`ArmTracker::track`]
+    /// reads a frame: every plane resampled to [`DEFAULT_INPUT_PX`] (the depth sampled at
+    /// each pixel's centre, [`Roi::sample_nearest`]).
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] for masks that are not the camera's size; renderer failures.
+    pub fn track_masks(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmOutcome> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        if (masks.width, masks.height) != (w, h) {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "masks of {}x{} for the {w}x{h} camera",
+                    masks.width, masks.height
+                ),
+            });
+        }
+        let roi = self.roi(camera);
+        let s = DEFAULT_INPUT_PX;
+        let crop = |plane: &[f32]| -> Result<Vec<f32>> {
+            check_len("a mask", plane.len(), w * h, camera)?;
+            Ok(roi.resample(plane, 1, w, h, s))
+        };
+        let cropped = ArmMasks {
+            width: s,
+            height: s,
+            parts: [
+                crop(&masks.parts[0])?,
+                crop(&masks.parts[1])?,
+                crop(&masks.parts[2])?,
+            ],
+            background: crop(&masks.background)?,
+            depth_m: match masks.depth_m.as_deref() {
+                Some(d) => {
+                    check_len("a depth image", d.len(), w * h, camera)?;
+                    Some(roi.sample_nearest(d, w, h, s))
+                }
+                None => None,
+            },
+        };
+        self.track_roi(&roi.camera(camera, s as u32)?, &cropped)
+    }
+
+    /// A frame the camera did not deliver: no estimate. The track is kept; the next frame
+    /// predicts from it.
+    pub fn no_frame(&mut self) -> ArmOutcome {
+        Err(NoEstimate::NoFrame)
+    }
+
+    /// One frame given as masks already in the region of interest's camera (what
+    /// [`ArmTracker::segment`] returns, with the depth there if there is one).
+    ///
+    /// # Errors
+    /// As [`ArmFitter::fit`].
+    pub fn track_roi(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<ArmOutcome> {
+        let fit = match self.fitter.fit(camera, masks)? {
+            Ok(fit) => fit,
+            Err(reason) => {
+                if self.streak >= CONFIRM_POSES && self.held < HOLD_REGION {
+                    self.held += 1;
+                } else {
+                    self.joints_W = None;
+                    self.streak = 0;
+                    self.held = 0;
+                }
+                return Ok(Err(NoEstimate::NoPose(reason)));
+            }
+        };
+        let X_WL = self.fitter.arm().part_poses(&fit.q, &Pose::IDENTITY)?;
+        let parts: Vec<PartCapsule> = FITTED_PARTS
+            .iter()
+            .zip(&self.capsules)
+            .zip(&X_WL)
+            .filter_map(|((&part, capsule), X)| {
+                let c = capsule.as_ref()?;
+                let (a_W, b_W) = c.segment_in_world(X);
+                Some(PartCapsule {
+                    part,
+                    a_W,
+                    b_W,
+                    radius_m: c.radius_m,
+                })
+            })
+            .collect();
+        let wrist =
+            parts
+                .iter()
+                .find(|p| p.part == HumanPart::Forearm)
+                .map_or(X_WL[2].translation, |p| {
+                    // The capsule's end away from the elbow.
+                    let e = X_WL[1].translation;
+                    if (p.a_W - e).length() > (p.b_W - e).length() {
+                        p.a_W
+                    } else {
+                        p.b_W
+                    }
+                });
+        self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist]);
+        self.streak += 1;
+        self.held = 0;
+        Ok(Ok(ArmEstimate {
+            parts,
+            uncertainty_m: fit.uncertainty_m,
+            X_WF: X_WL[1],
+            fit,
+        }))
+    }
+}
+
+/// A frame or mask of `len` values where the camera needs `expected`.
+fn check_len(what: &str, len: usize, expected: usize, camera: &Camera) -> Result<()> {
+    if len == expected {
+        return Ok(());
+    }
+    Err(PerceptionError::Input {
+        message: format!(
+            "expected {what} of {} values for the {}x{} camera, got {len}",
+            expected, camera.width, camera.height
+        ),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use workcell_render::RenderMesh;
+    use workcell_render::Renderer as _;
+    use workcell_robots::math::pose_from_xyz_rpy;
+
+    /// The built-in human in its default (flesh) look.
+    fn human() -> RobotModel {
+        let mut human = RobotModel::from_catalogue("human_arm").expect("catalogue human");
+        human.retain_visuals(|g| workcell_robots::HumanLook::Flesh.shows(g.name.as_deref()));
+        human
+    }
+
+    /// A camera looking at the shoulder of a human at `X_WH` from `offset` away.
+    fn camera_at(arm: &ArmModel, offset: Vector, size: [u32; 2], fov_deg: f64) -> Camera {
+        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
+        Camera::look_at(
+            (shoulder + offset).to_array(),
+            (shoulder - Vector::new(0.0, 0.0, 0.2)).to_array(),
+            [0.0, 0.0, 1.0],
+            size[0],
+            size[1],
+            fov_deg,
+        )
+        .expect("camera")
+    }
+
+    /// What a perfect segmenter and a depth camera give of `human`'s arm at `q`: the three
+    /// parts rendered together (z-buffered) as masks, with the depth image.
+    fn observe(human: &RobotModel, tracker: &ArmTracker, camera: &Camera, q: &[f64]) -> ArmMasks {
+        let arm = tracker.articulated();
+        let poses = arm.part_poses(q, &Pose::IDENTITY).expect("poses");
+        let mut scene = workcell_render::Scene::default();
+        for (p, part) in FITTED_PARTS.into_iter().enumerate() {
+            let mut mesh = RenderMesh::default();
+            for g in &human.links()[arm.part_links()[p]].visuals {
+                mesh.append(
+                    &RenderMesh::from_geometry(g, [0.8, 0.7, 0.6]),
+                    &Pose::IDENTITY,
+                );
+            }
+            scene.push(workcell_render::SceneObject {
+                name: part.name().into(),
+                class: Class::of_part(part),
+                mesh: Arc::new(mesh),
+                texture: 0.0,
+                X_WO: poses[p],
+            });
+        }
+        let mut frame = workcell_render::Frame::new();
+        CpuRenderer::new()
+            .render(&scene, camera, &mut frame)
+            .expect("render");
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let mut masks = ArmMasks::from_classes(&frame.classes(&scene), w, h).expect("masks");
+        masks.depth_m = Some(frame.depth_m.clone());
+        masks
+    }
+
+    /// Bad input is an error (a frame or masks of the wrong size) or no estimate with its
+    /// reason (nothing seen, values that are not probabilities, no frame); never a panic.
+    #[test]
+    fn bad_input_is_an_error_or_no_estimate_with_its_reason() {
+        let human = human();
+        let mut tracker =
+            ArmTracker::new(&human, &Pose::IDENTITY, ArmFitConfig::default()).expect("tracker");
+        let camera = camera_at(tracker.arm(), Vector::new(3.0, 0.0, 0.0), [64, 48], 50.0);
+        let err = tracker.track(&camera, &[0; 10], None).unwrap_err();
+        assert!(
+            err.to_string().contains("9216 values for the 64x48"),
+            "{err}"
+        );
+        let err = tracker
+            .track(&camera, &vec![0; 64 * 48 * 3], None)
+            .unwrap_err();
+        assert!(err.to_string().contains("no network"), "{err}");
+        let err = tracker
+            .track(&camera, &vec![0; 64 * 48 * 3], Some(&[1.0; 5]))
+            .unwrap_err();
+        assert!(err.to_string().contains("a depth image of 3072"), "{err}");
+        // A fully hidden arm: empty masks.
+        let empty = ArmMasks::from_classes(&vec![0; 64 * 48], 64, 48).expect("masks");
+        let outcome = tracker.track_masks(&camera, &empty).expect("no error");
+        assert_eq!(outcome, Err(NoEstimate::NoPose(NoPose::Empty)));
+        // NaN from a network.
+        let mut nan = empty.clone();
+        nan.parts[1][64 * 24 + 32] = f32::NAN;
+        let outcome = tracker.track_masks(&camera, &nan).expect("no error");
+        assert_eq!(outcome, Err(NoEstimate::NoPose(NoPose::NotAProbability)));
+        // Masks of another size.
+        let small = ArmMasks::from_classes(&[0; 12], 4, 3).expect("masks");
+        let err = tracker.track_masks(&camera, &small).unwrap_err();
+        assert!(err.to_string().contains("4x3 for the 64x48"), "{err}");
+        assert_eq!(tracker.no_frame(), Err(NoEstimate::NoFrame));
+    }
+
+    /// Blobs of every arm class scattered over the frame, where no arm could put its parts,
+    /// are no pose: the fit explains too little of them.
+    #[test]
+    fn scattered_blobs_no_arm_explains_are_no_estimate() {
+        let human = human();
+        let mut tracker =
+            ArmTracker::new(&human, &Pose::IDENTITY, ArmFitConfig::default()).expect("tracker");
+        let camera = camera_at(tracker.arm(), Vector::new(3.0, 0.0, 0.0), [160, 120], 50.0);
+        let (w, h) = (160, 120);
+        let mut classes = vec![0u8; w * h];
+        let parts = [Class::UpperArm, Class::Forearm, Class::Hand];
+        for k in 0..12 {
+            let (cx, cy) = ((k * 53) % w, (k * 37 + 11) % h);
+            for y in cy.saturating_sub(2)..(cy + 2).min(h) {
+                for x in cx.saturating_sub(2)..(cx + 2).min(w) {
+                    classes[y * w + x] = parts[k % 3] as u8;
+                }
+            }
+        }
+        let masks = ArmMasks::from_classes(&classes, w, h).expect("masks");
+        let outcome = tracker.track_masks(&camera, &masks).expect("no error");
+        assert_eq!(outcome, Err(NoEstimate::NoPose(NoPose::PoorFit)));
+    }
+
+    /// The loop's conventions end to end: masks and depth of the arm at a configuration,
+    /// through the region of interest, back as each part's collision capsule in the world
+    /// where the model puts it at that configuration; the region then follows the arm and a
+    /// lost track falls back to the workspace.
+    #[test]
+    fn the_tracker_finds_each_part_where_the_model_puts_it() {
+        let human = human();
+        let X_WH = pose_from_xyz_rpy([0.9, -0.3, 0.0], [0.0, 0.0, 0.7]);
+        let mut tracker = ArmTracker::new(&human, &X_WH, ArmFitConfig::default()).expect("tracker");
+        let arm = tracker.arm().clone();
+        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
+        let reach = arm.reach_m().expect("reach");
+        let camera = camera_at(&arm, Vector::new(1.6, 1.7, 0.3), [640, 480], 55.0);
+        let workspace = Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).unwrap();
+        assert_eq!(tracker.roi(&camera), workspace);
+        let q = [0.5, 0.9, 1.1];
+        let masks = observe(&human, &tracker, &camera, &q);
+        tracker
+            .track_masks(&camera, &masks)
+            .expect("track")
+            .expect("an estimate");
+        // One pose is not yet a track to follow.
+        assert_eq!(tracker.region(&camera), (workspace, RoiKind::Workspace));
+        assert_eq!(CONFIRM_POSES, 2);
+        let estimate = tracker
+            .track_masks(&camera, &masks)
+            .expect("track")
+            .expect("an estimate");
+        let k = human.fk(X_WH, &q).expect("fk");
+        let order: Vec<HumanPart> = estimate.parts.iter().map(|p| p.part).collect();
+        assert_eq!(order, HumanPart::ARM);
+        for p in &estimate.parts {
+            let link = human.link_id(p.part.link_name()).expect("link");
+            let c = link_bounding_capsule(&human, link).expect("capsule");
+            assert!((p.radius_m - c.radius_m).abs() < 1e-15, "{p:?}");
+            let (a, b) = c.segment_in_world(k.link_pose(link));
+            // 2.4 m away, RGB-D through a 128x128 region: within 3 cm.
+            for (x, y) in [(p.a_W, a), (p.b_W, b)] {
+                assert!((x - y).length() < 0.03, "{p:?}: {x} vs {y}");
+            }
+        }
+        assert!(estimate.uncertainty_m > 0.0 && estimate.uncertainty_m.is_finite());
+        // The region now holds the arm's joints and is smaller than the workspace's.
+        let (tracked, kind) = tracker.region(&camera);
+        assert_eq!(kind, RoiKind::Tracked);
+        assert!(tracked.size < workspace.size, "{tracked:?}");
+        let [u, v] = camera
+            .project(camera.X_WC.inverse() * estimate.X_WF.translation)
+            .expect("in front");
+        let inside = |x: f64, x0: i64| x >= x0 as f64 && x <= (x0 + i64::from(tracked.size)) as f64;
+        assert!(inside(u, tracked.x0) && inside(v, tracked.y0));
+        // A frame without a pose keeps the region for HOLD_REGION frames; a track lost for
+        // longer falls back to the workspace.
+        let empty = ArmMasks::from_classes(&vec![0; 640 * 480], 640, 480).expect("masks");
+        assert_eq!(HOLD_REGION, 1);
+        let mut lose = || {
+            tracker
+                .track_masks(&camera, &empty)
+                .expect("no error")
+                .expect_err("no arm in empty masks");
+            tracker.region(&camera)
+        };
+        assert_eq!(lose(), (tracked, RoiKind::Tracked));
+        assert_eq!(lose(), (workspace, RoiKind::Workspace));
+    }
+
+    /// A tracker of the built-in human at the origin with the shipped network.
+    fn shipped_tracker() -> ArmTracker {
+        let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../procnet/weights/procnet-cpu.safetensors");
+        let net =
+            ProcNet::load(&weights, workcell_procnet::Backend::Flex).expect("shipped weights");
+        ArmTracker::new(&human(), &Pose::IDENTITY, ArmFitConfig::default())
+            .expect("tracker")
+            .with_network(net)
+            .expect("forearm class")
+    }
+
+    /// A network reads the frame's region of interest at [`DEFAULT_INPUT_PX`]: the shipped
+    /// weights on a 640x480 frame see the reach sphere's square, and its masks come back with
+    /// that square's camera.
+    #[test]
+    fn the_network_reads_the_region_of_interest() {
+        let mut tracker = shipped_tracker();
+        let camera = camera_at(tracker.arm(), Vector::new(2.5, 0.5, 0.2), [640, 480], 45.0);
+        let roi = tracker.roi(&camera);
+        let out = tracker
+            .segment(&camera, &vec![90; 640 * 480 * 3], None)
+            .expect("segmented");
+        assert_eq!(out.roi, roi);
+        let s = DEFAULT_INPUT_PX;
+        assert_eq!(out.camera, roi.camera(&camera, s as u32).expect("camera"));
+        assert_eq!((out.masks.width, out.masks.height), (s, s));
+        for plane in out.masks.parts.iter().chain([&out.masks.background]) {
+            assert_eq!(plane.len(), s * s);
+            assert!(plane.iter().all(|v| (0.0..=1.0).contains(v)));
+        }
+    }
+
+    /// A region already cut out ([`ArmTracker::track_region`]): the network keeps its memory
+    /// while the region keeps its scale, and starts afresh, with VIEW_READS reads of the new
+    /// view, on the stream's first frame and when the scale jumps (the workspace crop to the
+    /// tracked one and back).
+    #[test]
+    fn a_region_of_another_scale_starts_the_network_afresh() {
+        let mut tracker = shipped_tracker();
+        let camera = camera_at(tracker.arm(), Vector::new(2.5, 0.5, 0.2), [640, 480], 45.0);
+        let s = DEFAULT_INPUT_PX;
+        let wide = Roi::square([320.0, 240.0], 400.0)
+            .camera(&camera, s as u32)
+            .expect("camera");
+        let near = Roi::square([320.0, 240.0], 380.0)
+            .camera(&camera, s as u32)
+            .expect("camera");
+        let zoomed = Roi::square([300.0, 220.0], 200.0)
+            .camera(&camera, s as u32)
+            .expect("camera");
+        let rgb = vec![90u8; 3 * s * s];
+        let frames = |t: &ArmTracker| t.network().map(ProcNet::frames);
+        let r = workcell_procnet::VIEW_READS;
+        assert_eq!(r, 3);
+        for (camera, expected) in [
+            (&wide, r + 1),
+            (&near, r + 2),
+            (&zoomed, r + 1),
+            (&zoomed, r + 2),
+            (&wide, r + 1),
+        ] {
+            let outcome = tracker.track_region(camera, &rgb, None).expect("tracked");
+            assert!(outcome.is_err(), "a grey frame shows no arm");
+            assert_eq!(frames(&tracker), Some(expected), "{camera:?}");
+        }
+        // Images of another size than the region's camera are refused.
+        assert!(tracker.track_region(&wide, &rgb[3..], None).is_err());
+        assert!(tracker.track_region(&wide, &rgb, Some(&[1.0; 5])).is_err());
+        assert!(tracker.track_region(&camera, &rgb, None).is_err());
+        assert!(!view_jump(None, 100.0));
+        assert!(!view_jump(Some(100.0), 124.0) && !view_jump(Some(124.0), 100.0));
+        assert!(view_jump(Some(100.0), 126.0) && view_jump(Some(126.0), 100.0));
+    }
+}

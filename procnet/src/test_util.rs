@@ -1,0 +1,20 @@
+//! Fixtures shared by the crate's unit tests.
+
+use workcell_render::dataset::{SequenceEntry, Split};
+
+/// The catalogue entry of a one-frame test sequence of the paper's short camera.
+pub fn one_frame_entry(occlusion_level: &str, mean_forearm_occlusion: f64) -> SequenceEntry {
+    SequenceEntry {
+        index: 0,
+        dir: "seq_00000".into(),
+        seed: 1,
+        attempts: 1,
+        distance_class: "short".into(),
+        occlusion_level: occlusion_level.into(),
+        source: "paper".into(),
+        split: Split::Test,
+        frames: 1,
+        mean_forearm_occlusion: Some(mean_forearm_occlusion),
+        frames_without_forearm: 0,
+    }
+}

@@ -1,0 +1,587 @@
+//! ProcNet in the closed loop: the cell's camera renders a frame at its rate (with its depth
+//! image when the camera measures depth, with a black disc over the forearm when the
+//! evaluation asks for artificial occlusion), an [`ArmTracker`] segments every arm part and
+//! fits the human model's joints to the masks, and the arm's parts are where the fitted
+//! joints put them, carried forward by the joints' velocity over the estimate's age. A frame
+//! without a pose delivers nothing: the last estimate ages (its uncertainty grows); without
+//! one, or once it is older than [`MAX_AGE_S`], the filter sees no human and brakes.
+
+use std::collections::VecDeque;
+
+use workcell_perception::pose::{ArmFitConfig, ArmMasks, Calibration};
+use workcell_perception::{ArmTracker, NoEstimate};
+use workcell_procnet::{Backend, ProcNet};
+use workcell_safety::{HumanEstimate, HumanGeometry};
+use workcell_sim::render::occlusion::{OCCLUDER_DEPTH_M, Occluder, OccluderKind, fit_occluder};
+use workcell_sim::render::{Camera, Class, CpuRenderer, Frame, Renderer};
+use workcell_sim::{CellModel, CellScene, Scenario};
+
+use super::{HumanPerception, MaskKind, PerceptionConfig, PerceptionInput};
+use crate::error::{Error, Result};
+use crate::robots::KinematicState;
+
+/// An estimate older than this is dropped, s: the filter then brakes (about ten frames at
+/// 30 Hz; by then the aged bound has grown by 0.45 m at the default 10 m/s^2).
+pub const MAX_AGE_S: f64 = 0.3;
+
+/// One measurement: the fitted joints and the pose uncertainty.
+#[derive(Debug, Clone)]
+struct Measured {
+    q: Vec<f64>,
+    uncertainty_m: f64,
+}
+
+/// Frames measured, and why those without an estimate had none.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct FrameCounts {
+    pub frames: usize,
+    pub estimates: usize,
+    pub no_pose: usize,
+    pub no_frame: usize,
+    pub errors: usize,
+}
+
+/// The cell's camera rendered and handed to an [`ArmTracker`], as a [`HumanPerception`]:
+/// this wiring adds the camera's rate, its latency, the artificial occluder, and the joints'
+/// velocities from successive frames.
+pub struct ProcNetCamera {
+    config: PerceptionConfig,
+    tracker: ArmTracker,
+    camera: Camera,
+    scene: CellScene,
+    renderer: CpuRenderer,
+    frame: Frame,
+    next_frame_s: f64,
+    in_flight: VecDeque<(f64, Option<Measured>)>,
+    /// The newest delivered measurement, its exposure time, and the one before (velocity).
+    latest: Option<(f64, Measured)>,
+    previous: Option<(f64, Measured)>,
+    geometry: HumanGeometry,
+    kinematics: KinematicState,
+    q: Vec<f64>,
+    qd: Vec<f64>,
+    counts: FrameCounts,
+}
+
+impl ProcNetCamera {
+    /// The perception of `config` for the cell `model` built from `scenario`: its camera
+    /// named `config.camera` (the first when empty), the weights at `config.weights`.
+    ///
+    /// # Errors
+    /// The scenario has no such camera, the weights do not load, the human has no arm.
+    pub fn new(config: &PerceptionConfig, scenario: &Scenario, model: &CellModel) -> Result<Self> {
+        let camera_config = scenario
+            .cameras
+            .iter()
+            .find(|c| config.camera.is_empty() || c.name == config.camera)
+            .ok_or_else(|| {
+                Error::config(
+                    "perception.camera",
+                    format!(
+                        "the cell has no camera named {:?} (it has {:?})",
+                        config.camera,
+                        scenario.cameras.iter().map(|c| &c.name).collect::<Vec<_>>()
+                    ),
+                )
+            })?;
+        let camera = camera_config
+            .camera()
+            .map_err(workcell_sim::SimError::from)?;
+        let net = if config.masks == MaskKind::Network {
+            let weights = config.weights_path();
+            let net = ProcNet::load(&weights, Backend::Flex).map_err(|e| Error::At {
+                key: "perception.weights".into(),
+                source: Box::new(e.into()),
+            })?;
+            if net.config().reads_depth() && !config.depth {
+                return Err(Error::config(
+                    "perception.depth",
+                    format!(
+                        "{} is a network that reads depth: the camera must measure it \
+                         (perception.depth = true)",
+                        weights.display()
+                    ),
+                ));
+            }
+            Some(net)
+        } else {
+            None
+        };
+        // The bound: the network's calibration file (or the conservative bound where its
+        // weights have none), true masks' own; the policy of `eval pose`.
+        let measured =
+            match &net {
+                Some(_) => {
+                    let found = Calibration::of_weights(&config.weights_path(), config.depth)
+                        .map_err(|e| Error::At {
+                            key: "perception.weights".into(),
+                            source: Box::new(e.into()),
+                        })?;
+                    if let Some(w) = found.warning() {
+                        tracing::warn!("{w}");
+                    }
+                    found.calibration
+                }
+                None => Calibration::true_masks(config.depth),
+            };
+        let fit = Calibration {
+            scale: if config.uncertainty_scale >= 0.0 {
+                config.uncertainty_scale
+            } else {
+                measured.scale
+            },
+            floor_m: if config.uncertainty_floor_m >= 0.0 {
+                config.uncertainty_floor_m
+            } else {
+                measured.floor_m
+            },
+            ..measured
+        }
+        .apply(ArmFitConfig::default());
+        let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
+        if let Some(net) = net {
+            tracker = tracker.with_network(net)?;
+        }
+        let mut kinematics = KinematicState::new(&model.human);
+        kinematics.X_WB = model.X_WH;
+        Ok(Self {
+            config: PerceptionConfig {
+                rate_hz: camera_config.rate_hz,
+                ..config.clone()
+            },
+            tracker,
+            camera,
+            scene: CellScene::new(model),
+            renderer: CpuRenderer::new(),
+            frame: Frame::new(),
+            next_frame_s: 0.0,
+            in_flight: VecDeque::new(),
+            latest: None,
+            previous: None,
+            geometry: HumanGeometry::new(&model.human)?,
+            kinematics,
+            q: vec![0.0; model.human.dof()],
+            qd: vec![0.0; model.human.dof()],
+            counts: FrameCounts::default(),
+        })
+    }
+
+    /// Frames measured so far, and why some had no estimate.
+    #[must_use]
+    pub fn counts(&self) -> &FrameCounts {
+        &self.counts
+    }
+
+    /// Renders and tracks one frame.
+    fn measure(&mut self, input: &PerceptionInput<'_>) -> Result<Option<Measured>> {
+        self.counts.frames += 1;
+        if self.config.camera_fails_at_s >= 0.0 && input.t_s >= self.config.camera_fails_at_s {
+            let reason = self.tracker.no_frame();
+            self.counts.no_frame += 1;
+            tracing::debug!("procnet perception at {:.3} s: {reason:?}", input.t_s);
+            return Ok(None);
+        }
+        self.scene.update(input.state);
+        self.renderer
+            .render(&self.scene.scene, &self.camera, &mut self.frame)
+            .map_err(workcell_sim::SimError::from)?;
+        // The class image: for the occluder and the perfect segmenter only.
+        let network = self.tracker.network().is_some();
+        let mut classes = if self.config.occlusion > 0.0 || !network {
+            self.frame.classes(&self.scene.scene)
+        } else {
+            Vec::new()
+        };
+        if self.config.occlusion > 0.0 {
+            self.occlude(&mut classes);
+        }
+        let depth = self.config.depth.then_some(self.frame.depth_m.as_slice());
+        let outcome = if network {
+            self.tracker.track(&self.camera, &self.frame.rgb, depth)?
+        } else {
+            // The perfect segmenter: each part's pixels in the frame.
+            let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+            let mut masks = ArmMasks::from_classes(&classes, w, h)?;
+            masks.depth_m = depth.map(<[f32]>::to_vec);
+            self.tracker.track_masks(&self.camera, &masks)?
+        };
+        Ok(match outcome {
+            Ok(estimate) => {
+                self.counts.estimates += 1;
+                Some(Measured {
+                    q: estimate.fit.q,
+                    uncertainty_m: estimate.uncertainty_m,
+                })
+            }
+            Err(reason) => {
+                self.counts.no_pose += 1;
+                if reason == NoEstimate::NoFrame {
+                    self.counts.no_frame += 1;
+                }
+                tracing::debug!("procnet perception at {:.3} s: {reason}", input.t_s);
+                None
+            }
+        })
+    }
+
+    /// A black disc over the forearm's pixels, sized so that it hides the configured
+    /// fraction of them: black in the frame, at [`OCCLUDER_DEPTH_M`] in its depth image,
+    /// background in `classes` (what is seen).
+    fn occlude(&mut self, classes: &mut [u8]) {
+        let w = self.camera.width;
+        let forearm: Vec<u8> = classes
+            .iter()
+            .map(|&c| u8::from(c == Class::Forearm as u8))
+            .collect();
+        let (mut n, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for (p, _) in forearm.iter().enumerate().filter(|(_, v)| **v != 0) {
+            n += 1.0;
+            sx += (p % w as usize) as f64 + 0.5;
+            sy += (p / w as usize) as f64 + 0.5;
+        }
+        if n == 0.0 {
+            return;
+        }
+        let disc = Occluder {
+            kind: OccluderKind::Blob,
+            centre_px: [sx / n, sy / n],
+            size_px: [1.0, 1.0],
+            angle_rad: 0.0,
+        };
+        let shown: Vec<bool> = forearm.iter().map(|&v| v != 0).collect();
+        let max_scale = f64::from(w + self.camera.height);
+        let (occluder, _) =
+            fit_occluder(&disc, self.config.occlusion, max_scale, w, &forearm, &shown);
+        let mask = occluder.mask(w, self.camera.height);
+        for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m != 0) {
+            self.frame.rgb[3 * p..3 * p + 3].fill(0);
+            self.frame.depth_m[p] = OCCLUDER_DEPTH_M;
+            classes[p] = Class::Background as u8;
+        }
+    }
+}
+
+impl HumanPerception for ProcNetCamera {
+    fn name(&self) -> String {
+        self.config.describe()
+    }
+
+    fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
+        let t = input.t_s;
+        if t + 1e-9 >= self.next_frame_s {
+            self.next_frame_s += 1.0 / self.config.rate_hz;
+            // A failure of the renderer or the network is a frame without a pose.
+            let measured = self.measure(input).unwrap_or_else(|e| {
+                self.counts.errors += 1;
+                tracing::warn!("procnet perception: {e:#}");
+                None
+            });
+            self.in_flight.push_back((t, measured));
+        }
+        while self
+            .in_flight
+            .front()
+            .is_some_and(|(t0, _)| t0 + self.config.latency_s <= t + 1e-9)
+        {
+            if let Some((t0, Some(m))) = self.in_flight.pop_front() {
+                self.previous = self.latest.replace((t0, m));
+            }
+        }
+        out.parts.clear();
+        out.uncertainty_m = 0.0;
+        out.uncertainty_rate_m_s = 0.0;
+        let Some((t0, m)) = &self.latest else {
+            return; // nothing yet: the filter brakes
+        };
+        let age = (t - t0).max(0.0);
+        if age > MAX_AGE_S {
+            return; // too old to trust: the filter brakes
+        }
+        // The joints' velocity from the last two measurements, when they are close enough
+        // in time to be one movement (zero otherwise).
+        self.qd.iter_mut().for_each(|v| *v = 0.0);
+        if let Some((t1, p)) = &self.previous {
+            let dt = t0 - t1;
+            if dt > 1e-6 && dt <= MAX_AGE_S {
+                for ((v, a), b) in self.qd.iter_mut().zip(&m.q).zip(&p.q) {
+                    *v = (a - b) / dt;
+                }
+            }
+        }
+        for ((q, q0), v) in self.q.iter_mut().zip(&m.q).zip(&self.qd) {
+            *q = q0 + v * age;
+        }
+        if input
+            .model
+            .human
+            .forward_kinematics(&self.q, &mut self.kinematics)
+            .is_err()
+        {
+            return;
+        }
+        self.geometry
+            .estimate_into(&input.model.human, &self.kinematics, &self.qd, out);
+        out.uncertainty_m = self.config.aged_uncertainty(m.uncertainty_m, 0.0, age);
+        out.uncertainty_rate_m_s = 0.0;
+    }
+}
+
+/// One frame of [`bench_tracker`]: milliseconds per stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameTiming {
+    /// The simulator's camera (not perception's work).
+    pub render_ms: f64,
+    /// The region of interest resampled and segmented by the network.
+    pub network_ms: f64,
+    /// The articulated fit.
+    pub fit_ms: f64,
+    /// The fit searched globally (first frame, lost track).
+    pub reacquired: bool,
+    /// The frame gave an estimate.
+    pub estimate: bool,
+}
+
+/// Times perception on `frames` frames of the cell's camera at its rate, from the start of
+/// episode `seed` of `evaluation` with the robot on its nominal path: the network (its
+/// weights, `perception.weights`) and the articulated fit, with the depth image when
+/// `perception.depth` is set, one thread each as in the loop.
+///
+/// # Errors
+/// The cell, its camera or the weights do not load; the simulator fails.
+pub fn bench_tracker(
+    evaluation: &crate::evaluate::Evaluation,
+    seed: u64,
+    frames: usize,
+    mut progress: impl FnMut(usize),
+) -> Result<Vec<FrameTiming>> {
+    use std::time::Instant;
+    let c = &evaluation.config.perception;
+    let mut scenario = evaluation.scenario.clone();
+    scenario.seed = seed;
+    let model = CellModel::new(&scenario, &evaluation.scenario_path)?;
+    let config = PerceptionConfig {
+        masks: MaskKind::Network,
+        ..c.clone()
+    };
+    let mut camera = ProcNetCamera::new(&config, &scenario, &model)?;
+    let mut state = workcell_sim::CellState::new(&model)?;
+    let dt = model.time_step_s();
+    let period = 1.0 / camera.config.rate_hz;
+    let mut out = Vec::with_capacity(frames);
+    let mut t = 0.0;
+    for k in 0..frames {
+        while t + 1e-9 < k as f64 * period {
+            workcell_sim::step(&model, &mut state, &workcell_sim::RobotCommand::Nominal)?;
+            t += dt;
+        }
+        let t0 = Instant::now();
+        camera.scene.update(&state);
+        camera
+            .renderer
+            .render(&camera.scene.scene, &camera.camera, &mut camera.frame)
+            .map_err(workcell_sim::SimError::from)?;
+        let t1 = Instant::now();
+        let depth = config.depth.then_some(camera.frame.depth_m.as_slice());
+        let roi = camera
+            .tracker
+            .segment(&camera.camera, &camera.frame.rgb, depth)?;
+        let t2 = Instant::now();
+        let outcome = camera.tracker.track_roi(&roi.camera, &roi.masks)?;
+        let t3 = Instant::now();
+        let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+        out.push(FrameTiming {
+            render_ms: ms(t0, t1),
+            network_ms: ms(t1, t2),
+            fit_ms: ms(t2, t3),
+            reacquired: outcome.as_ref().is_ok_and(|e| e.fit.reacquired),
+            estimate: outcome.is_ok(),
+        });
+        progress(k + 1);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use workcell_safety::HumanPart;
+    use workcell_sim::{CellState, RobotCommand, step};
+
+    fn cell() -> (Scenario, CellModel) {
+        let path =
+            std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/configs/default.toml"));
+        let scenario = Scenario::from_file(path).expect("scenario");
+        let model = CellModel::new(&scenario, path).expect("cell");
+        (scenario, model)
+    }
+
+    /// One control tick: the cell stepped by `dt`, then `perception`'s estimate at the new
+    /// time into `out` (`truth` is what the loop would pass as the true human).
+    fn tick(
+        model: &CellModel,
+        state: &mut CellState,
+        perception: &mut ProcNetCamera,
+        t: &mut f64,
+        truth: &HumanEstimate,
+        out: &mut HumanEstimate,
+    ) {
+        step(model, state, &RobotCommand::Nominal).expect("step");
+        *t += model.time_step_s();
+        let input = PerceptionInput {
+            t_s: *t,
+            model,
+            state,
+            truth,
+        };
+        perception.estimate(&input, out);
+    }
+
+    fn perfect_masks() -> PerceptionConfig {
+        PerceptionConfig {
+            kind: super::super::super::PerceptionKind::Procnet,
+            masks: MaskKind::GroundTruth,
+            depth: true,
+            ..PerceptionConfig::default()
+        }
+    }
+
+    /// The loop's conventions end to end: the cell's camera, every arm part's pixels in its
+    /// frame, the tracker with the cell's human model, and the arm back in the world where
+    /// the simulated human holds it, delivered after the camera's latency.
+    #[test]
+    fn the_cell_camera_finds_the_arm_it_renders() {
+        let (scenario, model) = cell();
+        let mut state = CellState::new(&model).expect("state");
+        let config = perfect_masks();
+        let mut perception = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
+        let mut geometry = HumanGeometry::new(&model.human).expect("geometry");
+        let mut kinematics = KinematicState::new(&model.human);
+        kinematics.X_WB = model.X_WH;
+        let (mut out, mut truth) = (HumanEstimate::default(), HumanEstimate::default());
+        let mut t = 0.0;
+        let (mut checked, mut ticks) = (0, 0);
+        // Four seconds: the human reaches in (up to about 0.5 m/s at the wrist) after two.
+        while t < 4.0 {
+            ticks += 1;
+            tick(
+                &model,
+                &mut state,
+                &mut perception,
+                &mut t,
+                &truth,
+                &mut out,
+            );
+            model
+                .human
+                .forward_kinematics(state.human_q(), &mut kinematics)
+                .expect("fk");
+            geometry.estimate_into(&model.human, &kinematics, state.human_qd(), &mut truth);
+            if t < config.latency_s {
+                assert!(
+                    out.parts.is_empty(),
+                    "an estimate before the first frame arrived"
+                );
+            }
+            // Every tenth tick's estimate against the truth then.
+            if ticks % 10 == 0 && t > 0.5 && !out.parts.is_empty() {
+                checked += 1;
+                let forearm = |e: &HumanEstimate| {
+                    e.parts
+                        .iter()
+                        .find(|p| p.part == HumanPart::Forearm)
+                        .map(|p| p.capsule)
+                        .expect("a forearm")
+                };
+                let (e, x) = (forearm(&out), forearm(&truth));
+                // 2.3 m away, RGB-D at 128x128; the estimate is 50 ms old and carried forward
+                // by the joints' velocity: within 8 cm.
+                let err = (e.a_W - x.a_W).length().max((e.b_W - x.b_W).length());
+                assert!(err < 0.08, "forearm {err} m off at {t} s");
+                assert!(out.uncertainty_m > 0.0 && out.uncertainty_m < 0.5);
+            }
+        }
+        assert!(checked > 320, "{checked} ticks checked");
+        let counts = perception.counts();
+        assert!(counts.frames >= 119 && counts.estimates + counts.no_pose == counts.frames);
+    }
+
+    /// A camera that stops delivering frames: the estimate ages out after `MAX_AGE_S` and
+    /// the filter then sees nobody (and brakes).
+    #[test]
+    fn a_failed_camera_leaves_no_estimate_after_the_maximum_age() {
+        let (scenario, model) = cell();
+        let mut state = CellState::new(&model).expect("state");
+        let config = PerceptionConfig {
+            camera_fails_at_s: 0.5,
+            ..perfect_masks()
+        };
+        let mut perception = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
+        let truth = HumanEstimate::default();
+        let mut out = HumanEstimate::default();
+        let dt = model.time_step_s();
+        let (mut t, mut last_seen) = (0.0, 0.0);
+        while t < 1.2 {
+            tick(
+                &model,
+                &mut state,
+                &mut perception,
+                &mut t,
+                &truth,
+                &mut out,
+            );
+            if !out.parts.is_empty() {
+                last_seen = t;
+            }
+        }
+        // The last frame before the failure was exposed before 0.5 s and arrived 50 ms
+        // later; its estimate is dropped once older than MAX_AGE_S.
+        assert!(
+            last_seen > 0.5 && last_seen <= 0.5 + MAX_AGE_S + dt,
+            "last seen at {last_seen} s"
+        );
+        assert!(perception.counts().no_frame >= 20);
+    }
+
+    /// The artificial occluder hides the configured share of the forearm's pixels,
+    /// blackens them in the frame and puts its own depth in the depth image there.
+    #[test]
+    fn the_occluder_hides_its_share_of_the_forearm() {
+        let (scenario, model) = cell();
+        let config = PerceptionConfig {
+            occlusion: 0.7,
+            ..perfect_masks()
+        };
+        let mut perception = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
+        let state = CellState::new(&model).expect("state");
+        perception.scene.update(&state);
+        perception
+            .renderer
+            .render(
+                &perception.scene.scene,
+                &perception.camera,
+                &mut perception.frame,
+            )
+            .expect("render");
+        let mut classes = perception.frame.classes(&perception.scene.scene);
+        let forearm = |c: &[u8]| c.iter().filter(|&&v| v == Class::Forearm as u8).count();
+        let before = forearm(&classes);
+        assert!(before > 50, "{before} forearm pixels");
+        perception.occlude(&mut classes);
+        let hidden = 1.0 - forearm(&classes) as f64 / before as f64;
+        // Within one step of the disc's size of the target.
+        assert!((hidden - 0.7).abs() < 0.1, "{hidden}");
+        let black = classes
+            .iter()
+            .enumerate()
+            .filter(|(p, _)| perception.frame.rgb[3 * p..3 * p + 3] == [0, 0, 0])
+            .count();
+        assert!(black >= before - forearm(&classes));
+        let at_occluder = perception
+            .frame
+            .depth_m
+            .iter()
+            .filter(|&&z| z == OCCLUDER_DEPTH_M)
+            .count();
+        assert!(at_occluder >= before - forearm(&classes), "{at_occluder}");
+    }
+}
