@@ -51,8 +51,11 @@ for m in gt procnet; do
   same "eval pose --masks $m: per-frame CSV" "$C/old_pose_$m/pose_frames.csv" "$C/new_pose_$m/pose_frames.csv" csv_no_timing
   same "eval pose --masks $m: tables" "$C/old_pose_$m/pose_eval.md" "$C/new_pose_$m/pose_eval.md" no_timing
 done
-(cd "$OLD_DIR" && "$OLD" eval segmentation --weights perception/weights/procnet-cpu.safetensors --dataset "$C/old_dataset" --split test > "$C/old_seg.md" 2>/dev/null)
-(cd "$NEW_DIR" && "$NEW" eval segmentation --weights perception/weights/procnet-cpu.safetensors --dataset "$C/new_dataset" --split test > "$C/new_seg.md" 2>/dev/null)
+# The shipped weights' folder of each checkout (perception/weights before the network had a
+# crate of its own, procnet/weights since).
+weights_of() { if [ -d "$1/procnet/weights" ]; then echo procnet/weights; else echo perception/weights; fi; }
+(cd "$OLD_DIR" && "$OLD" eval segmentation --weights "$(weights_of "$OLD_DIR")/procnet-cpu.safetensors" --dataset "$C/old_dataset" --split test > "$C/old_seg.md" 2>/dev/null)
+(cd "$NEW_DIR" && "$NEW" eval segmentation --weights "$(weights_of "$NEW_DIR")/procnet-cpu.safetensors" --dataset "$C/new_dataset" --split test > "$C/new_seg.md" 2>/dev/null)
 same "eval segmentation" "$C/old_seg.md" "$C/new_seg.md" no_timing
 OUT_ARG=(--out @)
 for p in procnet pose-gt-masks; do

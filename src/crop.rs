@@ -20,7 +20,7 @@ use workcell_render::dataset::HumanLabel;
 use workcell_render::roi::{Roi, RoiKind};
 use workcell_robots::RobotModel;
 use workcell_robots::math::Pose;
-use workcell_sim::dataset::{CropFactory, CropPolicy, GeneratedFrame};
+use workcell_sim::dataset::{CropFactory, CropPolicy, GeneratedFrame, PolicyError};
 
 use crate::Result;
 
@@ -81,7 +81,7 @@ impl TrackerCrop {
         Ok(Arc::new(move || {
             Self::new(&human, &X_WH, &weights, counts.clone())
                 .map(|p| Box::new(p) as Box<dyn CropPolicy>)
-                .map_err(|e| e.to_string())
+                .map_err(PolicyError::from)
         }))
     }
 }
@@ -102,13 +102,12 @@ impl CropPolicy for TrackerCrop {
     /// The frame as the dataset stores it: its depth in whole millimetres, as the stored
     /// 16-bit image gives it back, so that an evaluation of the stored frames reads what the
     /// tracker read.
-    fn seen(&mut self, frame: &GeneratedFrame) -> std::result::Result<(), String> {
+    fn seen(&mut self, frame: &GeneratedFrame) -> std::result::Result<(), PolicyError> {
         let camera = Camera::from(&frame.labels.camera);
         let depth: Vec<f32> = frame.depth_m.iter().map(|&d| stored_depth_m(d)).collect();
         let outcome = self
             .tracker
-            .track_region(&camera, &frame.rgb, Some(&depth))
-            .map_err(|e| e.to_string())?;
+            .track_region(&camera, &frame.rgb, Some(&depth))?;
         self.counts.frames.fetch_add(1, Ordering::Relaxed);
         if outcome.is_ok() {
             self.counts.posed.fetch_add(1, Ordering::Relaxed);

@@ -542,6 +542,10 @@ pub struct Evaluation {
     pub frames: Vec<FrameRecord>,
     /// Layer 0's prediction of the frames (none without the prediction loss).
     pub frame_prediction: Option<FramePrediction>,
+    /// The order of the tables' rows: the dataset's camera classes and occlusion levels as
+    /// its configuration lists them ([`Dataset::label_order`]); names not in them come
+    /// last, alphabetically.
+    pub order: (Vec<String>, Vec<String>),
 }
 
 /// How light the visible forearm is in a frame: the mean luma of its pixels in the input
@@ -617,12 +621,10 @@ fn luma_where(planar: &[f32], n: usize, keep: impl Fn(usize) -> bool) -> Option<
     (count > 0).then(|| sum / count as f64)
 }
 
-/// Order of the dataset's distance classes and occlusion levels in tables (others last).
-fn rank(order: &[&str], name: &str) -> usize {
-    order.iter().position(|n| *n == name).unwrap_or(order.len())
+/// A name's place among a table's rows: its index in `order`, names not in it after.
+fn rank(order: &[String], name: &str) -> usize {
+    order.iter().position(|n| n == name).unwrap_or(order.len())
 }
-const DISTANCES: [&str; 3] = ["short", "medium", "large"];
-const LEVELS: [&str; 3] = ["light", "medium", "heavy"];
 
 /// Reads a `[1, c]` tensor.
 fn row(t: Tensor<2>) -> Vec<f32> {
@@ -666,6 +668,7 @@ pub fn evaluate(
         classes: config.classes.clone(),
         split: split.name().to_string(),
         sequences: entries.len(),
+        order: dataset.label_order(),
         ..Evaluation::default()
     };
     let c = map.len();
@@ -902,12 +905,15 @@ impl Evaluation {
             return md;
         };
         let mut groups: Vec<(String, &Scores)> = vec![("all".into(), o)];
+        let (distances, levels) = &self.order;
+        // The maps iterate alphabetically, and the sorts are stable: names outside the
+        // order stay alphabetical after it.
         let mut dist: Vec<_> = self.by_distance.iter().collect();
-        dist.sort_by_key(|(k, _)| rank(&DISTANCES, k));
+        dist.sort_by_key(|(k, _)| rank(distances, k));
         let mut occ: Vec<_> = self.by_occlusion.iter().collect();
-        occ.sort_by_key(|(k, _)| rank(&LEVELS, k));
+        occ.sort_by_key(|(k, _)| rank(levels, k));
         let mut pairs: Vec<_> = self.by_pair.iter().collect();
-        pairs.sort_by_key(|((d, o), _)| (rank(&DISTANCES, d), rank(&LEVELS, o)));
+        pairs.sort_by_key(|((d, o), _)| (rank(distances, d), rank(levels, o)));
         groups.extend(dist.iter().map(|(k, s)| {
             // A camera of the cell is named as such, the paper's classes as distances.
             let name = if k.ends_with(" camera") {

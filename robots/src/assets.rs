@@ -85,6 +85,7 @@ impl UrdfAssets {
             let element = owner_name(&node);
             let resolved = packages
                 .resolve(&uri, urdf_dir)
+                .map_err(|e| e.to_string())
                 .and_then(|p| {
                     if p.is_file() {
                         Ok(p)

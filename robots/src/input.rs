@@ -210,7 +210,10 @@ fn check_nesting(text: &[u8]) -> Result<(), String> {
 ///
 /// # Errors
 /// A message naming the element and its count.
-pub fn check_collada_counts(doc: &roxmltree::Document<'_>, len: usize) -> Result<(), String> {
+pub(crate) fn check_collada_counts(
+    doc: &roxmltree::Document<'_>,
+    len: usize,
+) -> Result<(), String> {
     let budget = (len / 2 + 1) as u128;
     for node in doc.descendants().filter(roxmltree::Node::is_element) {
         let Some(count) = node.attribute("count") else {

@@ -41,7 +41,7 @@ pub use catalogue::{
 pub use error::{Result, RobotError};
 pub use human::{HumanLook, HumanPart};
 pub use kinematics::{Jacobian, KinematicState};
-pub use mesh::{DECODER_CRATES, TriMesh, gltf_buffer_files, gltf_buffer_path};
+pub use mesh::{DECODER_CRATES, MeshError, TriMesh, gltf_buffer_files, gltf_buffer_path};
 pub use model::{
     Coordinate, Geometry, Inertial, Joint, JointId, JointKind, JointLimits, Link, LinkId,
     RobotModel, SafetyController, Shape,

@@ -13,6 +13,24 @@ use crate::math::Vector;
 /// validator lives in gltf-json).
 pub const DECODER_CRATES: [&str; 3] = ["mesh-loader-", "gltf-json-", "gltf-1."];
 
+/// Why a mesh, or a file it names, was not loaded; the message names the file and what is
+/// wrong, never its bytes.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum MeshError {
+    /// The file cannot be read: missing, not a regular file, or larger than allowed.
+    #[error("{0}")]
+    Read(String),
+    /// The bytes are not a mesh of the file's format (truncated, malformed, counts that lie,
+    /// indices past the vertices), or the mesh is degenerate (no triangle, a non-finite
+    /// vertex).
+    #[error("{0}")]
+    Decode(String),
+    /// A file the mesh names (a glTF buffer) lies where the mesh may not reach.
+    #[error("{0}")]
+    Refused(String),
+}
+
 /// An indexed triangle mesh in the mesh's own frame, in metres (scale applied).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TriMesh {
@@ -27,18 +45,23 @@ impl TriMesh {
     /// face that indexes past the vertices is an error.
     ///
     /// # Errors
-    /// A message saying what is wrong with the file.
-    pub fn load(path: &Path, scale: [f64; 3]) -> Result<Self, String> {
+    /// [`MeshError::Read`] when the file cannot be read (missing, not a regular file, larger
+    /// than [`crate::input::MAX_MESH_BYTES`]), else as [`TriMesh::from_bytes`].
+    pub fn load(path: &Path, scale: [f64; 3]) -> Result<Self, MeshError> {
         let bytes = crate::input::read_regular_file(path, crate::input::MAX_MESH_BYTES)
-            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+            .map_err(|e| MeshError::Read(format!("cannot read {}: {e}", path.display())))?;
         Self::from_bytes(&bytes, path, scale)
     }
 
     /// Like [`TriMesh::load`] on bytes already read; `path` only tells the format.
     ///
     /// # Errors
-    /// A message saying what is wrong with the bytes.
-    pub fn from_bytes(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, String> {
+    /// [`MeshError::Decode`], saying what is wrong with the bytes.
+    pub fn from_bytes(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, MeshError> {
+        Self::decode(bytes, path, scale).map_err(MeshError::Decode)
+    }
+
+    fn decode(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Self, String> {
         if is_gltf(path) {
             return gltf_mesh(bytes, path, scale);
         }
@@ -204,9 +227,9 @@ pub fn gltf_buffer_files(bytes: &[u8], path: &Path) -> Vec<String> {
 /// symbolic links that lead out of the folder are refused.
 ///
 /// # Errors
-/// A message naming the URI and why it is refused (never the bytes of any file).
-pub fn gltf_buffer_path(gltf_path: &Path, uri: &str) -> Result<std::path::PathBuf, String> {
-    let refused = |why: &str| format!("buffer {uri:?} {why}");
+/// [`MeshError::Refused`], naming the URI and why (never the bytes of any file).
+pub fn gltf_buffer_path(gltf_path: &Path, uri: &str) -> Result<std::path::PathBuf, MeshError> {
+    let refused = |why: &str| MeshError::Refused(format!("buffer {uri:?} {why}"));
     if uri.contains("://") || uri.starts_with("data:") {
         return Err(refused("uses a URI scheme other than data:"));
     }
@@ -274,7 +297,7 @@ fn gltf_mesh_unguarded(bytes: &[u8], path: &Path, scale: [f64; 3]) -> Result<Tri
                         .decode(data)
                         .map_err(|e| bad(format!("a data URI: {e}")))?
                 } else {
-                    let file = gltf_buffer_path(path, uri).map_err(bad)?;
+                    let file = gltf_buffer_path(path, uri).map_err(|e| bad(e.to_string()))?;
                     crate::input::read_regular_file(&file, crate::input::MAX_MESH_BYTES)
                         .map_err(|e| bad(format!("buffer {}: {e}", file.display())))?
                 }

@@ -11,6 +11,11 @@ use std::path::{Component, Path, PathBuf};
 /// Environment variables read by [`PackageMap::from_env`]: lists of folders separated by `:`.
 pub const PACKAGE_PATH_VARS: [&str; 2] = ["WORKCELL_PACKAGE_PATH", "ROS_PACKAGE_PATH"];
 
+/// Why a mesh URI did not resolve to a file: the message names the URI and the reason.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct ResolveError(String);
+
 /// Where packages live. See the [module docs](self).
 #[derive(Debug, Clone, Default)]
 pub struct PackageMap {
@@ -62,8 +67,13 @@ impl PackageMap {
     /// Resolves `uri`, as written in a URDF found in folder `urdf_dir`, to a file path.
     ///
     /// # Errors
-    /// A message saying why: unknown package, a path escaping its root, an unsupported scheme.
-    pub fn resolve(&self, uri: &str, urdf_dir: &Path) -> Result<PathBuf, String> {
+    /// [`ResolveError`], saying why: unknown package, a path escaping its root, an
+    /// unsupported scheme.
+    pub fn resolve(&self, uri: &str, urdf_dir: &Path) -> Result<PathBuf, ResolveError> {
+        self.resolve_inner(uri, urdf_dir).map_err(ResolveError)
+    }
+
+    fn resolve_inner(&self, uri: &str, urdf_dir: &Path) -> Result<PathBuf, String> {
         if let Some(rest) = uri.strip_prefix("package://") {
             // `package:///name/...` appears in exported files; the extra slash means nothing.
             let rest = rest.trim_start_matches('/');
@@ -238,14 +248,14 @@ mod tests {
         let err = map
             .resolve("package://my_robot/../../../etc/passwd", &urdf_dir)
             .expect_err("escape");
-        assert!(err.contains("escapes"), "{err}");
+        assert!(err.to_string().contains("escapes"), "{err}");
         // Relative paths may climb inside the package but not out of it.
         let ok = map.resolve("../meshes/a.stl", &urdf_dir).expect("inside");
         assert!(ok.is_file());
         let err = map
             .resolve("../../../x.stl", &urdf_dir)
             .expect_err("escape");
-        assert!(err.contains("escapes"), "{err}");
+        assert!(err.to_string().contains("escapes"), "{err}");
     }
 
     #[cfg(unix)]
@@ -260,7 +270,7 @@ mod tests {
         let err = PackageMap::new()
             .resolve("package://my_robot/meshes/link.stl", &urdf_dir)
             .expect_err("symlink escape");
-        assert!(err.contains("outside"), "{err}");
+        assert!(err.to_string().contains("outside"), "{err}");
     }
 
     #[test]
@@ -278,7 +288,10 @@ mod tests {
         }
         for uri in ["/etc/hostname", "file:///etc/hostname", "/dev/zero"] {
             let err = map.resolve(uri, &urdf_dir).expect_err("outside");
-            assert!(err.contains("outside every known package root"), "{err}");
+            assert!(
+                err.to_string().contains("outside every known package root"),
+                "{err}"
+            );
         }
         // `..` in an absolute path may not climb out either.
         let climb = format!("{}/../../../../etc/hostname", pkg.display());
@@ -303,7 +316,7 @@ mod tests {
         let err = PackageMap::new()
             .resolve("package://share/my_robot/meshes/a.stl", &urdf_dir)
             .expect_err("not a package");
-        assert!(err.contains("not found"), "{err}");
+        assert!(err.to_string().contains("not found"), "{err}");
     }
 
     #[test]
@@ -313,11 +326,13 @@ mod tests {
         assert!(
             map.resolve("package://nope/a.stl", dir.path())
                 .unwrap_err()
+                .to_string()
                 .contains("not found")
         );
         assert!(
             map.resolve("http://x/a.stl", dir.path())
                 .unwrap_err()
+                .to_string()
                 .contains("scheme")
         );
         assert!(map.resolve("package://nope", dir.path()).is_err());

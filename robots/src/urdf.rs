@@ -686,17 +686,17 @@ impl Builder<'_> {
                 let path = self
                     .packages
                     .resolve(filename, self.urdf_dir)
-                    .map_err(mesh_error)?;
+                    .map_err(|e| mesh_error(e.to_string()))?;
                 let key = (path.clone(), scale.map(f64::to_bits));
                 let mesh = match self.meshes.get(&key) {
                     Some(mesh) => mesh.clone(),
                     None => {
-                        let mesh = Arc::new(TriMesh::load(&path, scale).map_err(|message| {
+                        let mesh = Arc::new(TriMesh::load(&path, scale).map_err(|e| {
                             RobotError::Mesh {
                                 path: self.path.to_path_buf(),
                                 element: element.to_string(),
                                 uri: filename.clone(),
-                                message,
+                                message: e.to_string(),
                             }
                         })?);
                         self.meshes.insert(key, mesh.clone());

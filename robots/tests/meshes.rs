@@ -151,7 +151,10 @@ fn lying_counts_and_odd_names_are_told_apart() {
         let text = dae.replace(honest, lie);
         let err = TriMesh::from_bytes(text.as_bytes(), Path::new("cube.dae"), [1.0; 3])
             .expect_err("lying count");
-        assert!(err.contains("claims more values than the"), "{lie}: {err}");
+        assert!(
+            err.to_string().contains("claims more values than the"),
+            "{lie}: {err}"
+        );
     }
     // An ASCII STL whose name is not ASCII is decoded as ASCII, not called a truncated
     // binary file.
@@ -171,7 +174,7 @@ fn deeply_nested_collada_is_an_error_not_a_stack_overflow() {
     );
     let err =
         TriMesh::from_bytes(dae.as_bytes(), Path::new("deep.dae"), [1.0; 3]).expect_err("too deep");
-    assert!(err.contains("deeper than 256 levels"), "{err}");
+    assert!(err.to_string().contains("deeper than 256 levels"), "{err}");
 }
 
 /// `cube.glb` is the project's own writer's output for `cube.obj` (rewrite it with
@@ -261,7 +264,7 @@ fn gltf_scene_graph_places_the_mesh() {
     let broken = |doc: serde_json::Value, expected: &str| {
         let err = TriMesh::from_bytes(doc.to_string().as_bytes(), Path::new("b.gltf"), [1.0; 3])
             .expect_err(expected);
-        assert!(err.contains(expected), "{expected}: {err}");
+        assert!(err.to_string().contains(expected), "{expected}: {err}");
     };
     let mut short = doc.clone();
     short["buffers"][0]["byteLength"] = serde_json::json!(bin.len() + 4);
@@ -373,14 +376,14 @@ fn gltf_buffers_stay_inside_the_gltf_folder() {
         "",
     ] {
         let err = load(uri).expect_err(uri);
-        assert!(err.contains("buffer"), "{uri}: {err}");
-        assert!(!err.contains(&secret_index), "{uri}: {err}");
+        assert!(err.to_string().contains("buffer"), "{uri}: {err}");
+        assert!(!err.to_string().contains(&secret_index), "{uri}: {err}");
     }
     #[cfg(unix)]
     {
         std::os::unix::fs::symlink(&secret_path, meshes.join("link.bin")).expect("symlink");
         let err = load("link.bin").expect_err("a link out of the folder");
-        assert!(err.contains("resolves outside"), "{err}");
+        assert!(err.to_string().contains("resolves outside"), "{err}");
     }
     // A FIFO beside the .gltf is refused before it is opened (a read would block).
     #[cfg(unix)]
@@ -389,7 +392,7 @@ fn gltf_buffers_stay_inside_the_gltf_folder() {
         let made = std::process::Command::new("mkfifo").arg(&fifo).status();
         if made.is_ok_and(|s| s.success()) {
             let err = load("fifo.bin").expect_err("a FIFO");
-            assert!(err.contains("not a regular file"), "{err}");
+            assert!(err.to_string().contains("not a regular file"), "{err}");
         }
     }
     // Inside the folder, in a subfolder too, it loads.
@@ -399,8 +402,11 @@ fn gltf_buffers_stay_inside_the_gltf_folder() {
     // An index past the vertices names its position, not its value (the file's bytes).
     std::fs::write(meshes.join("sub/bad.bin"), &secret).expect("bin");
     let err = load("sub/bad.bin").expect_err("indices past the vertices");
-    assert!(err.contains("index number 0 points past"), "{err}");
-    assert!(!err.contains(&secret_index), "{err}");
+    assert!(
+        err.to_string().contains("index number 0 points past"),
+        "{err}"
+    );
+    assert!(!err.to_string().contains(&secret_index), "{err}");
 }
 
 /// glTF nodes form trees. A 2.5 kB file whose nodes each list the next two as children has
@@ -433,7 +439,7 @@ fn gltf_nodes_shared_by_two_parents_are_refused() {
     // Each node is visited at most once, so the refusal comes after at most 64 visits.
     let err = TriMesh::from_bytes(text.as_bytes(), Path::new("dag.gltf"), [1.0; 3])
         .expect_err("a node with two parents");
-    assert!(err.contains("reached twice"), "{err}");
+    assert!(err.to_string().contains("reached twice"), "{err}");
     // The same node twice among the scene's roots.
     doc["nodes"] = serde_json::json!([{"mesh": 0}]);
     doc["scenes"] = serde_json::json!([{"nodes": [0, 0]}]);
@@ -443,11 +449,37 @@ fn gltf_nodes_shared_by_two_parents_are_refused() {
         [1.0; 3],
     )
     .expect_err("a root listed twice");
-    assert!(err.contains("reached twice"), "{err}");
+    assert!(err.to_string().contains("reached twice"), "{err}");
     // A tree of the same nodes loads: each node once, each with its own triangle.
     doc["scenes"] = serde_json::json!([{"nodes": [0]}]);
     doc["nodes"] = serde_json::json!([{"mesh": 0, "children": [1, 2]}, {"mesh": 0}, {"mesh": 0}]);
     let mesh = TriMesh::from_bytes(doc.to_string().as_bytes(), Path::new("tree.gltf"), [1.0; 3])
         .expect("a tree");
     assert_eq!(mesh.triangles.len(), 3);
+}
+
+/// The kind of a mesh error says what to fix: the file (unreadable), its bytes (not a mesh),
+/// or a file it names (out of reach).
+#[test]
+fn mesh_errors_say_which_kind_of_problem() {
+    use workcell_robots::{MeshError, gltf_buffer_path};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let missing = dir.path().join("missing.stl");
+    assert!(matches!(
+        TriMesh::load(&missing, [1.0; 3]),
+        Err(MeshError::Read(m)) if m.contains("missing.stl")
+    ));
+    assert!(matches!(
+        TriMesh::from_bytes(b"solid nothing", Path::new("x.stl"), [1.0; 3]),
+        Err(MeshError::Decode(_))
+    ));
+    let gltf = dir.path().join("a.gltf");
+    assert!(matches!(
+        gltf_buffer_path(&gltf, "../secret.bin"),
+        Err(MeshError::Refused(m)) if m.contains("../secret.bin")
+    ));
+    assert_eq!(
+        gltf_buffer_path(&gltf, "sub/a.bin").expect("inside"),
+        dir.path().join("sub/a.bin")
+    );
 }

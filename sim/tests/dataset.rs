@@ -91,6 +91,20 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
     let cell = pairs.iter().filter(|p| p.0 == "camera:front").count();
     assert_eq!(cell, 3, "{pairs:?}");
     assert_eq!(dataset.entries(Some(Split::Train)).count(), 12);
+    // The tables' row order is the configuration's, the cell's camera after the paper's
+    // classes, whatever they are named.
+    assert_eq!(
+        dataset.label_order(),
+        (
+            vec![
+                "short".to_string(),
+                "medium".into(),
+                "large".into(),
+                "front camera".into()
+            ],
+            vec!["light".to_string(), "medium".into(), "heavy".into()]
+        )
+    );
     // Three sequences to an episode.
     let seeds: Vec<u64> = m.sequences.iter().map(|s| s.seed).collect();
     assert!(seeds[0] == seeds[2] && seeds[2] != seeds[3], "{seeds:?}");
@@ -343,7 +357,7 @@ impl CropPolicy for Scripted {
         self.chosen.push(roi);
         (roi, kind)
     }
-    fn seen(&mut self, frame: &GeneratedFrame) -> Result<(), String> {
+    fn seen(&mut self, frame: &GeneratedFrame) -> Result<(), workcell_sim::dataset::PolicyError> {
         let label = frame.labels.roi.as_ref().ok_or("no region label")?;
         self.seen.push((frame.labels.frame, label.roi, label.kind));
         self.frame += 1;
@@ -383,7 +397,10 @@ fn a_crop_policy_chooses_each_frames_region_and_sees_the_frames_in_order() {
     let policy = |alternate: bool| {
         let tx = std::sync::Mutex::new(tx.clone());
         std::sync::Arc::new(move || {
-            let tx = tx.lock().map_err(|e| e.to_string())?.clone();
+            let tx = tx
+                .lock()
+                .map_err(|e| workcell_sim::dataset::PolicyError::from(e.to_string()))?
+                .clone();
             Ok(Box::new(Scripted {
                 alternate,
                 frame: 0,

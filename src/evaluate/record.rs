@@ -153,7 +153,7 @@ impl RunRecord {
     ///
     /// # Errors
     /// A message naming the field (`metrics[i] (episode e).key`) and what is wrong with it.
-    pub fn check(&self) -> std::result::Result<(), String> {
+    pub(crate) fn check(&self) -> std::result::Result<(), String> {
         let s = &self.settings;
         if s.shards == 0 || self.shard == 0 || self.shard > s.shards {
             return Err(format!(

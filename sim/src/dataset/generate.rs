@@ -125,12 +125,16 @@ pub trait CropPolicy: Send {
     /// The frame rendered through that region, as it is stored.
     ///
     /// # Errors
-    /// The policy's own failure, as a message.
-    fn seen(&mut self, frame: &GeneratedFrame) -> std::result::Result<(), String>;
+    /// The policy's own failure (the generator reports it with the sequence and frame).
+    fn seen(&mut self, frame: &GeneratedFrame) -> std::result::Result<(), PolicyError>;
 }
 
+/// A crop policy's own error: whatever its implementation fails with.
+pub type PolicyError = Box<dyn std::error::Error + Send + Sync>;
+
 /// Makes a fresh [`CropPolicy`] for each sequence.
-pub type CropFactory = dyn Fn() -> std::result::Result<Box<dyn CropPolicy>, String> + Send + Sync;
+pub type CropFactory =
+    dyn Fn() -> std::result::Result<Box<dyn CropPolicy>, PolicyError> + Send + Sync;
 
 /// A crop policy's factory and the line that names it in the dataset's `config.toml`.
 #[derive(Clone)]

@@ -6,6 +6,7 @@ mod generate;
 
 pub use config::{DatasetConfig, DistanceClass, OcclusionLevel, RoiConfig};
 pub use generate::{
-    CropFactory, CropPolicy, GeneratedFrame, GeneratedSequence, Generator, Report, Timing,
+    CropFactory, CropPolicy, GeneratedFrame, GeneratedSequence, Generator, PolicyError, Report,
+    Timing,
 };
 pub use workcell_render::dataset::*;

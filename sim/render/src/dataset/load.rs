@@ -175,6 +175,25 @@ impl Dataset {
             .filter(move |e| split.is_none_or(|s| e.split == s))
     }
 
+    /// The dataset's camera classes ([`SequenceEntry::camera_class`]) and occlusion levels in
+    /// the order its configuration lists them (the generator writes the sequences pair by
+    /// pair in that order, so it is their order of first appearance in the manifest): the
+    /// order of every table's rows, whatever the classes and levels are named.
+    #[must_use]
+    pub fn label_order(&self) -> (Vec<String>, Vec<String>) {
+        let (mut classes, mut levels) = (Vec::<String>::new(), Vec::<String>::new());
+        for e in &self.manifest.sequences {
+            let class = e.camera_class();
+            if !classes.contains(&class) {
+                classes.push(class);
+            }
+            if !levels.contains(&e.occlusion_level) {
+                levels.push(e.occlusion_level.clone());
+            }
+        }
+        (classes, levels)
+    }
+
     /// Loads the sequences of `split` one after another.
     pub fn sequences(&self, split: Option<Split>) -> impl Iterator<Item = Result<Sequence>> + '_ {
         self.entries(split).map(|e| self.load(e))
