@@ -67,7 +67,7 @@ pub struct FilterConfig {
     /// retreat), the filter takes the command that protects the closest pair most (farther
     /// pairs give way first) if it breaks the closest pair's row by at most this much, m/s
     /// ([`FilterStatus::Relaxed`]); beyond, it brakes. Default 3: the best retreat the
-    /// joints allow keeps more distance than stopping in the hand's path (docs/safety.md:
+    /// joints allow keeps more distance than stopping in the hand's path (experiments/safety.md:
     /// 1,000 episodes with the brake at 1 m/s and without it). A relaxation far beyond a
     /// human's speed means the inputs are wrong, and the filter stops.
     pub max_relaxation_m_s: f64,
@@ -96,7 +96,7 @@ pub struct FilterConfig {
     /// there; a resting part costs nothing. The rows of the part where it is now stay as
     /// they are. QP only: speed and separation monitoring counts the human's travel in its
     /// protective separation distance already. 0 turns it off; at most
-    /// [`MAX_HORIZON_S`]. Default 0.15, the evaluated filter's (docs/safety.md,
+    /// [`MAX_HORIZON_S`]. Default 0.15, the evaluated filter's (experiments/safety.md,
     /// "Anticipation": over 1,000 seeds with the noisy camera, none below d_min against 1 at
     /// 0).
     pub anticipation_s: f64,

@@ -35,7 +35,7 @@ pub enum YieldMotion {
     /// until the seen distance is above `yield_resume_m`. Over 1,000 seeds (0.1 s, 0.2 m,
     /// beside an earlier re-timing) it left 2 episodes below d_min instead of 6, but 10
     /// went beyond a body region's transient contact speed on the way back to the path
-    /// (the hand approached at up to 1.93 m/s against 1.35; docs/safety.md).
+    /// (the hand approached at up to 1.93 m/s against 1.35; experiments/safety.md).
     Retreat,
 }
 
@@ -65,7 +65,7 @@ pub struct ControllerConfig {
     /// `d_min` plus this (on the inflated estimate, m) and the filter relaxed none of its
     /// rows; `inf`: only while no part is within the filter's detection distance. 0.3 (0.4 m
     /// at the default `d_min` of 0.1 m) with `catch_up_speed = 1.75`: over 100 seeds the task
-    /// time falls from 1.169 to 1.100 of unfiltered with yielding on (docs/safety.md,
+    /// time falls from 1.169 to 1.100 of unfiltered with yielding on (experiments/safety.md,
     /// "Throughput"). A margin beyond `d_min`, so that no `d_min` makes it catch up inside it.
     pub catch_up_margin_m: f64,
     /// Yielding: when the task has been held off its path near the human (tracking rate
@@ -73,7 +73,7 @@ pub struct ControllerConfig {
     /// the robot stops pulling toward its path; `inf` never. Pulling presses the arm against
     /// the barrier, where it slides along the inflated estimate into corners between the
     /// human and the furniture, and a hand that then comes on even at 0.5 m/s cannot be
-    /// escaped (docs/safety.md, "Where the last four come from"). 0.5 beside
+    /// escaped (experiments/safety.md, "Where the last four come from"). 0.5 beside
     /// `catch_up_margin_m = 0.3`: 1 of 1,000 episodes below d_min, task time 1.102.
     pub yield_after_s: f64,
     /// The robot resumes its task once the filter's seen distance is above this, m.
@@ -244,7 +244,7 @@ impl TaskController {
     /// servo's acceleration limit held the reference back (a sudden evasion), and the servo
     /// then caught up at up to `sqrt(2 a e)` beyond anything the filter commanded: the
     /// forearm and hand limits of power and force limiting were exceeded that way in 5 of
-    /// 1,000 episodes (docs/safety.md, "Peak approach per body region").
+    /// 1,000 episodes (experiments/safety.md, "Peak approach per body region").
     pub fn bound_command_lead(&self, q_cmd: &mut [f64], reference_q: &[f64]) {
         let e_max = self.config.command_lead_rad;
         for (q, r) in q_cmd.iter_mut().zip(reference_q) {
@@ -371,5 +371,43 @@ impl TaskController {
         for g in &mut self.qdot_nom {
             *g *= scale;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The library's default is the controller `configs/evaluate.toml` was measured with (the
+    /// file writes it out), and `plan_only` turns re-timing and yielding off.
+    #[test]
+    fn the_default_is_the_evaluated_controller() {
+        let text = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate.toml"),
+        )
+        .expect("configs/evaluate.toml");
+        let file: toml::Table = toml::from_str(&text).expect("toml");
+        let written: ControllerConfig = file["controller"].clone().try_into().expect("table");
+        assert_eq!(written, ControllerConfig::default());
+        assert!(ControllerConfig::default().validate().is_ok());
+        let plan = ControllerConfig::plan_only();
+        assert!(plan.validate().is_ok());
+        assert_eq!(
+            (
+                plan.catch_up_speed,
+                plan.catch_up_margin_m,
+                plan.yield_after_s
+            ),
+            (1.0, f64::INFINITY, f64::INFINITY)
+        );
+        let bad = ControllerConfig {
+            catch_up_margin_m: -0.1,
+            ..ControllerConfig::default()
+        };
+        let err = bad.validate().expect_err("a negative margin");
+        assert!(
+            err.to_string().contains("controller.catch_up_margin_m"),
+            "{err}"
+        );
     }
 }

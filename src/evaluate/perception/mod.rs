@@ -159,7 +159,7 @@ impl PerceptionConfig {
     /// rows would have to outrun. A lost frame lets it grow; its rate is not reported
     /// (`uncertainty_rate_m_s` stays 0): told to the filter, the 1.2 m/s on top of the
     /// human's 2 m/s made the rows infeasible often enough to slow the task to 1.7 times the
-    /// unfiltered one, with more violations, not fewer (docs/safety.md).
+    /// unfiltered one, with more violations, not fewer (experiments/safety.md).
     #[must_use]
     pub fn aged_uncertainty(&self, base_m: f64, drift_m_s: f64, age_s: f64) -> f64 {
         let age = self.held_age_s(age_s);
