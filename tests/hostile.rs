@@ -104,6 +104,15 @@ fn counts_beyond_their_limits_are_refused_by_the_parser() {
             ],
             "perception.camera_fails_at_s",
         ),
+        (
+            vec![
+                "evaluate",
+                "configs/evaluate.toml",
+                "--set",
+                "perception.uncertainty_floor_m=-1",
+            ],
+            "perception.uncertainty_floor_m: out of range: -1 (>= 0; leave the key out",
+        ),
     ] {
         refused(&args, needle);
     }

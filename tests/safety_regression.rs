@@ -528,7 +528,7 @@ fn a_camera_that_fails_mid_episode_stops_the_robot_without_a_violation() {
     let mut evaluation = Evaluation::from_file(&scenarios().join("shared_space_noisy.toml"))
         .expect("scenario loads");
     let fails_at = 4.0;
-    evaluation.config.perception.camera_fails_at_s = fails_at;
+    evaluation.config.perception.camera_fails_at_s = Some(fails_at);
     for seed in 1..=3 {
         let (metrics, trace) = run_qp(&evaluation, seed);
         assert_eq!(metrics.violations, 0, "seed {seed}: {metrics:?}");

@@ -63,19 +63,23 @@ pub struct PerceptionConfig {
     /// occlusion). Default 0.
     pub occlusion: f64,
     /// For `procnet`: the factor on the fit's curvature uncertainty
-    /// (`ArmFitConfig::uncertainty_scale`); negative takes the one calibrated for the masks
-    /// and depth chosen (the calibration file beside the weights,
-    /// `workcell_perception::pose::Calibration::of_weights`). Default -1.
-    pub uncertainty_scale: f64,
-    /// For `procnet`: the uncertainty's floor, m (`ArmFitConfig::uncertainty_floor_m`);
-    /// negative takes the calibrated one. The floors where the depth image shows the
-    /// forearm hidden are the calibrated ones, never below this. Default -1.
-    pub uncertainty_floor_m: f64,
+    /// (`ArmFitConfig::uncertainty_scale`), in place of the one calibrated for the masks and
+    /// depth chosen (the calibration file beside the weights,
+    /// `workcell_perception::pose::Calibration::of_weights`), which is used when the key is
+    /// left out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty_scale: Option<f64>,
+    /// For `procnet`: the uncertainty's floor, m (`ArmFitConfig::uncertainty_floor_m`), in
+    /// place of the calibrated one (left out: the calibrated one). The floors where the depth
+    /// image shows the forearm hidden are the calibrated ones, never below this.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty_floor_m: Option<f64>,
     /// The camera delivers nothing from this time on, s (a failed camera; perception
-    /// switched off mid-episode); negative for never. `procnet` ages its last estimate out
+    /// switched off mid-episode); left out, never. `procnet` ages its last estimate out
     /// ([`procnet::MAX_AGE_S`]); the others report no human at once. Either way the
-    /// filter then brakes. Default -1.
-    pub camera_fails_at_s: f64,
+    /// filter then brakes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_fails_at_s: Option<f64>,
     /// Camera frame rate, Hz. Default 30.
     pub rate_hz: f64,
     /// Standard deviation of the position error of each part end point, per axis, m.
@@ -127,9 +131,9 @@ impl Default for PerceptionConfig {
             masks: MaskKind::Network,
             depth: false,
             occlusion: 0.0,
-            uncertainty_scale: -1.0,
-            uncertainty_floor_m: -1.0,
-            camera_fails_at_s: -1.0,
+            uncertainty_scale: None,
+            uncertainty_floor_m: None,
+            camera_fails_at_s: None,
             rate_hz: 30.0,
             position_noise_m: 0.01,
             velocity_noise_m_s: 0.05,
@@ -229,21 +233,22 @@ impl PerceptionConfig {
             self.occlusion,
             (0.0..1.0).contains(&self.occlusion),
         )?;
-        check(
-            "uncertainty_scale",
-            self.uncertainty_scale,
-            self.uncertainty_scale.is_finite(),
-        )?;
-        check(
-            "uncertainty_floor_m",
-            self.uncertainty_floor_m,
-            self.uncertainty_floor_m.is_finite(),
-        )?;
-        check(
-            "camera_fails_at_s",
-            self.camera_fails_at_s,
-            self.camera_fails_at_s.is_finite(),
-        )?;
+        // Left out: the calibrated values, a camera that never fails. Given: a value >= 0
+        // (the -1 that once stood for "left out" is refused, not taken as a value).
+        for (key, v) in [
+            ("uncertainty_scale", self.uncertainty_scale),
+            ("uncertainty_floor_m", self.uncertainty_floor_m),
+            ("camera_fails_at_s", self.camera_fails_at_s),
+        ] {
+            if let Some(v) = v {
+                check(key, v, v >= 0.0).map_err(|_| {
+                    crate::Error::config(
+                        format!("perception.{key}"),
+                        format!("out of range: {v} (>= 0; leave the key out for the default)"),
+                    )
+                })?;
+            }
+        }
         if self.foresight_s > 0.0 && self.kind != PerceptionKind::GroundTruth {
             return Err(crate::Error::config(
                 "perception.foresight_s",
@@ -283,11 +288,8 @@ impl PerceptionConfig {
                 )?));
             }
         };
-        Ok(if self.camera_fails_at_s >= 0.0 {
-            Box::new(CameraFailure {
-                inner,
-                at_s: self.camera_fails_at_s,
-            })
+        Ok(if let Some(at_s) = self.camera_fails_at_s {
+            Box::new(CameraFailure { inner, at_s })
         } else {
             inner
         })
@@ -328,8 +330,8 @@ impl PerceptionConfig {
                 self.latency_s * 1e3
             ),
         };
-        if self.camera_fails_at_s >= 0.0 {
-            format!("{base}, failing at {} s", self.camera_fails_at_s)
+        if let Some(at_s) = self.camera_fails_at_s {
+            format!("{base}, failing at {at_s} s")
         } else {
             base
         }

@@ -125,16 +125,8 @@ impl ProcNetCamera {
                 None => Calibration::true_masks(config.depth),
             };
         let fit = Calibration {
-            scale: if config.uncertainty_scale >= 0.0 {
-                config.uncertainty_scale
-            } else {
-                measured.scale
-            },
-            floor_m: if config.uncertainty_floor_m >= 0.0 {
-                config.uncertainty_floor_m
-            } else {
-                measured.floor_m
-            },
+            scale: config.uncertainty_scale.unwrap_or(measured.scale),
+            floor_m: config.uncertainty_floor_m.unwrap_or(measured.floor_m),
             ..measured
         }
         .apply(ArmFitConfig::default());
@@ -175,7 +167,11 @@ impl ProcNetCamera {
     /// Renders and tracks one frame.
     fn measure(&mut self, input: &PerceptionInput<'_>) -> Result<Option<Measured>> {
         self.counts.frames += 1;
-        if self.config.camera_fails_at_s >= 0.0 && input.t_s >= self.config.camera_fails_at_s {
+        if self
+            .config
+            .camera_fails_at_s
+            .is_some_and(|at_s| input.t_s >= at_s)
+        {
             let reason = self.tracker.no_frame();
             self.counts.no_frame += 1;
             tracing::debug!("procnet perception at {:.3} s: {reason:?}", input.t_s);
@@ -512,7 +508,7 @@ mod tests {
         let (scenario, model) = cell();
         let mut state = CellState::new(&model).expect("state");
         let config = PerceptionConfig {
-            camera_fails_at_s: 0.5,
+            camera_fails_at_s: Some(0.5),
             ..perfect_masks()
         };
         let mut perception = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
