@@ -1,21 +1,21 @@
 //! One closed-loop episode, tick by tick: observe the truth, command, perceive, filter, step.
+//! The episode's state is the cell, the filter, perception and the task controller
+//! ([`TaskController`]); its metrics accumulate in a [`Tally`]; a recording, when asked for,
+//! samples the state for the replay.
 
 use std::time::Instant;
 
 use workcell_robots::math::{Pose, Vector};
-use workcell_robots::{Jacobian, KinematicState, LinkId};
+use workcell_robots::{Jacobian, KinematicState};
 use workcell_safety::{
-    BrakeReason, FilterMode, FilterStatus, HumanEstimate, HumanGeometry, HumanPart, Obstacle,
-    SafetyFilter, SignedDistancePair,
+    FilterMode, HumanEstimate, HumanGeometry, Obstacle, SafetyFilter, SignedDistancePair,
 };
 use workcell_sim::{CellModel, CellState, RobotCommand, step};
 
+use super::tally::Tally;
 use super::{EpisodeMetrics, EpisodeTrace, Evaluation, EvaluationConfig};
 use super::{HumanPerception, PerceptionInput, TaskController};
 use crate::error::Result;
-
-/// A robot point slower than this counts as standing, m/s.
-const MOVING_M_S: f64 = 0.05;
 
 /// One closed-loop episode of `evaluation` with `filter` and the perception of the
 /// evaluation file, seeded with `seed` (the cell's seed is replaced by it, so the robot's
@@ -111,7 +111,7 @@ fn run(
         let progress = run.controller.progress();
         if progress >= c.task_s || t >= timeout_s {
             if progress >= c.task_s {
-                run.metrics.task_time_s = Some(t);
+                run.tally.finished(t);
             }
             break;
         }
@@ -146,25 +146,14 @@ struct Run<'a> {
     human_kinematics: KinematicState,
     robot_kinematics: KinematicState,
     truth: HumanEstimate,
-    /// The human's end point velocities at the last tick (two per part), m/s.
-    human_v_prev: Vec<Vector>,
     estimate: HumanEstimate,
     /// The task controller: the nominal command before the filter.
     controller: TaskController,
     /// The servos' position command: the filtered velocity integrated.
     q_cmd: Vec<f64>,
     jacobian: Jacobian,
-    metrics: EpisodeMetrics,
-    trace: EpisodeTrace,
-    /// Below d_min at the last tick.
-    below: bool,
-    /// In contact (true separation <= 0) at the last tick.
-    touching: bool,
-    /// The closest pair so far (formatted once at the end: no allocation per tick).
-    closest: Option<(LinkId, HumanPart, f64)>,
-    braking: Vec<(BrakeReason, usize)>,
-    error_sum: f64,
-    error_ticks: usize,
+    /// The episode's metrics and trace as they accumulate.
+    tally: Tally,
     /// The sample period and the samples of a 3D replay, when recording.
     recording: Option<(f64, Recording)>,
 }
@@ -198,33 +187,7 @@ impl<'a> Run<'a> {
         let q_cmd = state.q().to_vec();
         let controller =
             TaskController::new(c.controller, &robot.velocity_limits(), c.safety.d_min_m);
-        let metrics = EpisodeMetrics {
-            episode,
-            seed,
-            filter: mode.to_string(),
-            min_separation_m: f64::INFINITY,
-            closest: String::new(),
-            violation_s: 0.0,
-            violations: 0,
-            violation_moving_s: 0.0,
-            task_time_s: None,
-            nominal_task_s: c.task_s,
-            peak_speed_near_human_m_s: 0.0,
-            peak_approach_speed_m_s: 0.0,
-            peak_human_speed_m_s: 0.0,
-            peak_human_acceleration_m_s2: 0.0,
-            peak_approach_by_part_m_s: [0.0; 3],
-            contacts_moving: 0,
-            contacts_standing: 0,
-            ticks_pass: 0,
-            ticks_modified: 0,
-            ticks_relaxed: 0,
-            ticks_braking: 0,
-            braking_reasons: Vec::new(),
-            perception_error_m: 0.0,
-            simulated_s: 0.0,
-            wall_s: 0.0,
-        };
+        let tally = Tally::new(episode, seed, mode.to_string(), c.task_s);
         Ok(Self {
             c,
             filter,
@@ -233,19 +196,11 @@ impl<'a> Run<'a> {
             human_kinematics,
             robot_kinematics,
             truth: HumanEstimate::default(),
-            human_v_prev: Vec::new(),
             estimate: HumanEstimate::default(),
             controller,
             q_cmd,
             jacobian: Jacobian::zeros(dof),
-            metrics,
-            trace: EpisodeTrace::default(),
-            below: false,
-            touching: false,
-            closest: None,
-            braking: Vec::new(),
-            error_sum: 0.0,
-            error_ticks: 0,
+            tally,
             recording: None,
             model,
             state,
@@ -266,26 +221,7 @@ impl<'a> Run<'a> {
             state.human_qd(),
             &mut self.truth,
         );
-        let metrics = &mut self.metrics;
-        for p in &self.truth.parts {
-            metrics.peak_human_speed_m_s = metrics
-                .peak_human_speed_m_s
-                .max(p.v_a_W.length())
-                .max(p.v_b_W.length());
-        }
-        // The end points' accelerations over the last tick (none at the first).
-        let velocities = self.truth.parts.iter().flat_map(|p| [p.v_a_W, p.v_b_W]);
-        if self.human_v_prev.len() == 2 * self.truth.parts.len() {
-            for (v, v_prev) in velocities.zip(&mut self.human_v_prev) {
-                metrics.peak_human_acceleration_m_s2 = metrics
-                    .peak_human_acceleration_m_s2
-                    .max((v - *v_prev).length() / dt);
-                *v_prev = v;
-            }
-        } else {
-            self.human_v_prev.clear();
-            self.human_v_prev.extend(velocities);
-        }
+        self.tally.human(&self.truth, dt);
         model
             .robot
             .forward_kinematics(state.q(), &mut self.robot_kinematics)?;
@@ -315,10 +251,7 @@ impl<'a> Run<'a> {
                     &mut self.jacobian,
                     &pair,
                 );
-                if let Some(i) = HumanPart::ARM.iter().position(|&p| p == pair.part) {
-                    let peak = &mut self.metrics.peak_approach_by_part_m_s[i];
-                    *peak = peak.max(-pair.nhat_BA_W.dot(v));
-                }
+                self.tally.approach(pair.part, -pair.nhat_BA_W.dot(v));
                 velocity = Some(v);
             }
             if closest.is_none_or(|(b, _)| pair.distance_m < b.distance_m) {
@@ -332,18 +265,12 @@ impl<'a> Run<'a> {
             closest.as_ref().map(|(pair, _)| pair),
         );
         let Some((pair, velocity)) = closest else {
-            self.trace.separation_m.push(f64::NAN);
+            self.tally.no_pair();
             return Ok(());
         };
-        let metrics = &mut self.metrics;
-        let d = pair.distance_m;
-        if d < metrics.min_separation_m {
-            metrics.min_separation_m = d;
-            self.closest = Some((pair.link, pair.part, t));
-        }
-        let mut speed = 0.0;
-        if d < c.near_m.max(d_min) {
-            let v = velocity.unwrap_or_else(|| {
+        // The robot point's velocity where the pair is near enough to count.
+        let velocity = (pair.distance_m < c.near_m.max(d_min)).then(|| {
+            velocity.unwrap_or_else(|| {
                 robot_point_velocity(
                     model,
                     state,
@@ -351,43 +278,10 @@ impl<'a> Run<'a> {
                     &mut self.jacobian,
                     &pair,
                 )
-            });
-            speed = v.length();
-            let metrics = &mut self.metrics;
-            if d < c.near_m {
-                metrics.peak_speed_near_human_m_s = metrics.peak_speed_near_human_m_s.max(speed);
-                metrics.peak_approach_speed_m_s =
-                    metrics.peak_approach_speed_m_s.max(-pair.nhat_BA_W.dot(v));
-            }
-        }
-        let metrics = &mut self.metrics;
-        // SSM permits contact only with a robot at standstill (ISO/TS 15066 5.5.4): count
-        // each contact by the robot's speed when it began.
-        if d <= 0.0 {
-            if !self.touching {
-                if speed > MOVING_M_S {
-                    metrics.contacts_moving += 1;
-                } else {
-                    metrics.contacts_standing += 1;
-                }
-            }
-            self.touching = true;
-        } else {
-            self.touching = false;
-        }
-        if d < d_min {
-            if !self.below {
-                metrics.violations += 1;
-            }
-            self.below = true;
-            metrics.violation_s += dt;
-            if speed > MOVING_M_S {
-                metrics.violation_moving_s += dt;
-            }
-        } else {
-            self.below = false;
-        }
-        self.trace.separation_m.push(d);
+            })
+        });
+        self.tally
+            .separation(t, dt, &pair, velocity, d_min, c.near_m);
         Ok(())
     }
 
@@ -403,10 +297,6 @@ impl<'a> Run<'a> {
             &mut self.estimate,
         );
         let tick_error = perception_error(&self.estimate, &self.truth);
-        if let Some(e) = tick_error {
-            self.error_sum += e;
-            self.error_ticks += 1;
-        }
         let out = self.filter.tick(
             &self.model.robot,
             self.state.q(),
@@ -416,28 +306,16 @@ impl<'a> Run<'a> {
         );
         self.controller.observe(&out);
         tracing::trace!(
-            episode = self.metrics.episode,
+            episode = self.tally.episode(),
             t,
             status = %out.status.label(),
             seen_m = out.min_distance_m,
-            true_m = self.trace.separation_m.last().copied().unwrap_or(f64::NAN),
+            true_m = self.tally.last_separation_m(),
             uncertainty_m = self.estimate.uncertainty_m,
             pairs = out.active_pairs,
             "tick"
         );
-        let metrics = &mut self.metrics;
-        match out.status {
-            FilterStatus::Pass => metrics.ticks_pass += 1,
-            FilterStatus::Modified => metrics.ticks_modified += 1,
-            FilterStatus::Relaxed => metrics.ticks_relaxed += 1,
-            FilterStatus::Braking(reason) => {
-                metrics.ticks_braking += 1;
-                match self.braking.iter_mut().find(|(r, _)| *r == reason) {
-                    Some((_, n)) => *n += 1,
-                    None => self.braking.push((reason, 1)),
-                }
-            }
-        }
+        self.tally.status(out.status);
         let nominal_norm = self
             .controller
             .command()
@@ -452,15 +330,13 @@ impl<'a> Run<'a> {
             .map(|v| v * v)
             .sum::<f64>()
             .sqrt();
-        self.trace.t_s.push(t);
-        self.trace.perception_error_m.push(tick_error);
-        self.trace.task_speed.push(self.controller.speed());
-        self.trace.command_rad_s.push(command_norm);
-        self.trace.speed_scale.push(if nominal_norm > 1e-6 {
-            (command_norm / nominal_norm).min(2.0)
-        } else {
-            1.0
-        });
+        self.tally.tick(
+            t,
+            tick_error,
+            self.controller.speed(),
+            nominal_norm,
+            command_norm,
+        );
     }
 
     /// The physics steps of one control tick. The robot is position-controlled with velocity
@@ -484,28 +360,13 @@ impl<'a> Run<'a> {
     }
 
     /// The metrics and the trace, with what is formatted once per episode.
-    fn finish(mut self, started: Instant) -> (EpisodeMetrics, EpisodeTrace) {
-        self.trace.separation_m.truncate(self.trace.t_s.len());
-        let metrics = &mut self.metrics;
-        if let Some((link, part, t)) = self.closest {
-            metrics.closest = format!(
-                "{} / {part} at {t:.2} s",
-                self.model.robot.links()[link].name
-            );
-        }
-        metrics.braking_reasons = self
-            .braking
-            .into_iter()
-            .map(|(r, n)| (r.to_string(), n))
-            .collect();
-        metrics.perception_error_m = if self.error_ticks > 0 {
-            self.error_sum / self.error_ticks as f64
-        } else {
-            f64::NAN
-        };
-        metrics.simulated_s = self.state.time_s();
-        metrics.wall_s = started.elapsed().as_secs_f64();
-        (self.metrics, self.trace)
+    fn finish(self, started: Instant) -> (EpisodeMetrics, EpisodeTrace) {
+        let robot = &self.model.robot;
+        self.tally.finish(
+            |link| robot.links()[link].name.clone(),
+            self.state.time_s(),
+            started,
+        )
     }
 }
 

@@ -20,6 +20,7 @@ pub mod perception;
 pub mod record;
 pub mod replay;
 pub mod report;
+mod tally;
 
 use std::path::{Path, PathBuf};
 
