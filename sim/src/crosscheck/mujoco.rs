@@ -127,11 +127,10 @@ impl<'a> MujocoRobot<'a> {
         let mut uris = Vec::with_capacity(assets.meshes.len());
         for (k, m) in assets.meshes.iter().enumerate() {
             if !loaded.contains_key(m.path.as_path()) {
-                let mesh =
-                    TriMesh::load(&m.path, [1.0; 3]).map_err(|message| CrosscheckError::Mesh {
-                        path: m.path.clone(),
-                        message,
-                    })?;
+                let mesh = TriMesh::load(&m.path, [1.0; 3]).map_err(|e| CrosscheckError::Mesh {
+                    path: m.path.clone(),
+                    message: e.to_string(),
+                })?;
                 loaded.insert(&m.path, mesh);
             }
             let out = workdir.join(format!("mesh_{k}.stl"));
