@@ -64,12 +64,16 @@ pub type ArmOutcome = std::result::Result<ArmEstimate, NoEstimate>;
 /// joints put it. With a depth image the depth agreement joins the fit.
 ///
 /// ```no_run
-/// # use workcell_perception::{ArmTracker, Backend, ProcNet, pose::ArmFitConfig};
+/// # use workcell_perception::ArmTracker;
+/// # use workcell_perception::pose::{ArmFitConfig, Calibration};
+/// # use workcell_procnet::{Backend, ProcNet};
 /// # fn run(human: workcell_robots::RobotModel, X_WH: workcell_robots::math::Pose,
 /// #        camera: workcell_render::Camera, rgb: &[u8]) -> workcell_perception::Result<()> {
 /// let weights = std::path::Path::new("procnet/weights/procnet-cpu.safetensors");
+/// // The bound calibrated for these weights (the file beside them), for a fit of RGB alone.
+/// let fit = Calibration::of_weights(weights, false)?.calibration.apply(ArmFitConfig::default());
 /// let net = ProcNet::load(weights, Backend::Flex)?;
-/// let mut tracker = ArmTracker::new(&human, &X_WH, ArmFitConfig::default())?.with_network(net)?;
+/// let mut tracker = ArmTracker::new(&human, &X_WH, fit)?.with_network(net)?;
 /// match tracker.track(&camera, rgb, None)? {
 ///     Ok(estimate) => println!("{} parts, +-{:.3} m", estimate.parts.len(), estimate.uncertainty_m),
 ///     Err(reason) => println!("no estimate: {reason}"),
