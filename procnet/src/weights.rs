@@ -169,26 +169,22 @@ pub fn save(model: &ProcNetModel, config: &ProcNetConfig, path: &Path) -> Result
         })?;
     }
     // Write beside, then rename: an interrupted save never leaves a half file.
-    let io = |source| ProcNetError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut saved = Ok(());
-    workcell_robots::output::write_atomic_with(path, |tmp| {
-        let mut store = SafetensorsStore::from_file(tmp)
-            .metadata("format", FORMAT)
-            .metadata("config", config.to_json())
-            .overwrite(true);
-        saved = model
-            .save_into(&mut store)
-            .map_err(|e| weights_error(path, format!("cannot save: {e}")));
-        if saved.is_ok() {
-            Ok(())
-        } else {
-            Err(std::io::Error::other("the tensor store failed"))
-        }
-    })
-    .map_err(|e| saved.err().unwrap_or_else(|| io(e)))
+    workcell_robots::output::write_atomic_with(
+        path,
+        |tmp| {
+            let mut store = SafetensorsStore::from_file(tmp)
+                .metadata("format", FORMAT)
+                .metadata("config", config.to_json())
+                .overwrite(true);
+            model
+                .save_into(&mut store)
+                .map_err(|e| weights_error(path, format!("cannot save: {e}")))
+        },
+        |source| ProcNetError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+    )
 }
 
 /// Loads weights into a fresh model of the file's own configuration.

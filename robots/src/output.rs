@@ -20,10 +20,14 @@ pub fn temporary_name(path: &Path) -> PathBuf {
 /// # Errors
 /// The temporary file cannot be created, written or synced, or the rename fails.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    write_atomic_with(path, |tmp| {
-        let mut file = std::fs::File::create(tmp)?;
-        file.write_all(bytes)
-    })
+    write_atomic_with(
+        path,
+        |tmp| {
+            let mut file = std::fs::File::create(tmp)?;
+            file.write_all(bytes)
+        },
+        |e| e,
+    )
 }
 
 /// Atomically replaces `path` with what `write` puts at the temporary path it is given (for
@@ -31,16 +35,18 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 /// synced, then renamed over `path`.
 ///
 /// # Errors
-/// What `write` returns, or an I/O error of the sync or the rename (converted into `E`).
-pub fn write_atomic_with<E: From<std::io::Error>>(
+/// What `write` returns, or the I/O error of the sync or the rename as `io_error` makes it.
+pub fn write_atomic_with<E>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), E>,
+    io_error: impl FnOnce(std::io::Error) -> E,
 ) -> Result<(), E> {
     let tmp = temporary_name(path);
     write(&tmp)?;
-    std::fs::File::open(&tmp)?.sync_data()?;
-    std::fs::rename(&tmp, path)?;
-    Ok(())
+    std::fs::File::open(&tmp)
+        .and_then(|f| f.sync_data())
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .map_err(io_error)
 }
 
 #[cfg(test)]
@@ -63,10 +69,14 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("weights.safetensors");
         std::fs::write(&path, b"old").expect("write");
-        let result: Result<(), std::io::Error> = write_atomic_with(&path, |tmp| {
-            std::fs::write(tmp, b"half")?;
-            Err(std::io::Error::other("the writer failed"))
-        });
+        let result: Result<(), std::io::Error> = write_atomic_with(
+            &path,
+            |tmp| {
+                std::fs::write(tmp, b"half")?;
+                Err(std::io::Error::other("the writer failed"))
+            },
+            |e| e,
+        );
         assert!(result.is_err());
         assert_eq!(std::fs::read(&path).expect("read"), b"old");
         // Into a folder that does not exist: an error, nothing written.

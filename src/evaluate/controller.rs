@@ -210,11 +210,6 @@ impl TaskController {
         }
     }
 
-    #[must_use]
-    pub fn config(&self) -> &ControllerConfig {
-        &self.config
-    }
-
     /// Where along the task's trajectory the reference is, s of the plan.
     #[must_use]
     pub fn progress(&self) -> f64 {
@@ -225,12 +220,6 @@ impl TaskController {
     #[must_use]
     pub fn speed(&self) -> f64 {
         self.speed
-    }
-
-    /// Whether the robot is yielding to the human.
-    #[must_use]
-    pub fn yielding(&self) -> bool {
-        self.yielding
     }
 
     /// The nominal joint velocity of the last [`TaskController::nominal`], rad/s.
