@@ -6,11 +6,14 @@
 use std::path::PathBuf;
 
 use serde::Serialize;
-use workcell::evaluate::{ControllerConfig, EvaluationConfig, PerceptionConfig};
+use workcell::evaluate::{
+    ControllerConfig, EvaluationConfig, GroundTruthConfig, NoisyConfig, ProcNetConfig,
+};
 use workcell::perception::pose::{ArmFitConfig, PoseConfig};
 use workcell::safety::{FilterConfig, SsmConfig};
 use workcell::sim::Scenario;
-use workcell::sim::scenario::{CameraConfig, HumanConfig, RobotConfig};
+use workcell::sim::ik::IkOptions;
+use workcell::sim::scenario::{CameraConfig, HumanConfig, RobotConfig, RobotMotionConfig};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -25,14 +28,23 @@ fn table_of<T: Serialize>(value: &T) -> toml::Table {
 /// `false`, `inf`, `empty` or a backticked value; phrases such as `Default: the cell's` state
 /// no value and are skipped).
 fn stated_defaults(source: &str, name: &str) -> Vec<(String, String)> {
+    // A struct, or a struct-like variant of an enum (`Enum::Variant`), whose fields have no
+    // `pub`.
+    let header = match name.split_once("::") {
+        Some((_, variant)) => format!("\n    {variant} {{"),
+        None => format!("pub struct {name} {{"),
+    };
     let start = source
-        .find(&format!("pub struct {name} {{"))
+        .find(&header)
         .unwrap_or_else(|| panic!("no struct {name}"));
     let mut out = Vec::new();
     let mut doc = String::new();
-    for line in source[start..].lines().skip(1) {
+    for line in source[start..]
+        .lines()
+        .skip(if header.starts_with('\n') { 2 } else { 1 })
+    {
         let t = line.trim();
-        if t == "}" {
+        if t == "}" || t == "}," {
             break;
         }
         if let Some(d) = t.strip_prefix("///") {
@@ -43,7 +55,11 @@ fn stated_defaults(source: &str, name: &str) -> Vec<(String, String)> {
         if t.starts_with("#[") {
             continue;
         }
-        if let Some(rest) = t.strip_prefix("pub ") {
+        if let Some(rest) = t.strip_prefix("pub ").or_else(|| {
+            name.contains("::")
+                .then_some(t)
+                .filter(|t| t.contains(": "))
+        }) {
             let field = rest
                 .split(':')
                 .next()
@@ -125,9 +141,19 @@ fn every_stated_default_is_the_one_in_code() {
             table_of(&EvaluationConfig::default()),
         ),
         (
-            "src/evaluate/perception/mod.rs",
-            "PerceptionConfig",
-            table_of(&PerceptionConfig::default()),
+            "src/evaluate/perception/config.rs",
+            "GroundTruthConfig",
+            table_of(&GroundTruthConfig::default()),
+        ),
+        (
+            "src/evaluate/perception/config.rs",
+            "NoisyConfig",
+            table_of(&NoisyConfig::default()),
+        ),
+        (
+            "src/evaluate/perception/config.rs",
+            "ProcNetConfig",
+            table_of(&ProcNetConfig::default()),
         ),
         (
             "src/evaluate/controller.rs",
@@ -173,6 +199,24 @@ fn every_stated_default_is_the_one_in_code() {
             "perception/src/pose/config.rs",
             "PoseConfig",
             table_of(&PoseConfig::default()),
+        ),
+        (
+            "sim/src/ik.rs",
+            "IkOptions",
+            table_of(&IkOptions::default()),
+        ),
+        (
+            "sim/src/scenario.rs",
+            "RobotMotionConfig::Random",
+            table_of(&RobotMotionConfig::default()),
+        ),
+        (
+            "sim/src/scenario.rs",
+            "RobotMotionConfig::PickAndPlace",
+            table_of(
+                &toml::from_str::<RobotMotionConfig>("kind = \"pick_and_place\"\nwaypoints = []\n")
+                    .expect("a pick and place with its defaults"),
+            ),
         ),
     ];
     let mut wrong = Vec::new();
@@ -238,4 +282,27 @@ pub struct Demo {
     assert!(!agrees("31", &table["rate_hz"]));
     assert!(!agrees("[0, 0, -9.8]", &table["gravity"]));
     assert!(!agrees("true", &table["bound"]));
+    // A struct-like variant of an enum: its fields have no `pub`, and its closing `},` ends
+    // it before the next variant's fields.
+    let source = r#"
+pub enum Motion {
+    Random {
+        /// Scale. Default 0.5.
+        #[serde(default = "half")]
+        speed_scale: f64,
+    },
+    Other {
+        /// Dwell. Default 0.3.
+        dwell_s: f64,
+    },
+}
+"#;
+    assert_eq!(
+        stated_defaults(source, "Motion::Random"),
+        [("speed_scale".to_string(), "0.5".to_string())]
+    );
+    assert_eq!(
+        stated_defaults(source, "Motion::Other"),
+        [("dwell_s".to_string(), "0.3".to_string())]
+    );
 }

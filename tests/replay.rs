@@ -7,7 +7,7 @@ use std::path::Path;
 use workcell::evaluate::replay::{
     HUMAN_PREFIX, MARKER_SUFFIX, PAIR_NODES, ROBOT_PREFIX, ROOT_NODE, episode_glb, pair_class,
 };
-use workcell::evaluate::{Evaluation, apply_overrides, record_episode};
+use workcell::evaluate::{Evaluation, PerceptionKind, record_episode};
 use workcell::robots::math::{Pose, Rotation, Vector};
 use workcell::safety::FilterMode;
 use workcell::sim::CellModel;
@@ -32,11 +32,10 @@ fn pose_of(track: &Track, k: usize) -> Pose {
 #[test]
 fn an_episode_reads_back_with_the_simulations_poses() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate.toml");
-    let text = std::fs::read_to_string(&path).expect("evaluate.toml");
     // The noisy camera model: the replay's poses, not perception, are under test.
-    let overrides = ["task_s=3".into(), "perception.kind=\"noisy\"".into()];
-    let text = apply_overrides(&text, &overrides, &path).expect("override");
-    let evaluation = Evaluation::from_toml(&text, &path).expect("evaluation");
+    let (evaluation, _) =
+        Evaluation::from_file_as(&path, Some(PerceptionKind::Noisy), &["task_s=3".into()])
+            .expect("evaluation");
     let seed = 2;
     let (metrics, _, recording) =
         record_episode(&evaluation, FilterMode::Qp, 0, seed, 1.0 / 30.0).expect("episode");

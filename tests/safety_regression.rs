@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use workcell::evaluate::report::Aggregate;
-use workcell::evaluate::{EpisodeMetrics, EpisodeTrace, Evaluation, run_episode};
+use workcell::evaluate::{
+    EpisodeMetrics, EpisodeTrace, Evaluation, PerceptionConfig, PerceptionKind, run_episode,
+};
 use workcell::safety::FilterMode;
 
 #[derive(Debug, Deserialize)]
@@ -216,11 +218,13 @@ fn episodes_are_deterministic() {
 /// tests/scenarios/expectations.toml.
 fn readme_evaluation() -> Evaluation {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    Evaluation::from_file_with(
+    Evaluation::from_file_as(
         &root.join("configs/evaluate.toml"),
-        &["perception.kind = \"noisy\"".into()],
+        Some(PerceptionKind::Noisy),
+        &[],
     )
     .expect("evaluation loads")
+    .0
 }
 
 /// The README's evaluation with the filter the older cases were found with: one that reacts
@@ -510,7 +514,11 @@ fn the_reported_human_acceleration_is_the_second_derivative_of_its_motion() {
         "peak human acceleration {:.3} m/s^2 reported, {peak:.3} m/s^2 from positions",
         metrics.peak_human_acceleration_m_s2
     );
-    let assumed = evaluation.config.perception.human_acceleration_m_s2;
+    let assumed = evaluation
+        .config
+        .perception
+        .human_acceleration_m_s2()
+        .expect("a camera's bound");
     assert!(peak > 2.0 * assumed, "{peak} vs {assumed}");
     assert!(
         (metrics.peak_human_acceleration_m_s2 - peak).abs() < 0.03 * peak,
@@ -528,7 +536,10 @@ fn a_camera_that_fails_mid_episode_stops_the_robot_without_a_violation() {
     let mut evaluation = Evaluation::from_file(&scenarios().join("shared_space_noisy.toml"))
         .expect("scenario loads");
     let fails_at = 4.0;
-    evaluation.config.perception.camera_fails_at_s = Some(fails_at);
+    let PerceptionConfig::Noisy(camera) = &mut evaluation.config.perception else {
+        panic!("the scenario's perception is the noisy camera")
+    };
+    camera.camera_fails_at_s = Some(fails_at);
     for seed in 1..=3 {
         let (metrics, trace) = run_qp(&evaluation, seed);
         assert_eq!(metrics.violations, 0, "seed {seed}: {metrics:?}");

@@ -12,8 +12,6 @@ pub mod dataset;
 mod error;
 pub mod eval;
 pub mod pose;
-#[cfg(test)]
-mod test_util;
 pub mod tracker;
 
 pub use error::{PerceptionError, Result};

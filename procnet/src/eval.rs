@@ -1069,7 +1069,7 @@ const WORST_SEQUENCES: usize = 5;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::one_frame_entry;
+    use workcell_render::dataset::test_util::one_frame_entry;
 
     #[test]
     fn a_channel_predicted_black_everywhere_is_reported_dead() {

@@ -20,8 +20,6 @@ pub mod loss;
 pub mod model;
 pub mod nn;
 pub mod ops;
-#[cfg(test)]
-mod test_util;
 pub mod train;
 pub mod weights;
 

@@ -1243,7 +1243,7 @@ mod tests {
                 attempts: 1,
                 distance_class: distance.into(),
                 occlusion_level: occlusion.into(),
-                source: source.into(),
+                source: source.to_string().try_into().expect("a camera source"),
                 split: Split::Validation,
                 frames: 0,
                 mean_forearm_occlusion: None,

@@ -8,7 +8,7 @@ use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
 
 /// Options of [`solve_ik`]; defaults in [`IkOptions::default`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct IkOptions {
     /// Iterations per attempt. Default 200.
     pub max_iterations: usize,

@@ -9,6 +9,7 @@ use workcell_sim::SimError;
 use workcell_sim::dataset::{
     CropPolicy, Dataset, DatasetConfig, GeneratedFrame, Generator, Split, Timing,
 };
+use workcell_sim::render::dataset::ViewSource;
 use workcell_sim::render::image::PixelKind;
 use workcell_sim::render::roi::{Roi, RoiKind};
 use workcell_sim::render::{Camera, Class, CpuRenderer, MaskBatch, RenderMesh, Renderer};
@@ -88,7 +89,10 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
     pairs.sort();
     pairs.dedup();
     assert_eq!(pairs.len(), 12);
-    let cell = pairs.iter().filter(|p| p.0 == "camera:front").count();
+    let cell = pairs
+        .iter()
+        .filter(|p| p.0 == ViewSource::Camera("front".into()))
+        .count();
     assert_eq!(cell, 3, "{pairs:?}");
     assert_eq!(dataset.entries(Some(Split::Train)).count(), 12);
     // The tables' row order is the configuration's, the cell's camera after the paper's
@@ -186,10 +190,10 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
             let native = Camera::from(&roi.native);
             let expected = roi.roi.camera(&native, 64).unwrap();
             assert_eq!(Camera::from(&labels.camera), expected);
-            if labels.source == "paper" {
+            if labels.source == ViewSource::Paper {
                 assert_eq!((native.width, native.height), (160, 120));
             } else {
-                assert_eq!(labels.source, "camera:front");
+                assert_eq!(labels.source, ViewSource::Camera("front".into()));
                 assert_eq!((native.width, native.height), (640, 480));
             }
             // Depth: 16-bit mm; the forearm's pixels lie within a forearm's length of its

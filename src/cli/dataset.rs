@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use workcell::crop::{CropCounts, TrackerCrop};
-use workcell::render::dataset::forearm_stats;
+use workcell::render::dataset::{ViewSource, forearm_stats};
 use workcell::render::image::{PixelKind, write_png};
 use workcell::sim::dataset::{Dataset, DatasetConfig, Generator, Split, contact_sheet};
 
@@ -287,7 +287,7 @@ pub fn show(args: &ShowArgs) -> Result<ExitCode> {
         m.width_px,
         m.height_px
     );
-    let mut pairs: Vec<(String, String, String, usize, f64)> = Vec::new();
+    let mut pairs: Vec<(ViewSource, String, String, usize, f64)> = Vec::new();
     for s in &m.sequences {
         let o = s.mean_forearm_occlusion.unwrap_or(f64::NAN);
         match pairs

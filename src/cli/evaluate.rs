@@ -16,7 +16,9 @@ use workcell::evaluate::replay::episode_glb;
 use workcell::evaluate::report::{
     Aggregate, SummaryContext, metrics_csv, summary_markdown, write_plots,
 };
-use workcell::evaluate::{Evaluation, EvaluationConfig, record_episode, run_episode};
+use workcell::evaluate::{
+    Evaluation, EvaluationConfig, PerceptionConfig, PerceptionKind, record_episode, run_episode,
+};
 use workcell::safety::iso::effective_robot_mass_kg;
 use workcell::safety::{BodyRegion, FilterMode, HumanPart};
 
@@ -62,20 +64,39 @@ pub enum PerceptionArg {
 }
 
 impl PerceptionArg {
-    /// The keys of the evaluation file this choice sets, as `--set` overrides: applied with
-    /// the file's own, so that the file is checked as it will run (a key such as
-    /// `perception.foresight_s` is valid for one kind only).
-    fn overrides(self) -> Vec<String> {
-        let (kind, masks) = match self {
-            PerceptionArg::GroundTruth => ("ground_truth", None),
-            PerceptionArg::Noisy => ("noisy", None),
-            PerceptionArg::Procnet => ("procnet", Some("network")),
-            PerceptionArg::PoseGtMasks => ("procnet", Some("ground_truth")),
-        };
-        let mut overrides = vec![format!("perception.kind = \"{kind}\"")];
-        overrides.extend(masks.map(|m| format!("perception.masks = \"{m}\"")));
-        overrides
+    /// The kind of `[perception]` this choice makes the file's, and the `--set` override it
+    /// adds to the user's (which masks the fit reads).
+    fn kind(self) -> (PerceptionKind, Option<String>) {
+        let masks = |m: &str| Some(format!("perception.masks = \"{m}\""));
+        match self {
+            PerceptionArg::GroundTruth => (PerceptionKind::GroundTruth, None),
+            PerceptionArg::Noisy => (PerceptionKind::Noisy, None),
+            PerceptionArg::Procnet => (PerceptionKind::Procnet, masks("network")),
+            PerceptionArg::PoseGtMasks => (PerceptionKind::Procnet, masks("ground_truth")),
+        }
     }
+}
+
+/// `path` as `--perception` (when given) and the `--set` overrides make it: the file's
+/// `[perception]` switched to the chosen kind first (a note names the keys of the file that
+/// the new kind does not take), then the overrides, the choice's own last.
+fn load(
+    path: &Path,
+    perception: Option<PerceptionArg>,
+    overrides: &[String],
+) -> Result<Evaluation> {
+    let (kind, own) = perception.map(PerceptionArg::kind).unzip();
+    let mut overrides = overrides.to_vec();
+    overrides.extend(own.flatten());
+    let (evaluation, dropped) = Evaluation::from_file_as(path, kind, &overrides)?;
+    if let (Some(kind), false) = (kind, dropped.is_empty()) {
+        eprintln!(
+            "note: perception kind {}: the file's {} (of its own kind) not used",
+            kind.name(),
+            dropped.join(", ")
+        );
+    }
+    Ok(evaluation)
 }
 
 #[derive(Debug, clap::Args)]
@@ -211,16 +232,9 @@ fn shell_quote(word: &str) -> String {
 }
 
 pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
-    // `--perception` sets its keys as overrides after the user's, before the file is checked.
-    let mut overrides = args.overrides.clone();
-    overrides.extend(
-        args.perception
-            .map(PerceptionArg::overrides)
-            .unwrap_or_default(),
-    );
     if args.print_defaults {
         let config = match &args.evaluation {
-            Some(path) => Evaluation::from_file_with(path, &overrides)?.config,
+            Some(path) => load(path, args.perception, &args.overrides)?.config,
             None => EvaluationConfig::default(),
         };
         say_inline!(
@@ -246,7 +260,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
             u64::MAX - last_episode
         );
     }
-    let evaluation = Evaluation::from_file_with(path, &overrides)?;
+    let evaluation = load(path, args.perception, &args.overrides)?;
     let mode = match args.filter {
         FilterArg::None => FilterMode::None,
         FilterArg::Qp => FilterMode::Qp,
@@ -611,7 +625,9 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
     if args.depth {
         overrides.push("perception.depth = true".into());
     }
-    let evaluation = Evaluation::from_file_with(&args.evaluation, &overrides)?;
+    // The tracker is what is timed: the file's perception as procnet.
+    let (evaluation, _) =
+        Evaluation::from_file_as(&args.evaluation, Some(PerceptionKind::Procnet), &overrides)?;
     workcell::procnet::backend::set_threads(args.threads);
     let bar = super::progress_bar(
         args.frames as u64,
@@ -622,7 +638,9 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
             bar.set_position(k as u64)
         })?;
     bar.finish_and_clear();
-    let p = &evaluation.config.perception;
+    let PerceptionConfig::Procnet(p) = &evaluation.config.perception else {
+        bail!("the tracker is timed on a procnet perception");
+    };
     say!(
         "perception on {} frames of the cell's camera ({}; seed {}), {}, weights {}, network and fit on {} thread(s)",
         timings.len(),

@@ -35,8 +35,8 @@ pub use controller::{ControllerConfig, TaskController, YieldMotion};
 pub use episode::{Recording, record_episode, run_episode};
 pub use perception::procnet;
 pub use perception::{
-    Foresight, GroundTruth, HumanPerception, MaskKind, NoisyCamera, PerceptionConfig,
-    PerceptionInput, PerceptionKind,
+    Foresight, GroundTruth, GroundTruthConfig, HumanPerception, MaskKind, NoisyCamera, NoisyConfig,
+    PerceptionConfig, PerceptionInput, PerceptionKind, ProcNetConfig,
 };
 
 /// An evaluation file: the cell, the task, perception and the safety filter's settings.
@@ -64,6 +64,7 @@ pub struct EvaluationConfig {
     pub controller: ControllerConfig,
     /// "Near the human" for the peak speed metric: true separation below this, m. Default 0.3.
     pub near_m: f64,
+    /// The `[perception]` table; its `kind` chooses the keys ([`PerceptionConfig`]).
     pub perception: PerceptionConfig,
     pub safety: FilterConfig,
 }
@@ -138,6 +139,37 @@ impl Evaluation {
         Self::from_toml(&apply_overrides(&text, overrides, path)?, path)
     }
 
+    /// Like [`Evaluation::from_file_with`], with the file's `[perception]` made one of
+    /// `kind` first when given (a command line's `--perception`): the keys `kind` also takes
+    /// are kept, the others dropped ([`perception::switch_perception_kind`]) and returned,
+    /// for a note. The overrides apply after the switch, so they may set the new kind's keys.
+    ///
+    /// # Errors
+    /// As [`Evaluation::from_file_with`].
+    pub fn from_file_as(
+        path: &Path,
+        kind: Option<PerceptionKind>,
+        overrides: &[String],
+    ) -> Result<(Self, Vec<String>)> {
+        let mut text = read_text_file(path, MAX_CONFIG_BYTES).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut dropped = Vec::new();
+        if let Some(kind) = kind {
+            let parse_error = |message: String| Error::Parse {
+                path: path.to_path_buf(),
+                message,
+            };
+            let mut document: toml::Table =
+                toml::from_str(&text).map_err(|e| parse_error(e.to_string()))?;
+            dropped = perception::switch_perception_kind(&mut document, kind);
+            text = toml::to_string(&document).map_err(|e| parse_error(e.to_string()))?;
+        }
+        let this = Self::from_toml(&apply_overrides(&text, overrides, path)?, path)?;
+        Ok((this, dropped))
+    }
+
     /// Like [`Evaluation::from_file`] on text already read; `path` names it in errors and
     /// anchors the cell's and the weights' paths.
     ///
@@ -162,7 +194,8 @@ impl Evaluation {
         // Paths inside the file are relative to the file.
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario_path = dir.join(&config.cell);
-        if let Some(weights) = &mut config.perception.weights
+        if let PerceptionConfig::Procnet(p) = &mut config.perception
+            && let Some(weights) = &mut p.weights
             && weights.is_relative()
         {
             *weights = dir.join(&*weights);
@@ -423,14 +456,17 @@ mod tests {
         let path = dir.path().join("eval.toml");
         std::fs::write(
             &path,
-            format!("cell = {cell:?}\n[perception]\nweights = \"nets/w.safetensors\"\n"),
+            format!(
+                "cell = {cell:?}\n[perception]\nkind = \"procnet\"\n\
+                 weights = \"nets/w.safetensors\"\n"
+            ),
         )
         .expect("write");
         let evaluation = Evaluation::from_file(&path).expect("evaluation");
-        assert_eq!(
-            evaluation.config.perception.weights,
-            Some(dir.path().join("nets/w.safetensors"))
-        );
+        let PerceptionConfig::Procnet(p) = &evaluation.config.perception else {
+            panic!("{:?}", evaluation.config.perception)
+        };
+        assert_eq!(p.weights, Some(dir.path().join("nets/w.safetensors")));
         assert_eq!(evaluation.scenario_path, std::path::PathBuf::from(cell));
 
         std::fs::write(&path, format!("cell = {cell:?}\ntask_s = -1.0\n")).expect("write");

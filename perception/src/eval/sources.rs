@@ -228,7 +228,7 @@ impl MaskSource for NetworkMasks {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::one_frame_entry;
+    use workcell_render::dataset::test_util::one_frame_entry;
 
     /// One 4x4 frame: the forearm in the top-left 2x2 block and one pixel of the block beside
     /// it, the upper arm in the bottom row, background elsewhere.

@@ -12,7 +12,7 @@ use workcell_robots::math::{Pose, Vector};
 
 use workcell_render::dataset::{
     CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, RoiLabel,
-    SequenceEntry, Split, frame_files, sequence_dir,
+    SequenceEntry, Split, ViewSource, frame_files, sequence_dir,
 };
 use workcell_render::image::{PixelKind, depth_mm_bytes, encode_png, write_atomic};
 use workcell_render::occlusion::{
@@ -322,12 +322,12 @@ impl Generator {
     }
 
     /// Name of camera class `d`: a distance class, then `camera:<name>` for the cell's.
-    fn source(&self, d: usize) -> String {
+    fn source(&self, d: usize) -> ViewSource {
         let n = self.config.distances.len();
         if d < n {
-            "paper".into()
+            ViewSource::Paper
         } else {
-            format!("camera:{}", self.scenario.cameras[d - n].name)
+            ViewSource::Camera(self.scenario.cameras[d - n].name.clone())
         }
     }
 

@@ -38,10 +38,10 @@ pub fn sphere_radius_for_sigmas(k: f64) -> f64 {
 /// `r(k) sqrt(sigma_p^2 + (sigma_v age)^2) + a_max age^2 / 2` (r(k): the 3-D radius as
 /// rarely exceeded as `confidence_sigmas` in 1-D, [`sphere_radius_for_sigmas`]) held at the
 /// oldest age before the next frame is due
-/// ([`PerceptionConfig::noisy_camera_uncertainty`]).
+/// ([`NoisyConfig::uncertainty`]).
 #[derive(Debug, Clone)]
 pub struct NoisyCamera {
-    config: PerceptionConfig,
+    config: NoisyConfig,
     /// `sphere_radius_for_sigmas(config.confidence_sigmas)`.
     radius_sigmas: f64,
     rng: ChaCha8Rng,
@@ -55,7 +55,7 @@ pub struct NoisyCamera {
 impl NoisyCamera {
     /// A camera with `config`, its noise and dropouts drawn from `seed`.
     #[must_use]
-    pub fn new(config: PerceptionConfig, seed: u64) -> Self {
+    pub fn new(config: NoisyConfig, seed: u64) -> Self {
         Self {
             radius_sigmas: sphere_radius_for_sigmas(config.confidence_sigmas),
             config,
@@ -126,9 +126,7 @@ impl HumanPerception for NoisyCamera {
             return; // nothing yet: the filter brakes
         };
         let age = (t - t0).max(0.0);
-        out.uncertainty_m = self
-            .config
-            .noisy_camera_uncertainty(self.radius_sigmas, age);
+        out.uncertainty_m = self.config.uncertainty(self.radius_sigmas, age);
         out.uncertainty_rate_m_s = 0.0;
         out.parts
             .extend(measured.parts.iter().map(|p| PartEstimate {

@@ -16,7 +16,7 @@ use workcell_sim::render::occlusion::{OCCLUDER_DEPTH_M, Occluder, OccluderKind, 
 use workcell_sim::render::{Camera, Class, CpuRenderer, Frame, Renderer};
 use workcell_sim::{CellModel, CellScene, Scenario};
 
-use super::{HumanPerception, MaskKind, PerceptionConfig, PerceptionInput};
+use super::{AgeingBound, HumanPerception, MaskKind, PerceptionInput, ProcNetConfig};
 use crate::error::{Error, Result};
 use crate::robots::KinematicState;
 
@@ -45,7 +45,10 @@ pub struct FrameCounts {
 /// this wiring adds the camera's rate, its latency, the artificial occluder, and the joints'
 /// velocities from successive frames.
 pub struct ProcNetCamera {
-    config: PerceptionConfig,
+    config: ProcNetConfig,
+    /// The cell camera's frame rate, Hz.
+    rate_hz: f64,
+    ageing: AgeingBound,
     tracker: ArmTracker,
     camera: Camera,
     scene: CellScene,
@@ -69,7 +72,7 @@ impl ProcNetCamera {
     ///
     /// # Errors
     /// The scenario has no such camera, the weights do not load, the human has no arm.
-    pub fn new(config: &PerceptionConfig, scenario: &Scenario, model: &CellModel) -> Result<Self> {
+    pub fn new(config: &ProcNetConfig, scenario: &Scenario, model: &CellModel) -> Result<Self> {
         let camera_config = scenario
             .cameras
             .iter()
@@ -137,10 +140,9 @@ impl ProcNetCamera {
         let mut kinematics = KinematicState::new(&model.human);
         kinematics.X_WB = model.X_WH;
         Ok(Self {
-            config: PerceptionConfig {
-                rate_hz: camera_config.rate_hz,
-                ..config.clone()
-            },
+            config: config.clone(),
+            rate_hz: camera_config.rate_hz,
+            ageing: config.ageing(camera_config.rate_hz),
             tracker,
             camera,
             scene: CellScene::new(model),
@@ -265,7 +267,7 @@ impl HumanPerception for ProcNetCamera {
     fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
         let t = input.t_s;
         if t + 1e-9 >= self.next_frame_s {
-            self.next_frame_s += 1.0 / self.config.rate_hz;
+            self.next_frame_s += 1.0 / self.rate_hz;
             // A failure of the renderer or the network is a frame without a pose.
             let measured = self.measure(input).unwrap_or_else(|e| {
                 self.counts.errors += 1;
@@ -317,7 +319,7 @@ impl HumanPerception for ProcNetCamera {
         }
         self.geometry
             .estimate_into(&input.model.human, &self.kinematics, &self.qd, out);
-        out.uncertainty_m = self.config.aged_uncertainty(m.uncertainty_m, 0.0, age);
+        out.uncertainty_m = self.ageing.aged_uncertainty(m.uncertainty_m, 0.0, age);
         out.uncertainty_rate_m_s = 0.0;
     }
 }
@@ -351,18 +353,23 @@ pub fn bench_tracker(
     mut progress: impl FnMut(usize),
 ) -> Result<Vec<FrameTiming>> {
     use std::time::Instant;
-    let c = &evaluation.config.perception;
+    let super::PerceptionConfig::Procnet(c) = &evaluation.config.perception else {
+        return Err(Error::config(
+            "perception.kind",
+            "the tracker is timed on a procnet perception (kind = \"procnet\")",
+        ));
+    };
     let mut scenario = evaluation.scenario.clone();
     scenario.seed = seed;
     let model = CellModel::new(&scenario, &evaluation.scenario_path)?;
-    let config = PerceptionConfig {
+    let config = ProcNetConfig {
         masks: MaskKind::Network,
         ..c.clone()
     };
     let mut camera = ProcNetCamera::new(&config, &scenario, &model)?;
     let mut state = workcell_sim::CellState::new(&model)?;
     let dt = model.time_step_s();
-    let period = 1.0 / camera.config.rate_hz;
+    let period = 1.0 / camera.rate_hz;
     let mut out = Vec::with_capacity(frames);
     let mut t = 0.0;
     for k in 0..frames {
@@ -432,12 +439,11 @@ mod tests {
         perception.estimate(&input, out);
     }
 
-    fn perfect_masks() -> PerceptionConfig {
-        PerceptionConfig {
-            kind: super::super::super::PerceptionKind::Procnet,
+    fn perfect_masks() -> ProcNetConfig {
+        ProcNetConfig {
             masks: MaskKind::GroundTruth,
             depth: true,
-            ..PerceptionConfig::default()
+            ..ProcNetConfig::default()
         }
     }
 
@@ -507,7 +513,7 @@ mod tests {
     fn a_failed_camera_leaves_no_estimate_after_the_maximum_age() {
         let (scenario, model) = cell();
         let mut state = CellState::new(&model).expect("state");
-        let config = PerceptionConfig {
+        let config = ProcNetConfig {
             camera_fails_at_s: Some(0.5),
             ..perfect_masks()
         };
@@ -543,7 +549,7 @@ mod tests {
     #[test]
     fn the_occluder_hides_its_share_of_the_forearm() {
         let (scenario, model) = cell();
-        let config = PerceptionConfig {
+        let config = ProcNetConfig {
             occlusion: 0.7,
             ..perfect_masks()
         };

@@ -132,8 +132,8 @@ pub struct FrameLabels {
     pub occlusion_level: String,
     /// The camera source: `paper` (the paper's distance classes) or `camera:<name>` (a
     /// camera of the cell, jittered). `paper` in format 1.
-    #[serde(default = "paper")]
-    pub source: String,
+    #[serde(default)]
+    pub source: ViewSource,
     /// The region of the native camera's image this frame shows (absent in format 1: the
     /// frame is the whole image).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -258,8 +258,57 @@ fn skeletal() -> HumanLook {
     HumanLook::Skeletal
 }
 
-fn paper() -> String {
-    "paper".into()
+/// Where a sequence's camera comes from: the paper's distance classes, or a camera of the
+/// cell by name (jittered). Written `paper` or `camera:<name>`; `paper` in format 1.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum ViewSource {
+    /// A camera of the cell. Listed first so that sources sort as their written names do
+    /// (`camera:...` before `paper`).
+    Camera(String),
+    /// The paper's cameras at its distance classes.
+    #[default]
+    Paper,
+}
+
+impl ViewSource {
+    /// The cell camera's name, if it is one.
+    #[must_use]
+    pub fn camera(&self) -> Option<&str> {
+        match self {
+            Self::Camera(name) => Some(name),
+            Self::Paper => None,
+        }
+    }
+}
+
+impl std::fmt::Display for ViewSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Paper => f.pad("paper"),
+            Self::Camera(name) => f.pad(&format!("camera:{name}")),
+        }
+    }
+}
+
+impl TryFrom<String> for ViewSource {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<Self, String> {
+        match text.strip_prefix("camera:") {
+            _ if text == "paper" => Ok(Self::Paper),
+            Some(name) if !name.is_empty() => Ok(Self::Camera(name.to_string())),
+            _ => Err(format!(
+                "camera source {text:?}: `paper` or `camera:<name>`"
+            )),
+        }
+    }
+}
+
+impl From<ViewSource> for String {
+    fn from(source: ViewSource) -> Self {
+        source.to_string()
+    }
 }
 
 /// One sequence as the manifest lists it.
@@ -275,8 +324,8 @@ pub struct SequenceEntry {
     pub distance_class: String,
     pub occlusion_level: String,
     /// As [`FrameLabels::source`].
-    #[serde(default = "paper")]
-    pub source: String,
+    #[serde(default)]
+    pub source: ViewSource,
     pub split: Split,
     pub frames: usize,
     /// Mean forearm occlusion over the frames that show it.
@@ -291,7 +340,7 @@ impl SequenceEntry {
     /// the arm from its own distance.
     #[must_use]
     pub fn camera_class(&self) -> String {
-        self.source.strip_prefix("camera:").map_or_else(
+        self.source.camera().map_or_else(
             || self.distance_class.clone(),
             |name| format!("{name} camera"),
         )

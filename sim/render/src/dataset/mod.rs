@@ -22,10 +22,12 @@ mod labels;
 mod load;
 mod sheet;
 mod stats;
+#[cfg(any(test, feature = "test-util"))]
+pub mod test_util;
 
 pub use labels::{
     CameraLabel, FORMAT, FrameLabels, HumanLabel, Manifest, PartLabel, PoseLabel, READS, RoiLabel,
-    SEES_THROUGH_OCCLUDER, SequenceEntry, Split, View,
+    SEES_THROUGH_OCCLUDER, SequenceEntry, Split, View, ViewSource,
 };
 pub use load::{Dataset, MAX_SEQUENCE_FRAMES, MAX_SEQUENCES, Sequence};
 pub use sheet::{PredictionPanel, contact_sheet, prediction_sheet};

@@ -162,10 +162,9 @@ pub fn contact_sheet(dataset: &Dataset, columns: usize) -> Result<(u32, u32, Vec
         let crop = first
             .and_then(|l| l.roi)
             .map_or(String::new(), |r| format!(" - {} crop", r.kind.name()));
-        let source = if entry.source == "paper" {
-            String::new()
-        } else {
-            format!("{} ", entry.source)
+        let source = match entry.source {
+            crate::dataset::ViewSource::Paper => String::new(),
+            crate::dataset::ViewSource::Camera(_) => format!("{} ", entry.source),
         };
         canvas.text(
             gap,

@@ -12,7 +12,7 @@ use crate::roi::{mask_width, perfect_dice_loss};
 /// One row of the table: the frames of one group that show the forearm.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ForearmStats {
-    pub source: String,
+    pub source: crate::dataset::ViewSource,
     pub distance_class: String,
     /// `workspace`, `tracked`, `frame` (format 1) or `all`.
     pub roi: String,
@@ -61,7 +61,8 @@ pub fn forearm_stats(
 ) -> Result<Vec<ForearmStats>> {
     let m = &dataset.manifest;
     let (w, h) = (m.width_px as usize, m.height_px as usize);
-    let mut groups: BTreeMap<(String, String, String), Samples> = BTreeMap::new();
+    let mut groups: BTreeMap<(crate::dataset::ViewSource, String, String), Samples> =
+        BTreeMap::new();
     for (k, entry) in m.sequences.iter().enumerate() {
         let labels = dataset.labels(entry)?;
         for (f, l) in labels.iter().enumerate() {
