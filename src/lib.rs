@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub use workcell_mocap as mocap;
 pub use workcell_perception as perception;
 pub use workcell_procnet as procnet;
 pub use workcell_render as render;

@@ -43,6 +43,11 @@ enum Command {
     },
     /// Run a scenario and write joint trajectories and human part poses (CSV) and a plot.
     Simulate(cli::simulate::SimulateArgs),
+    /// Recorded human motion: how fast people's joints move, beside the generator's.
+    Human {
+        #[command(subcommand)]
+        command: HumanCommand,
+    },
     /// Camera datasets for ProcNet: generate them, look at them.
     Dataset {
         #[command(subcommand)]
@@ -92,6 +97,14 @@ enum DatasetCommand {
     /// Measure what a dataset gives a network: the forearm's pixels and width in the stored
     /// frames and the Dice loss of a perfect network, per source, distance class and crop.
     Stats(cli::dataset::StatsArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum HumanCommand {
+    /// Per part (wrist, elbow, shoulder, head, trunk): the peak, 99.9th and 99th percentile
+    /// speed and acceleration of recorded clips (cleaned of capture artefacts, low-pass
+    /// filtered), each library's tuning and test clips apart, and the generator's beside them.
+    Stats(cli::human::StatsArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -149,6 +162,9 @@ fn main() -> ExitCode {
         } => cli::perception::training_report(&a),
         Command::Crosscheck(a) => cli::crosscheck::run(&a),
         Command::Simulate(a) => cli::simulate::run(&a),
+        Command::Human {
+            command: HumanCommand::Stats(a),
+        } => cli::human::stats(&a),
         Command::Dataset {
             command: DatasetCommand::Generate(a),
         } => cli::dataset::generate(&a),

@@ -6,10 +6,13 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
+mod common;
+
 /// The source roots of the workspace's crates.
-const CRATES: [&str; 7] = [
+const CRATES: [&str; 8] = [
     "src",
     "robots/src",
+    "mocap/src",
     "sim/src",
     "sim/render/src",
     "procnet/src",
@@ -24,18 +27,9 @@ fn root() -> PathBuf {
 /// Every `.rs` file under `dir` with its module path (`pose/articulated/fit.rs` is
 /// `["pose", "articulated", "fit"]`; `lib.rs`, `main.rs` and `mod.rs` name their folder).
 fn modules(dir: &Path) -> Vec<(Vec<String>, String)> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for entry in std::fs::read_dir(&d).expect("source folder").flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                stack.push(path);
-                continue;
-            }
-            if path.extension().is_none_or(|e| e != "rs") {
-                continue;
-            }
+    common::product_sources(dir)
+        .into_iter()
+        .map(|(path, product)| {
             let relative = path.strip_prefix(dir).expect("inside");
             let mut module: Vec<String> = relative
                 .with_extension("")
@@ -48,17 +42,14 @@ fn modules(dir: &Path) -> Vec<(Vec<String>, String)> {
             ) {
                 module.pop();
             }
-            let source = std::fs::read_to_string(&path).expect("source");
-            let product = source.split("#[cfg(test)]").next().unwrap_or_default();
             let code: String = product
                 .lines()
                 .filter(|l| !l.trim_start().starts_with("//"))
                 .collect::<Vec<_>>()
                 .join("\n");
-            out.push((module, code));
-        }
-    }
-    out
+            (module, code)
+        })
+        .collect()
 }
 
 /// The module paths `code` (in module `at`) names: `crate::a::b`, `super::c`, with the

@@ -1283,7 +1283,7 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     // Only the oracle of the simulator can see the future, not a camera.
     bad(
         &format!("{cell_line}[perception]\nkind = \"noisy\"\nforesight_s = 0.5\n"),
-        "perception.foresight_s: only the ground_truth perception can see the future",
+        "perception.foresight_s: a key of the ground_truth perception, not of noisy",
     );
     bad(&format!("{cell_line}speed = 3\n"), "unknown field");
     bad(
@@ -1726,4 +1726,108 @@ fn bench_perception_prints_each_stage() {
         frames("fit with the global search (no track, or a poor one)"),
     );
     assert!(searched >= 1 && tracked + searched == 4, "{table}");
+}
+
+/// A BVH clip of the shipped Vicon skeleton translating at 1 m/s along x: every part's speed
+/// is 1 m/s and its acceleration 0 (closed form), whatever the filter; the generator's rows
+/// stand beside it with its wrist below the generator's 2.0 m/s cap.
+#[test]
+fn human_stats_measures_a_clip_beside_the_generator() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let joint = |name: &str, offset: &str, inner: &str| {
+        format!(
+            "JOINT {name}\n{{\nOFFSET {offset}\nCHANNELS 3 Zrotation Xrotation Yrotation\n{inner}}}\n"
+        )
+    };
+    let end = "End Site\n{\nOFFSET 0 0 0\n}\n";
+    let arm = |side: &str, x: &str| {
+        joint(
+            &format!("{side}_collar"),
+            "0 300 0",
+            &joint(
+                &format!("{side}_upper_arm"),
+                &format!("{x} 0 0"),
+                &joint(
+                    &format!("{side}_forearm"),
+                    "0 -280 0",
+                    &joint(&format!("{side}_hand"), "0 -250 0", end),
+                ),
+            ),
+        )
+    };
+    let frames = 300;
+    let mut bvh = format!(
+        "HIERARCHY\nROOT hip\n{{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n{}}}\nMOTION\nFrames: {frames}\nFrame Time: 0.01\n",
+        joint(
+            "torso",
+            "0 100 0",
+            &format!(
+                "{}{}{}",
+                joint("neck", "0 300 0", &joint("head", "0 150 0", end)),
+                arm("left", "150"),
+                arm("right", "-150")
+            )
+        )
+    );
+    for f in 0..frames {
+        // 10 mm a frame at 100 Hz: 1 m/s.
+        bvh.push_str(&format!("{} 1000 0 0 0 0{}\n", 10 * f, " 0 0 0".repeat(11)));
+    }
+    let clip = dir.path().join("walk.bvh");
+    std::fs::write(&clip, bvh).expect("write");
+    let json = dir.path().join("stats.json");
+    let out = workcell(&[
+        "human",
+        "stats",
+        clip.to_str().expect("utf-8"),
+        "--generated",
+        "2",
+        "--seconds",
+        "20",
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("json");
+    let rows = report["rows"].as_array().expect("rows");
+    let row = |part: &str, source: &str| {
+        rows.iter()
+            .find(|r| {
+                r["part"] == part && r["source"].as_str().is_some_and(|s| s.starts_with(source))
+            })
+            .unwrap_or_else(|| panic!("no {part} row of {source}: {rows:?}"))
+    };
+    for part in ["wrist", "elbow", "shoulder", "head", "chest", "pelvis"] {
+        let r = row(part, "clips given");
+        for q in ["peak", "p999", "p99", "median"] {
+            let v = r["speed_m_s"][q].as_f64().expect("speed");
+            assert!((v - 1.0).abs() < 1e-6, "{part} {q}: {v}");
+        }
+        assert!(r["acceleration_m_s2"]["peak"].as_f64().expect("acc") < 1e-6);
+    }
+    let generated = row("wrist", "generator");
+    let peak = generated["speed_m_s"]["peak"].as_f64().expect("speed");
+    assert!(peak > 0.5 && peak <= 2.0, "{peak}");
+    assert!(
+        text(&out.stdout).contains("| wrist | clips given | 1 |"),
+        "{}",
+        text(&out.stdout)
+    );
+    // A table needs its frame rate said.
+    let table = dir.path().join("t.txt");
+    std::fs::write(&table, "0 0 0\n").expect("write");
+    let out = workcell(&[
+        "human",
+        "stats",
+        table.to_str().expect("utf-8"),
+        "--generated",
+        "0",
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("give --rate-hz"),
+        "{}",
+        text(&out.stderr)
+    );
 }

@@ -810,30 +810,17 @@ fn every_file_is_read_through_the_bounded_reader() {
         ("src/cli/mod.rs", "File::open("),
     ];
     let mut found = Vec::new();
-    let mut stack: Vec<PathBuf> = [
+    for dir in [
         "src",
         "robots/src",
+        "mocap/src",
         "sim/src",
         "sim/render/src",
         "procnet/src",
         "perception/src",
         "safety/src",
-    ]
-    .iter()
-    .map(|d| root().join(d))
-    .collect();
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).expect("source folder").flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                stack.push(path);
-                continue;
-            }
-            if path.extension().is_none_or(|e| e != "rs") {
-                continue;
-            }
-            let source = std::fs::read_to_string(&path).expect("source");
-            let product = source.split("#[cfg(test)]").next().unwrap_or_default();
+    ] {
+        for (path, product) in common::product_sources(&root().join(dir)) {
             let relative = path
                 .strip_prefix(root())
                 .expect("inside")

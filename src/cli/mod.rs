@@ -21,6 +21,7 @@ macro_rules! say_inline {
 pub mod crosscheck;
 pub mod dataset;
 pub mod evaluate;
+pub mod human;
 pub mod perception;
 pub mod pose;
 pub mod report;

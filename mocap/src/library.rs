@@ -1,0 +1,267 @@
+//! A clip library: collections of clip files, each with its format and the clips held out
+//! of every tuning and training (the test split), in one TOML file
+//! (`data/mocap/library.toml` for the shipped recordings).
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{MocapError, Result};
+use crate::{Clip, ClipFormat};
+
+/// The largest library file read, bytes.
+pub const MAX_LIBRARY_BYTES: u64 = 1 << 20;
+/// The most clips a collection may hold.
+pub const MAX_CLIPS: usize = 100_000;
+
+/// Which clips.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, PartialOrd, Ord)]
+#[serde(rename_all = "snake_case")]
+pub enum Split {
+    /// The clips settings may be chosen on (and networks trained on).
+    Tuning,
+    /// The held-out clips: reported, never tuned on.
+    Test,
+}
+
+impl Split {
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tuning => "tuning",
+            Self::Test => "test",
+        }
+    }
+}
+
+/// One collection of a library file.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Collection {
+    /// Its name, the first part of each clip's id.
+    pub name: String,
+    /// Its folder, relative to the library file.
+    pub dir: PathBuf,
+    /// The ending of its clip files' names (`.bvh.gz`): every such file under `dir` is a
+    /// clip.
+    pub suffix: String,
+    /// How its files are read.
+    pub format: ClipFormat,
+    /// The held-out clips, by their path under `dir` without `suffix`
+    /// (`CollaborativeHammering/3`).
+    #[serde(default)]
+    pub test: Vec<String>,
+    /// Where the recordings come from, for reports and the notice.
+    #[serde(default)]
+    pub source: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LibraryFile {
+    #[serde(rename = "collection")]
+    collections: Vec<Collection>,
+}
+
+/// A clip of a library: its id (`collection/path`), file, format and split.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LibraryClip {
+    pub id: String,
+    pub collection: String,
+    pub path: PathBuf,
+    pub format: ClipFormat,
+    pub split: Split,
+}
+
+impl LibraryClip {
+    /// Reads the clip, named by its id.
+    ///
+    /// # Errors
+    /// As [`crate::read_clip`].
+    pub fn read(&self) -> Result<Clip> {
+        crate::read_clip(&self.path, &self.format, self.id.clone())
+    }
+}
+
+/// A library file's clips, every one found on disk.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Library {
+    pub path: PathBuf,
+    pub collections: Vec<Collection>,
+    pub clips: Vec<LibraryClip>,
+}
+
+impl Library {
+    /// Reads a library file and finds its clips.
+    ///
+    /// # Errors
+    /// [`MocapError::Io`] for the file or a folder that cannot be read;
+    /// [`MocapError::Parse`] for TOML that is not a library; [`MocapError::Invalid`] for a
+    /// collection with no clips, a held-out clip that is not there, two collections of one
+    /// name, more than [`MAX_CLIPS`] clips.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let text =
+            workcell_robots::input::read_text_file(path, MAX_LIBRARY_BYTES).map_err(|source| {
+                MocapError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                }
+            })?;
+        let file: LibraryFile = toml::from_str(&text).map_err(|e| MocapError::Parse {
+            path: path.to_path_buf(),
+            line: None,
+            message: e.to_string(),
+        })?;
+        let invalid = |message: String| MocapError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        };
+        let root = path.parent().unwrap_or(Path::new("."));
+        let mut clips = Vec::new();
+        for (i, c) in file.collections.iter().enumerate() {
+            if file.collections[..i].iter().any(|d| d.name == c.name) {
+                return Err(invalid(format!("two collections named {:?}", c.name)));
+            }
+            let dir = root.join(&c.dir);
+            let mut found = Vec::new();
+            walk(&dir, &c.suffix, &mut found)?;
+            found.sort();
+            if found.is_empty() {
+                return Err(invalid(format!(
+                    "collection {}: no files ending in {:?} under {}",
+                    c.name,
+                    c.suffix,
+                    dir.display()
+                )));
+            }
+            let relative = |p: &Path| -> String {
+                let r = p
+                    .strip_prefix(&dir)
+                    .unwrap_or(p)
+                    .to_string_lossy()
+                    .replace('\\', "/");
+                r.strip_suffix(&c.suffix).unwrap_or(&r).to_string()
+            };
+            for held in &c.test {
+                if !found.iter().any(|p| &relative(p) == held) {
+                    return Err(invalid(format!(
+                        "collection {}: held-out clip {held:?} is not one of its files",
+                        c.name
+                    )));
+                }
+            }
+            for p in found {
+                let name = relative(&p);
+                clips.push(LibraryClip {
+                    id: format!("{}/{name}", c.name),
+                    collection: c.name.clone(),
+                    split: if c.test.contains(&name) {
+                        Split::Test
+                    } else {
+                        Split::Tuning
+                    },
+                    path: p,
+                    format: c.format.clone(),
+                });
+                if clips.len() > MAX_CLIPS {
+                    return Err(invalid(format!("more than {MAX_CLIPS} clips")));
+                }
+            }
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            collections: file.collections,
+            clips,
+        })
+    }
+
+    /// The clips of `split` (all when `None`), in the library's order.
+    pub fn clips(&self, split: Option<Split>) -> impl Iterator<Item = &LibraryClip> {
+        self.clips
+            .iter()
+            .filter(move |c| split.is_none_or(|s| c.split == s))
+    }
+}
+
+/// Every regular file under `dir` whose name ends in `suffix` (symbolic links are not
+/// followed).
+fn walk(dir: &Path, suffix: &str, out: &mut Vec<PathBuf>) -> Result<()> {
+    let io = |source: std::io::Error| MocapError::Io {
+        path: dir.to_path_buf(),
+        source,
+    };
+    for entry in std::fs::read_dir(dir).map_err(io)? {
+        let entry = entry.map_err(io)?;
+        let kind = entry.file_type().map_err(io)?;
+        let path = entry.path();
+        if kind.is_dir() {
+            walk(&path, suffix, out)?;
+        } else if kind.is_file() && path.to_string_lossy().ends_with(suffix) {
+            out.push(path);
+            if out.len() > MAX_CLIPS {
+                return Err(MocapError::Invalid {
+                    path: dir.to_path_buf(),
+                    message: format!("more than {MAX_CLIPS} clip files"),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shipped library: every clip is found, the held-out ones are the test split, and
+    /// no clip is in both.
+    #[test]
+    fn the_shipped_library_holds_out_its_test_clips() {
+        let path = Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../data/mocap/library.toml"
+        ));
+        let library = Library::from_file(path).expect("library");
+        let count = |collection: &str, split: Option<Split>| {
+            library
+                .clips(split)
+                .filter(|c| c.collection == collection)
+                .count()
+        };
+        // 78 in the source, of which 8 are copies of others (data/mocap/hrc-task-clips/DUPLICATES).
+        assert_eq!(count("hrc-task-clips", None), 70);
+        assert_eq!(count("human-assembly-data", None), 20);
+        let held: usize = library.collections.iter().map(|c| c.test.len()).sum();
+        assert_eq!(library.clips(Some(Split::Test)).count(), held);
+        assert_eq!(held, 18);
+        for c in library.clips(Some(Split::Test)) {
+            assert!(library.clips(Some(Split::Tuning)).all(|t| t.id != c.id));
+        }
+    }
+
+    #[test]
+    fn a_held_out_clip_that_is_not_there_is_refused() {
+        let dir = tempfile::tempdir().expect("dir");
+        std::fs::create_dir(dir.path().join("c")).expect("dir");
+        std::fs::write(dir.path().join("c/a.txt"), "0 0 0\n0 0 0\n").expect("write");
+        let lib = dir.path().join("library.toml");
+        std::fs::write(
+            &lib,
+            "[[collection]]\nname = \"c\"\ndir = \"c\"\nsuffix = \".txt\"\ntest = [\"b\"]\n\
+             format = { format = \"table\", columns = [\"pelvis\"], rate_hz = 10.0 }\n",
+        )
+        .expect("write");
+        let err = Library::from_file(&lib).expect_err("no b").to_string();
+        assert!(err.contains("held-out clip \"b\""), "{err}");
+        std::fs::write(
+            &lib,
+            "[[collection]]\nname = \"c\"\ndir = \"c\"\nsuffix = \".txt\"\ntest = [\"a\"]\n\
+             format = { format = \"table\", columns = [\"pelvis\"], rate_hz = 10.0 }\n",
+        )
+        .expect("write");
+        let library = Library::from_file(&lib).expect("library");
+        assert_eq!(library.clips(Some(Split::Test)).count(), 1);
+        let clip = library.clips[0].read().expect("clip");
+        assert_eq!((clip.name.as_str(), clip.frames()), ("c/a", 2));
+    }
+}
