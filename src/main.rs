@@ -105,6 +105,9 @@ enum HumanCommand {
     /// speed and acceleration of recorded clips (cleaned of capture artefacts, low-pass
     /// filtered), each library's tuning and test clips apart, and the generator's beside them.
     Stats(cli::human::StatsArgs),
+    /// Lay clips on the cell's human model (inverse kinematics within its joint and velocity
+    /// limits) and report, per clip, how far its wrist and elbow stay from the recording.
+    Retarget(cli::human::RetargetArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -165,6 +168,9 @@ fn main() -> ExitCode {
         Command::Human {
             command: HumanCommand::Stats(a),
         } => cli::human::stats(&a),
+        Command::Human {
+            command: HumanCommand::Retarget(a),
+        } => cli::human::retarget(&a),
         Command::Dataset {
             command: DatasetCommand::Generate(a),
         } => cli::dataset::generate(&a),

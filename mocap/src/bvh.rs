@@ -50,8 +50,9 @@ pub struct Bvh {
 pub type JointMap = BTreeMap<Landmark, String>;
 
 /// A named preset of [`JointMap`]: `hrc` (the Vicon task clips shipped in
-/// `data/mocap/hrc-task-clips`: `hip`, `neck`, `head`, `*_upper_arm`, `*_forearm`, `*_hand`;
-/// its `torso` joint sits at the hip, so it gives no chest of its own) or `cmu`
+/// `data/mocap/hrc-task-clips`: `hip`, `neck`, `head`, `*_upper_arm`, `*_forearm`, `*_hand`,
+/// the sides swapped, as the hierarchy's are mirrored; its `torso` joint sits at the hip, so
+/// it gives no chest of its own) or `cmu`
 /// (the CMU motion-capture library's BVH conversions: `Hips`, `Spine1`, `LeftArm`,
 /// `LeftForeArm`, `LeftHand`).
 #[must_use]
@@ -62,12 +63,16 @@ pub fn joint_map_preset(name: &str) -> Option<JointMap> {
             (L::Pelvis, "hip"),
             (L::Neck, "neck"),
             (L::Head, "head"),
-            (L::LeftShoulder, "left_upper_arm"),
-            (L::LeftElbow, "left_forearm"),
-            (L::LeftWrist, "left_hand"),
-            (L::RightShoulder, "right_upper_arm"),
-            (L::RightElbow, "right_forearm"),
-            (L::RightWrist, "right_hand"),
+            // Mirrored: the hierarchy's `left_*` arm is the person's right. In its rest pose
+            // the head sits 0.23 m ahead of the neck along +z, so the person faces +z with y
+            // up and their left is +x, where the `right_*` arm is; and with the names as
+            // written the hands would work behind the back in most clips.
+            (L::LeftShoulder, "right_upper_arm"),
+            (L::LeftElbow, "right_forearm"),
+            (L::LeftWrist, "right_hand"),
+            (L::RightShoulder, "left_upper_arm"),
+            (L::RightElbow, "left_forearm"),
+            (L::RightWrist, "left_hand"),
         ],
         "cmu" => &[
             (L::Pelvis, "Hips"),

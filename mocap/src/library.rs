@@ -265,3 +265,60 @@ mod tests {
         assert_eq!((clip.name.as_str(), clip.frames()), ("c/a", 2));
     }
 }
+
+#[cfg(test)]
+mod sides {
+    use super::*;
+    use crate::Landmark as L;
+    use workcell_robots::math::Vector;
+
+    /// The `hrc` preset's sides are the person's: with the torso frame the sides give (left
+    /// from the right shoulder to the left, up from the pelvis to the neck, forward = left x
+    /// up), the hands of people handing objects over work in front of the body, and the
+    /// head is ahead of the neck. With the hierarchy's names as written, both come out
+    /// behind.
+    #[test]
+    fn the_vicon_clips_face_forward_with_the_presets_sides() {
+        let path = Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../data/mocap/library.toml"
+        ));
+        let library = Library::from_file(path).expect("library");
+        let mut clips = 0;
+        for c in library
+            .clips(None)
+            .filter(|c| c.id.contains("HumanRobotHandover"))
+        {
+            let clip = c.read().expect("clip");
+            let t = |l| clip.track(l);
+            let (ls, rs, pelvis, neck, head) = (
+                t(L::LeftShoulder),
+                t(L::RightShoulder),
+                t(L::Pelvis),
+                t(L::Neck),
+                t(L::Head),
+            );
+            let (lw, rw) = (t(L::LeftWrist), t(L::RightWrist));
+            let (mut hands, mut face) = (0.0, 0.0);
+            for f in 0..clip.frames() {
+                let left = (ls[f] - rs[f]).normalize();
+                let up = neck[f] - pelvis[f];
+                let forward = left.cross(up).normalize();
+                let middle: Vector = (ls[f] + rs[f]) * 0.5;
+                hands += 0.5 * ((lw[f] - middle).dot(forward) + (rw[f] - middle).dot(forward));
+                face += (head[f] - neck[f]).dot(forward);
+            }
+            let n = clip.frames() as f64;
+            assert!(hands / n > 0.05, "{}: hands {} m ahead", c.id, hands / n);
+            assert!(face / n > 0.02, "{}: head {} m ahead", c.id, face / n);
+            eprintln!(
+                "{}: hands {:.3} m, head {:.3} m ahead",
+                c.id,
+                hands / n,
+                face / n
+            );
+            clips += 1;
+        }
+        assert!(clips >= 10, "{clips} handover clips");
+    }
+}

@@ -132,13 +132,16 @@ impl CellModel {
             &initial_q,
             &clutter,
         )?;
-        let human_motion = HumanMotion::generate(
-            &scenario.human.motions,
-            scenario.human.shuffle,
-            &human,
-            scenario.human.peak_speed_m_s,
-            scenario.seed,
-        )
+        let human_motion = match &scenario.human.recorded {
+            Some(recorded) => recorded_motion(recorded, scenario.seed, scenario_path, &human)?,
+            None => HumanMotion::generate(
+                &scenario.human.motions,
+                scenario.human.shuffle,
+                &human,
+                scenario.human.peak_speed_m_s,
+                scenario.seed,
+            ),
+        }
         .with_speed(scenario.human.speed_scale);
         tracing::info!(
             robot = robot.name(),
@@ -493,4 +496,62 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
     state.steps += 1;
     state.read_robot();
     Ok(())
+}
+
+/// The clip the episode of `seed` plays (`[human.recorded]`), retargeted onto `human`.
+fn recorded_motion(
+    recorded: &crate::scenario::RecordedConfig,
+    seed: u64,
+    scenario_path: &Path,
+    human: &RobotModel,
+) -> Result<HumanMotion> {
+    use crate::scenario::ClipSplit;
+    use workcell_mocap::library::{Library, Split};
+    let dir = scenario_path.parent().unwrap_or(Path::new("."));
+    let library = Library::from_file(&dir.join(&recorded.library))?;
+    let chosen: Vec<&workcell_mocap::library::LibraryClip> = if recorded.clips.is_empty() {
+        let split = match recorded.split {
+            ClipSplit::Tuning => Some(Split::Tuning),
+            ClipSplit::Test => Some(Split::Test),
+            ClipSplit::All => None,
+        };
+        library.clips(split).collect()
+    } else {
+        recorded
+            .clips
+            .iter()
+            .map(|id| {
+                library
+                    .clips
+                    .iter()
+                    .find(|c| &c.id == id)
+                    .ok_or_else(|| SimError::Invalid {
+                        path: Some(scenario_path.to_path_buf()),
+                        key: "human.recorded.clips".into(),
+                        message: format!("{id:?} is not a clip of {}", library.path.display()),
+                    })
+            })
+            .collect::<Result<_>>()?
+    };
+    let n = chosen.len().max(1) as u64;
+    let Some(clip) = chosen.get((seed.wrapping_sub(1) % n) as usize) else {
+        return Err(SimError::Invalid {
+            path: Some(scenario_path.to_path_buf()),
+            key: "human.recorded".into(),
+            message: format!("no clips to play in {}", library.path.display()),
+        });
+    };
+    let (motion, report) = crate::retarget::retarget(&clip.read()?, human, &recorded.retarget)
+        .map_err(|e| e.in_file(scenario_path))?;
+    tracing::info!(
+        clip = clip.id,
+        frames = report.frames,
+        wrist_error_median_m = report.wrist_error_m.median,
+        "recorded human motion"
+    );
+    Ok(HumanMotion::recorded(
+        motion,
+        recorded.start_s,
+        recorded.end,
+    ))
 }

@@ -62,6 +62,9 @@ pub enum SimError {
     /// The renderer, or reading or writing an image or a dataset file, failed.
     #[error(transparent)]
     Render(#[from] workcell_render::RenderError),
+    /// A recorded clip could not be read.
+    #[error(transparent)]
+    Mocap(#[from] workcell_mocap::MocapError),
     /// A dataset being generated cannot be written where it is asked to be.
     #[error("{path}: {message}")]
     Dataset { path: PathBuf, message: String },

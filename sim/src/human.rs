@@ -168,6 +168,29 @@ pub struct HumanMotion {
     dof: usize,
     /// Playback speed: 1 as generated, 0.5 half as fast.
     speed: f64,
+    /// A recorded clip played instead of the phases.
+    recorded: Option<Box<Playback>>,
+}
+
+/// A retargeted clip as the human plays it (`[human.recorded]`).
+#[derive(Debug, Clone, PartialEq)]
+struct Playback {
+    motion: crate::retarget::RecordedMotion,
+    /// Clip time at the episode's start, s.
+    start_s: f64,
+    end: ClipEnd,
+}
+
+/// What a recorded clip does at its end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ClipEnd {
+    /// Stand still in the last frame.
+    Hold,
+    /// Start again from the first frame (a jump back, unless the clip ends where it began).
+    Loop,
+    /// Play backwards to the start, then forwards again: no jump.
+    Reverse,
 }
 
 impl HumanMotion {
@@ -271,7 +294,36 @@ impl HumanMotion {
             period_s: t,
             dof,
             speed: 1.0,
+            recorded: None,
         }
+    }
+
+    /// A recorded clip's motion, retargeted onto the arm, played from `start_s` into the
+    /// clip; after its end it holds, loops or reverses.
+    #[must_use]
+    pub fn recorded(motion: crate::retarget::RecordedMotion, start_s: f64, end: ClipEnd) -> Self {
+        let duration = motion.duration_s().max(1e-9);
+        let dof = motion.q.first().map_or(0, Vec::len);
+        Self {
+            phases: Vec::new(),
+            period_s: match end {
+                ClipEnd::Reverse => 2.0 * duration,
+                ClipEnd::Hold | ClipEnd::Loop => duration,
+            },
+            dof,
+            speed: 1.0,
+            recorded: Some(Box::new(Playback {
+                motion,
+                start_s: start_s.max(0.0),
+                end,
+            })),
+        }
+    }
+
+    /// The recorded clip's name, when a clip drives the human.
+    #[must_use]
+    pub fn clip(&self) -> Option<&str> {
+        self.recorded.as_ref().map(|p| p.motion.name.as_str())
     }
 
     /// The same motion played `speed` times as fast (positions along the same path, joint
@@ -291,10 +343,12 @@ impl HumanMotion {
         self.period_s
     }
 
-    /// The primitive being performed at `t_s`.
+    /// The primitive being performed at `t_s`; none for a recorded clip.
     #[must_use]
-    pub fn kind_at(&self, t_s: f64) -> HumanMotionKind {
-        self.phase(t_s * self.speed).kind
+    pub fn kind_at(&self, t_s: f64) -> Option<HumanMotionKind> {
+        self.recorded
+            .is_none()
+            .then(|| self.phase(t_s * self.speed).kind)
     }
 
     /// The phase at generated time `t_s` (before the speed is applied).
@@ -309,6 +363,28 @@ impl HumanMotion {
 
     /// Joint positions and velocities at `t_s` (slices of the arm's dof).
     pub fn sample(&self, t_s: f64, q: &mut [f64], qd: &mut [f64]) {
+        if let Some(p) = &self.recorded {
+            let n = self.dof.min(q.len());
+            let duration = p.motion.duration_s();
+            let t = p.start_s + t_s * self.speed;
+            let (clip_t, sign) = match p.end {
+                ClipEnd::Hold => (t.min(duration), if t < duration { 1.0 } else { 0.0 }),
+                ClipEnd::Loop => (t.rem_euclid(duration.max(1e-9)), 1.0),
+                ClipEnd::Reverse => {
+                    let u = t.rem_euclid(2.0 * duration.max(1e-9));
+                    if u <= duration {
+                        (u, 1.0)
+                    } else {
+                        (2.0 * duration - u, -1.0)
+                    }
+                }
+            };
+            p.motion.sample(clip_t, &mut q[..n], &mut qd[..n]);
+            for v in &mut qd[..n] {
+                *v *= sign * self.speed;
+            }
+            return;
+        }
         let t = (t_s * self.speed).rem_euclid(self.period_s * self.speed);
         let p = self.phase(t);
         p.sample(t - p.t0_s, &mut q[..self.dof], &mut qd[..self.dof]);
@@ -364,6 +440,7 @@ mod tests {
                 assert!((0.5 * qd[j] - qd2[j]).abs() < 1e-12);
             }
             assert_eq!(m.kind_at(t), slow.kind_at(2.0 * t));
+            assert!(m.kind_at(t).is_some());
         }
     }
 
@@ -466,5 +543,42 @@ mod tests {
             .fold(0.0, f64::max);
         assert!((v - reach).abs() < 1e-9, "{v} vs {reach}");
         assert_eq!(speed.fastest(&[0.0; 2], &[0.0; 2]), 0.0);
+    }
+
+    /// A clip's end: `hold` stands still with zero velocity, `loop` starts again, `reverse`
+    /// turns back without a jump (its velocity flips sign).
+    #[test]
+    fn a_recorded_clip_holds_loops_or_reverses_at_its_end() {
+        let motion = crate::retarget::RecordedMotion {
+            name: "ramp".into(),
+            rate_hz: 10.0,
+            q: (0..=10)
+                .map(|f| vec![0.1 * f64::from(f), 0.0, 0.0])
+                .collect(),
+        };
+        let at = |end, t: f64| {
+            let m = HumanMotion::recorded(motion.clone(), 0.0, end);
+            let (mut q, mut qd) = ([0.0; 3], [0.0; 3]);
+            m.sample(t, &mut q, &mut qd);
+            (q[0], qd[0])
+        };
+        let close = |(a, b): (f64, f64), (c, d): (f64, f64)| {
+            assert!(
+                (a - c).abs() < 1e-12 && (b - d).abs() < 1e-12,
+                "{a} {b} vs {c} {d}"
+            );
+        };
+        close(at(ClipEnd::Hold, 0.5), (0.5, 1.0));
+        close(at(ClipEnd::Hold, 1.7), (1.0, 0.0));
+        close(at(ClipEnd::Loop, 1.25), (0.25, 1.0));
+        close(at(ClipEnd::Reverse, 1.25), (0.75, -1.0));
+        close(at(ClipEnd::Reverse, 2.25), (0.25, 1.0));
+        // Played twice as fast: twice the velocity along the same path.
+        let fast = HumanMotion::recorded(motion, 0.0, ClipEnd::Hold).with_speed(2.0);
+        let (mut q, mut qd) = ([0.0; 3], [0.0; 3]);
+        fast.sample(0.25, &mut q, &mut qd);
+        assert!((q[0] - 0.5).abs() < 1e-12 && (qd[0] - 2.0).abs() < 1e-12);
+        assert_eq!(fast.clip(), Some("ramp"));
+        assert_eq!(fast.kind_at(0.1), None);
     }
 }

@@ -27,6 +27,7 @@ pub mod human;
 pub mod ik;
 mod multibody;
 mod planning;
+pub mod retarget;
 pub mod scenario;
 mod scene;
 pub mod trajectory;

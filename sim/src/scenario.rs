@@ -229,8 +229,58 @@ pub struct HumanConfig {
     /// approach speed of hands and arms.
     pub peak_speed_m_s: [f64; 2],
     /// Playback speed of the motions: 1 as generated, 0.5 half as fast, 1.5 a deliberately
-    /// fast intrusion (peaks up to 1.5 times `peak_speed_m_s`). Default 1.
+    /// fast intrusion (peaks up to 1.5 times `peak_speed_m_s`); a recorded clip's too. Default
+    /// 1.
     pub speed_scale: f64,
+    /// A recorded clip moves the arm instead of the generator (`[human.recorded]`); left
+    /// out, the generator.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recorded: Option<RecordedConfig>,
+}
+
+/// Recorded motion in a scenario: which clips of a library, how they are played, how they
+/// are retargeted onto the arm. The episode of seed `s` plays clip `(s - 1) mod n` of the `n`
+/// chosen, so seeds `1..=k n` play every clip `k` times, each with its own robot motion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordedConfig {
+    /// The clip library, relative to the scenario file (the shipped one is
+    /// `data/mocap/library.toml`).
+    pub library: PathBuf,
+    /// Clips by id (`hrc-task-clips/CollaborativeHammering/0`). Default empty: every clip of
+    /// `split`.
+    #[serde(default)]
+    pub clips: Vec<String>,
+    /// The library's clips played when `clips` is empty: `tuning`, `test` or `all`. Default
+    /// `tuning`: the held-out clips are played only when asked for.
+    #[serde(default = "tuning")]
+    pub split: ClipSplit,
+    /// Clip time at the episode's start, s. Default 0.
+    #[serde(default)]
+    pub start_s: f64,
+    /// At the clip's end: `hold`, `loop` or `reverse` (backwards to the start, no jump).
+    /// Default `reverse`.
+    #[serde(default = "reverse")]
+    pub end: crate::human::ClipEnd,
+    /// How the clip is laid on the arm (side, low-pass cut-off, elbow weight).
+    #[serde(default)]
+    pub retarget: crate::retarget::RetargetConfig,
+}
+
+/// Which clips of a library.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ClipSplit {
+    Tuning,
+    Test,
+    All,
+}
+
+fn tuning() -> ClipSplit {
+    ClipSplit::Tuning
+}
+fn reverse() -> crate::human::ClipEnd {
+    crate::human::ClipEnd::Reverse
 }
 
 impl Default for HumanConfig {
@@ -248,6 +298,7 @@ impl Default for HumanConfig {
             shuffle: false,
             peak_speed_m_s: [1.0, 2.0],
             speed_scale: 1.0,
+            recorded: None,
         }
     }
 }
@@ -432,6 +483,28 @@ impl Scenario {
                 "human.peak_speed_m_s",
                 format!("[{lo}, {hi}] must be a range within (0, {MAX_HUMAN_PEAK_SPEED_M_S}] m/s"),
             ));
+        }
+        if let Some(r) = &self.human.recorded {
+            if !(r.start_s.is_finite() && r.start_s >= 0.0) {
+                return Err(bad(
+                    "human.recorded.start_s",
+                    format!("{} must be >= 0", r.start_s),
+                ));
+            }
+            let c = r.retarget.cutoff_hz;
+            if !(c.is_finite() && c > 0.0) {
+                return Err(bad(
+                    "human.recorded.retarget.cutoff_hz",
+                    format!("{c} must be > 0"),
+                ));
+            }
+            let w = r.retarget.elbow_weight;
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(bad(
+                    "human.recorded.retarget.elbow_weight",
+                    format!("{w} must be >= 0"),
+                ));
+            }
         }
         let a = self.robot.servo_acceleration_rad_s2;
         if !(a > 0.0 && a.is_finite()) {

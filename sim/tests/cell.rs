@@ -519,3 +519,71 @@ fn unbounded_scenario_settings_are_refused() {
         assert!(err.contains(key), "{to}: {err}");
     }
 }
+
+/// `[human.recorded]` with the shipped library: seed s plays clip (s - 1) mod n of the
+/// chosen ones, so seeds n apart play the same clip and neighbours another; the human's
+/// joints move as the clip does and stay within the model's limits.
+#[test]
+fn recorded_clips_drive_the_human_by_seed() {
+    let library = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/mocap/library.toml");
+    let clips = vec![
+        "hrc-task-clips/CollaborativeLifting/1".to_string(),
+        "human-assembly-data/Task1/Human1/trial1".to_string(),
+    ];
+    let model = |seed: u64| {
+        let mut scenario = Scenario::from_file(&default_path()).expect("scenario");
+        scenario.seed = seed;
+        scenario.human.recorded = Some(workcell_sim::scenario::RecordedConfig {
+            library: library.clone(),
+            clips: clips.clone(),
+            split: workcell_sim::scenario::ClipSplit::Tuning,
+            start_s: 0.0,
+            end: workcell_sim::human::ClipEnd::Reverse,
+            retarget: workcell_sim::retarget::RetargetConfig::default(),
+        });
+        CellModel::new(&scenario, &default_path()).expect("cell")
+    };
+    let (one, two, three) = (model(1), model(2), model(3));
+    assert_eq!(one.human_motion.clip(), Some(clips[0].as_str()));
+    assert_eq!(two.human_motion.clip(), Some(clips[1].as_str()));
+    assert_eq!(three.human_motion.clip(), one.human_motion.clip());
+    let limits = one.human.position_limits();
+    let (mut q, mut qd) = (vec![0.0; one.human.dof()], vec![0.0; one.human.dof()]);
+    let mut moved: f64 = 0.0;
+    let mut previous = None;
+    for k in 0..800 {
+        one.human_motion
+            .sample(0.01 * f64::from(k), &mut q, &mut qd);
+        for (v, [lo, hi]) in q.iter().zip(&limits) {
+            assert!(
+                *v >= lo - 1e-9 && *v <= hi + 1e-9,
+                "{v} outside [{lo}, {hi}]"
+            );
+        }
+        if let Some(p) = previous.replace(q.clone()) {
+            moved += q
+                .iter()
+                .zip(&p)
+                .map(|(a, b): (&f64, &f64)| (a - b).abs())
+                .sum::<f64>();
+        }
+    }
+    assert!(moved > 0.5, "the arm moved {moved} rad in 8 s");
+    // A clip the library lacks is named.
+    let mut scenario = Scenario::from_file(&default_path()).expect("scenario");
+    scenario.human.recorded = Some(workcell_sim::scenario::RecordedConfig {
+        library,
+        clips: vec!["nowhere/0".into()],
+        split: workcell_sim::scenario::ClipSplit::Tuning,
+        start_s: 0.0,
+        end: workcell_sim::human::ClipEnd::Hold,
+        retarget: workcell_sim::retarget::RetargetConfig::default(),
+    });
+    let err = CellModel::new(&scenario, &default_path())
+        .err()
+        .expect("no such clip");
+    assert!(
+        err.to_string().contains("\"nowhere/0\" is not a clip"),
+        "{err}"
+    );
+}

@@ -91,7 +91,7 @@ fn load(
     let (evaluation, dropped) = Evaluation::from_file_as(path, kind, &overrides)?;
     if let (Some(kind), false) = (kind, dropped.is_empty()) {
         eprintln!(
-            "note: perception kind {}: the file's {} (of its own kind) not used",
+            "note: --perception {} leaves out the file's {} (keys of its other kind)",
             kind.name(),
             dropped.join(", ")
         );

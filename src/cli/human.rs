@@ -26,8 +26,9 @@ pub enum SplitArg {
     All,
 }
 
+/// Which clips: libraries or files, and how files that are tables are read.
 #[derive(Debug, clap::Args)]
-pub struct StatsArgs {
+pub struct ClipArgs {
     /// Clip libraries (`.toml`, e.g. data/mocap/library.toml) or clip files (`.bvh`,
     /// `.bvh.gz`, or tables with --rate-hz). Default: the shipped library.
     pub sources: Vec<PathBuf>,
@@ -43,6 +44,12 @@ pub struct StatsArgs {
     /// For tables: metres per unit.
     #[arg(long, default_value_t = 1.0)]
     pub metres_per_unit: f64,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct StatsArgs {
+    #[command(flatten)]
+    pub clips: ClipArgs,
     /// Cut-off of the zero-phase low-pass applied before differentiating, Hz.
     #[arg(long, default_value_t = DEFAULT_CUTOFF_HZ)]
     pub cutoff_hz: f64,
@@ -161,7 +168,7 @@ struct Source {
     format: ClipFormat,
 }
 
-fn sources(args: &StatsArgs) -> Result<Vec<Source>> {
+fn sources(args: &ClipArgs) -> Result<Vec<Source>> {
     let given = if args.sources.is_empty() {
         vec![PathBuf::from("data/mocap/library.toml")]
     } else {
@@ -298,7 +305,7 @@ pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
     if !(args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= 3600.0) {
         bail!("--seconds {}: from 0 to 3600", args.seconds);
     }
-    let sources = sources(args)?;
+    let sources = sources(&args.clips)?;
     let mut groups: BTreeMap<String, Group> = BTreeMap::new();
     let mut per_clip: Vec<(String, Group)> = Vec::new();
     let mut cleaning = Vec::new();
@@ -515,4 +522,104 @@ fn describe(c: &CleanConfig) -> String {
         c.max_repair_s,
         c.min_piece_s
     )
+}
+
+#[derive(Debug, clap::Args)]
+pub struct RetargetArgs {
+    #[command(flatten)]
+    pub clips: ClipArgs,
+    /// The cell whose human model the clips are laid on.
+    #[arg(long, default_value = "configs/default.toml")]
+    pub cell: PathBuf,
+    /// The recorded arm the model follows.
+    #[arg(long, value_enum, default_value_t = SideArg::Right)]
+    pub side: SideArg,
+    /// Cut-off of the low-pass on the recorded positions, Hz.
+    #[arg(long, default_value_t = DEFAULT_CUTOFF_HZ)]
+    pub cutoff_hz: f64,
+    /// Weight of the elbow's target against the wrist's.
+    #[arg(long, default_value_t = workcell::sim::retarget::RetargetConfig::default().elbow_weight)]
+    pub elbow_weight: f64,
+    /// Also write every clip's report as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SideArg {
+    Left,
+    Right,
+}
+
+/// Lays each clip on the cell's human model and prints what the model could not follow:
+/// the wrist's and the elbow's distance from the recorded directions on the model's bones,
+/// the frames at a joint limit or held back by a velocity limit.
+pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
+    use workcell::sim::retarget::{RetargetConfig, Side, retarget};
+    let sources = sources(&args.clips)?;
+    let mut scenario = Scenario::from_file(&args.cell)?;
+    scenario.human.recorded = None;
+    let model = CellModel::new(&scenario, &args.cell)?;
+    let config = RetargetConfig {
+        side: match args.side {
+            SideArg::Left => Side::Left,
+            SideArg::Right => Side::Right,
+        },
+        cutoff_hz: args.cutoff_hz,
+        elbow_weight: args.elbow_weight,
+    };
+    if !(args.elbow_weight.is_finite() && args.elbow_weight >= 0.0) {
+        bail!("--elbow-weight {}: a weight >= 0", args.elbow_weight);
+    }
+    say!(
+        "{} clips on {} ({}), the {} arm; errors are the distance from the recorded directions laid on the model's bones",
+        sources.len(),
+        model.human.name(),
+        args.cell.display(),
+        config.side.name()
+    );
+    say!();
+    say!(
+        "| clip | frames kept | wrist error median (mm) | wrist peak (mm) | elbow median (mm) | elbow peak (mm) | at a joint limit | velocity-limited | recorded bones (m) |"
+    );
+    say!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let mut reports = Vec::new();
+    let (mut wrist, mut limited, mut frames) = (Vec::new(), 0, 0);
+    for source in &sources {
+        let clip = workcell::mocap::read_clip(&source.path, &source.format, source.id.clone())?;
+        let (_, r) = retarget(&clip, &model.human, &config)?;
+        say!(
+            "| {} | {} of {} | {:.0} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2}, {:.2} |",
+            r.clip,
+            r.frames,
+            r.clip_frames,
+            1e3 * r.wrist_error_m.median,
+            1e3 * r.wrist_error_m.peak,
+            1e3 * r.elbow_error_m.median,
+            1e3 * r.elbow_error_m.peak,
+            r.clamped_frames,
+            r.velocity_limited_frames,
+            r.recorded_bones_m[0],
+            r.recorded_bones_m[1]
+        );
+        wrist.push(r.wrist_error_m.median);
+        limited += r.velocity_limited_frames;
+        frames += r.frames;
+        reports.push(r);
+    }
+    let spread = Spread::of(&mut wrist);
+    say!();
+    say!(
+        "median over clips of the wrist's median error {:.0} mm (worst clip {:.0} mm); {limited} of {frames} frames velocity-limited; the model's bones {:.2}, {:.2} m",
+        1e3 * spread.median,
+        1e3 * spread.peak,
+        reports.first().map_or(0.0, |r| r.model_bones_m[0]),
+        reports.first().map_or(0.0, |r| r.model_bones_m[1])
+    );
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&reports).context("serialising the reports")?;
+        workcell::robots::output::write_atomic(path, text.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
 }

@@ -55,6 +55,11 @@ pub struct EvaluationConfig {
     /// `human.speed_scale` (the generated motions peak at `human.peak_speed_m_s`; ISO 13855
     /// assumes 1.6 to 2.0 m/s). Default: the cell's.
     pub human_speed_scale: Option<f64>,
+    /// Recorded clips move the cell's human instead of its generator: the cell's
+    /// `[human.recorded]` (`workcell_sim::scenario::RecordedConfig`), its `library` relative to
+    /// this file. Episode `i` (seed `s`) plays clip `(s - 1) mod n`. Left out: the cell's own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub human_recorded: Option<workcell_sim::scenario::RecordedConfig>,
     /// An episode ends unfinished after `timeout_factor * task_s`. Default 3.
     pub timeout_factor: f64,
     /// Control period, s (a multiple of the cell's time step). Default 0.004.
@@ -75,6 +80,7 @@ impl Default for EvaluationConfig {
             cell: "default.toml".into(),
             task_s: 12.0,
             human_speed_scale: None,
+            human_recorded: None,
             timeout_factor: 3.0,
             control_period_s: 0.004,
             controller: ControllerConfig::default(),
@@ -201,6 +207,17 @@ impl Evaluation {
             *weights = dir.join(&*weights);
         }
         let mut scenario = Scenario::from_file(&scenario_path)?;
+        if let Some(recorded) = &mut config.human_recorded {
+            // Relative to this file, wherever the cell's file is.
+            if recorded.library.is_relative() {
+                recorded.library = std::path::absolute(dir.join(&recorded.library))
+                    .unwrap_or_else(|_| dir.join(&recorded.library));
+            }
+            scenario.human.recorded = Some(recorded.clone());
+            scenario
+                .validate()
+                .map_err(|e| Error::config("human_recorded", e.to_string()).in_file(path))?;
+        }
         if let Some(speed) = config.human_speed_scale {
             scenario.human.speed_scale = speed;
             scenario

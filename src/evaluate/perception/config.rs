@@ -287,7 +287,7 @@ pub fn switch_perception_kind(document: &mut toml::Table, kind: PerceptionKind) 
     let mut dropped = Vec::new();
     if current != Some(kind) {
         table.retain(|key, _| {
-            let keep = key == "kind" || kind.keys().iter().any(|k| *k == key);
+            let keep = key == "kind" || kind.keys().contains(&key);
             if !keep {
                 dropped.push(format!("perception.{key}"));
             }
