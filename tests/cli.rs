@@ -1297,6 +1297,24 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         "no camera named \"ceiling\"",
     );
     bad("cell = \"missing.toml\"\n", "missing.toml");
+    bad(
+        &format!("{cell_line}[human_recorded]\nlibrary = \"nowhere.toml\"\n"),
+        "human_recorded.library",
+    );
+    bad(
+        &format!(
+            "{cell_line}[human_recorded]\nlibrary = {:?}\nclips = [\"no/such\"]\n",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/data/mocap/library.toml")
+        ),
+        "\"no/such\" is not a clip",
+    );
+    bad(
+        &format!(
+            "{cell_line}[human_recorded]\nlibrary = {:?}\nend = \"bounce\"\n",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/data/mocap/library.toml")
+        ),
+        "unknown variant `bounce`",
+    );
     for (set, expected) in [
         ("safety", "an override is KEY=VALUE"),
         ("cell.x=1", "'cell' is not a table"),

@@ -217,6 +217,26 @@ impl Evaluation {
             scenario
                 .validate()
                 .map_err(|e| Error::config("human_recorded", e.to_string()).in_file(path))?;
+            // The library and the clips it names, checked now rather than at the first
+            // episode.
+            let library =
+                workcell_mocap::library::Library::from_file(&recorded.library).map_err(|e| {
+                    Error::config("human_recorded.library", e.to_string()).in_file(path)
+                })?;
+            if let Some(missing) = recorded
+                .clips
+                .iter()
+                .find(|id| library.clips.iter().all(|c| &c.id != *id))
+            {
+                return Err(Error::config(
+                    "human_recorded.clips",
+                    format!(
+                        "{missing:?} is not a clip of {}",
+                        recorded.library.display()
+                    ),
+                )
+                .in_file(path));
+            }
         }
         if let Some(speed) = config.human_speed_scale {
             scenario.human.speed_scale = speed;
