@@ -1834,10 +1834,28 @@ fn human_stats_measures_a_clip_beside_the_generator() {
     );
     // Retargeted onto the cell's arm: the arms stand straight out to the sides, which the
     // model's abducted arm reaches exactly.
-    let out = workcell(&["human", "retarget", clip.to_str().expect("utf-8")]);
+    let glb = dir.path().join("walk.glb");
+    let out = workcell(&[
+        "human",
+        "retarget",
+        clip.to_str().expect("utf-8"),
+        "--gltf",
+        glb.to_str().expect("utf-8"),
+    ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let shown = text(&out.stdout);
     assert!(shown.contains("| walk | 300 of 300 | 0 | 0 |"), "{shown}");
+    // A glTF of the cell with the arm animated: 3 s at 30 frames a second.
+    let bytes = std::fs::read(&glb).expect("glb");
+    let document = gltf::Gltf::from_slice(&bytes).expect("a valid glTF");
+    let animation = document.animations().next().expect("an animation");
+    let times = animation
+        .channels()
+        .next()
+        .expect("a channel")
+        .sampler()
+        .input();
+    assert_eq!(times.count(), 90);
     // A table needs its frame rate said.
     let table = dir.path().join("t.txt");
     std::fs::write(&table, "0 0 0\n").expect("write");

@@ -543,6 +543,10 @@ pub struct RetargetArgs {
     /// Also write every clip's report as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Write the retargeted clip as an animated binary glTF (`.glb`) of the cell, for any
+    /// glTF viewer (one clip only).
+    #[arg(long)]
+    pub gltf: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -557,6 +561,9 @@ pub enum SideArg {
 pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
     use workcell::sim::retarget::{RetargetConfig, Side, retarget};
     let sources = sources(&args.clips)?;
+    if args.gltf.is_some() && sources.len() != 1 {
+        bail!("--gltf writes one clip; {} were given", sources.len());
+    }
     let mut scenario = Scenario::from_file(&args.cell)?;
     scenario.human.recorded = None;
     let model = CellModel::new(&scenario, &args.cell)?;
@@ -587,7 +594,12 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
     let (mut wrist, mut limited, mut frames) = (Vec::new(), 0, 0);
     for source in &sources {
         let clip = workcell::mocap::read_clip(&source.path, &source.format, source.id.clone())?;
-        let (_, r) = retarget(&clip, &model.human, &config)?;
+        let (motion, r) = retarget(&clip, &model.human, &config)?;
+        if let Some(path) = &args.gltf {
+            let glb = clip_glb(&model, &motion)?;
+            workcell::robots::output::write_atomic(path, &glb)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
         say!(
             "| {} | {} of {} | {:.0} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2}, {:.2} |",
             r.clip,
@@ -616,10 +628,54 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
         reports.first().map_or(0.0, |r| r.model_bones_m[0]),
         reports.first().map_or(0.0, |r| r.model_bones_m[1])
     );
+    if let Some(path) = &args.gltf {
+        say!("replay: {}", path.display());
+    }
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&reports).context("serialising the reports")?;
         workcell::robots::output::write_atomic(path, text.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The cell with its robot at rest and its human playing `motion`, at 30 frames a second, as
+/// binary glTF.
+fn clip_glb(
+    model: &CellModel,
+    motion: &workcell::sim::retarget::RecordedMotion,
+) -> Result<Vec<u8>> {
+    let mut robot = KinematicState::new(&model.robot);
+    robot.X_WB = model.X_WR;
+    model
+        .robot
+        .forward_kinematics(&model.initial_q, &mut robot)?;
+    let mut human = KinematicState::new(&model.human);
+    human.X_WB = model.X_WH;
+    let (mut q, mut qd) = (vec![0.0; model.human.dof()], vec![0.0; model.human.dof()]);
+    let mut recording = workcell::evaluate::Recording {
+        t_s: Vec::new(),
+        robot_link_poses: Vec::new(),
+        human_link_poses: Vec::new(),
+        robot_q: Vec::new(),
+        closest: Vec::new(),
+    };
+    let frames = (motion.duration_s() * 30.0).floor() as usize + 1;
+    for k in 0..frames {
+        let t = k as f64 / 30.0;
+        motion.sample(t, &mut q, &mut qd);
+        model.human.forward_kinematics(&q, &mut human)?;
+        recording.t_s.push(t);
+        recording.robot_link_poses.push(robot.link_poses().to_vec());
+        recording.human_link_poses.push(human.link_poses().to_vec());
+        recording.robot_q.push(model.initial_q.clone());
+        recording.closest.push(None);
+    }
+    Ok(workcell::evaluate::replay::episode_glb(
+        model,
+        &[],
+        &recording,
+        workcell::safety::FilterConfig::default().d_min_m, // no closest pairs are drawn
+        &motion.name,
+    ))
 }
