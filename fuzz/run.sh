@@ -16,7 +16,7 @@ shift $(( $# > 2 ? 2 : $# ))
 if [ $# -gt 0 ]; then
     targets=("$@")
 else
-    targets=(urdf urdf_rapier stl obj dae gltf png scenario evaluation dataset_config train_config weights manifest)
+    targets=(urdf urdf_rapier stl obj dae gltf png scenario evaluation dataset_config train_config weights manifest bvh joint_table clip_library)
 fi
 export AFL_SKIP_CPUFREQ=1 AFL_I_DONT_CARE_ABOUT_MISSING_CRASHES=1 AFL_NO_UI=1 AFL_NO_AFFINITY=1
 export AFL_MAP_SIZE=262144

@@ -17,7 +17,7 @@ use workcell::sim::Scenario;
 use workcell::sim::dataset::DatasetConfig;
 
 /// Every target, by the name of its corpus folder.
-pub const TARGETS: [&str; 13] = [
+pub const TARGETS: [&str; 16] = [
     "urdf",
     "urdf_rapier",
     "stl",
@@ -31,6 +31,9 @@ pub const TARGETS: [&str; 13] = [
     "train_config",
     "weights",
     "manifest",
+    "bvh",
+    "joint_table",
+    "clip_library",
 ];
 
 /// The repository's root, which anchors the paths that configs name.
@@ -107,6 +110,71 @@ pub fn run(target: &str, data: &[u8]) {
                 for entry in dataset.entries(None) {
                     let _ = dataset.labels(entry);
                 }
+            }
+        }
+        "bvh" => {
+            if let Some(text) = text() {
+                let path = Path::new("fuzz.bvh");
+                if let Ok(bvh) = workcell::mocap::bvh::Bvh::parse(text, path) {
+                    for preset in ["hrc", "cmu"] {
+                        if let Some(map) = workcell::mocap::bvh::joint_map_preset(preset) {
+                            let _ = bvh.clip(
+                                &map,
+                                0.001,
+                                workcell::mocap::Axes::Y_UP,
+                                "fuzz".into(),
+                                path,
+                            );
+                        }
+                    }
+                    // Whatever the hierarchy names, its first joint as the pelvis and its
+                    // last as a wrist.
+                    let names: Vec<String> = bvh.joint_names().map(str::to_string).collect();
+                    if let (Some(first), Some(last)) = (names.first(), names.last()) {
+                        let map = [
+                            (workcell::mocap::Landmark::Pelvis, first.clone()),
+                            (workcell::mocap::Landmark::RightWrist, last.clone()),
+                        ]
+                        .into_iter()
+                        .collect();
+                        if let Ok(clip) =
+                            bvh.clip(&map, 1.0, workcell::mocap::Axes::Z_UP, "fuzz".into(), path)
+                        {
+                            let config = workcell::mocap::clean::CleanConfig::default();
+                            let _ = workcell::mocap::clean::clean(&clip, &config);
+                        }
+                    }
+                }
+            }
+        }
+        "joint_table" => {
+            if let Some(text) = text() {
+                let format = workcell::mocap::table::TableFormat {
+                    columns: workcell::mocap::table::ASSEMBLY_COLUMNS.to_vec(),
+                    rate_hz: 30.0,
+                    metres_per_unit: 1.0,
+                    axes: workcell::mocap::Axes::CAMERA,
+                    max_gap_s: 0.5,
+                };
+                let path = Path::new("fuzz.txt");
+                if let Ok(clip) =
+                    workcell::mocap::table::parse_table(text, &format, "fuzz".into(), path)
+                {
+                    let config = workcell::mocap::clean::CleanConfig::default();
+                    let (pieces, _) = workcell::mocap::clean::clean(&clip, &config);
+                    for piece in &pieces {
+                        let _ = workcell::mocap::stats::clip_samples(piece);
+                    }
+                }
+            }
+        }
+        "clip_library" => {
+            // Beside the shipped clips: a collection may name their folders (or try to leave).
+            if let Some(text) = text() {
+                let _ = workcell::mocap::library::Library::from_toml(
+                    text,
+                    &root().join("data/mocap/fuzz.toml"),
+                );
             }
         }
         _ => {}

@@ -245,7 +245,8 @@ impl Bvh {
         if frame_time_s <= 0.0 {
             return Err(words.error(None, format!("frame time {frame_time_s} s: > 0")));
         }
-        let mut values = Vec::with_capacity(frames.saturating_mul(channels).min(1 << 26));
+        // Every value takes at least two bytes of the text: no more can follow than that.
+        let mut values = Vec::with_capacity(frames.saturating_mul(channels).min(text.len() / 2));
         for f in 0..frames {
             for _ in 0..channels {
                 values.push(words.number(&format!("frame {f}'s values"))?);

@@ -107,7 +107,16 @@ impl Library {
                     source,
                 }
             })?;
-        let file: LibraryFile = toml::from_str(&text).map_err(|e| MocapError::Parse {
+        Self::from_toml(&text, path)
+    }
+
+    /// Like [`Library::from_file`] on text already read; `path` names it in errors and
+    /// anchors the collections' folders.
+    ///
+    /// # Errors
+    /// As [`Library::from_file`], without the I/O of the file itself.
+    pub fn from_toml(text: &str, path: &Path) -> Result<Self> {
+        let file: LibraryFile = toml::from_str(text).map_err(|e| MocapError::Parse {
             path: path.to_path_buf(),
             line: None,
             message: e.to_string(),
@@ -183,19 +192,48 @@ impl Library {
     }
 }
 
+/// The deepest folder below a collection's `dir` that is searched for clips.
+pub const MAX_DEPTH: usize = 16;
+/// The most entries (files and folders) a collection's search looks at.
+pub const MAX_ENTRIES: usize = 200_000;
+
 /// Every regular file under `dir` whose name ends in `suffix` (symbolic links are not
-/// followed).
+/// followed; at most [`MAX_DEPTH`] folders deep and [`MAX_ENTRIES`] entries looked at).
 fn walk(dir: &Path, suffix: &str, out: &mut Vec<PathBuf>) -> Result<()> {
+    let mut seen = 0;
+    walk_below(dir, suffix, out, 0, &mut seen)
+}
+
+fn walk_below(
+    dir: &Path,
+    suffix: &str,
+    out: &mut Vec<PathBuf>,
+    depth: usize,
+    seen: &mut usize,
+) -> Result<()> {
     let io = |source: std::io::Error| MocapError::Io {
         path: dir.to_path_buf(),
         source,
     };
+    let refuse = |message: String| MocapError::Invalid {
+        path: dir.to_path_buf(),
+        message,
+    };
+    if depth > MAX_DEPTH {
+        return Err(refuse(format!("more than {MAX_DEPTH} folders deep")));
+    }
     for entry in std::fs::read_dir(dir).map_err(io)? {
+        *seen += 1;
+        if *seen > MAX_ENTRIES {
+            return Err(refuse(format!(
+                "more than {MAX_ENTRIES} files and folders to search"
+            )));
+        }
         let entry = entry.map_err(io)?;
         let kind = entry.file_type().map_err(io)?;
         let path = entry.path();
         if kind.is_dir() {
-            walk(&path, suffix, out)?;
+            walk_below(&path, suffix, out, depth + 1, seen)?;
         } else if kind.is_file() && path.to_string_lossy().ends_with(suffix) {
             out.push(path);
             if out.len() > MAX_CLIPS {
@@ -237,6 +275,20 @@ mod tests {
         for c in library.clips(Some(Split::Test)) {
             assert!(library.clips(Some(Split::Tuning)).all(|t| t.id != c.id));
         }
+    }
+
+    /// A collection's search stops at its depth bound instead of walking a whole disk.
+    #[test]
+    fn a_search_too_deep_is_refused() {
+        let dir = tempfile::tempdir().expect("dir");
+        let mut deep = dir.path().to_path_buf();
+        for k in 0..=MAX_DEPTH + 1 {
+            deep = deep.join(format!("d{k}"));
+        }
+        std::fs::create_dir_all(&deep).expect("dirs");
+        let mut found = Vec::new();
+        let err = walk(dir.path(), ".txt", &mut found).expect_err("too deep").to_string();
+        assert!(err.contains("folders deep"), "{err}");
     }
 
     #[test]
