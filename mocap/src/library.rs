@@ -287,7 +287,9 @@ mod tests {
         }
         std::fs::create_dir_all(&deep).expect("dirs");
         let mut found = Vec::new();
-        let err = walk(dir.path(), ".txt", &mut found).expect_err("too deep").to_string();
+        let err = walk(dir.path(), ".txt", &mut found)
+            .expect_err("too deep")
+            .to_string();
         assert!(err.contains("folders deep"), "{err}");
     }
 

@@ -18,6 +18,7 @@ use workcell_robots::collision::link_bounding_capsule;
 use workcell_robots::math::Vector;
 use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
 
+pub use crate::scenario::ClipEnd;
 use crate::scenario::HumanMotionKind;
 use crate::trajectory::quintic;
 
@@ -179,18 +180,6 @@ struct Playback {
     /// Clip time at the episode's start, s.
     start_s: f64,
     end: ClipEnd,
-}
-
-/// What a recorded clip does at its end.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ClipEnd {
-    /// Stand still in the last frame.
-    Hold,
-    /// Start again from the first frame (a jump back, unless the clip ends where it began).
-    Loop,
-    /// Play backwards to the start, then forwards again: no jump.
-    Reverse,
 }
 
 impl HumanMotion {

@@ -261,7 +261,7 @@ pub struct RecordedConfig {
     /// At the clip's end: `hold`, `loop` or `reverse` (backwards to the start, no jump).
     /// Default `reverse`.
     #[serde(default = "reverse")]
-    pub end: crate::human::ClipEnd,
+    pub end: ClipEnd,
     /// How the clip is laid on the arm (side, low-pass cut-off, elbow weight).
     #[serde(default)]
     pub retarget: crate::retarget::RetargetConfig,
@@ -279,8 +279,20 @@ pub enum ClipSplit {
 fn tuning() -> ClipSplit {
     ClipSplit::Tuning
 }
-fn reverse() -> crate::human::ClipEnd {
-    crate::human::ClipEnd::Reverse
+fn reverse() -> ClipEnd {
+    ClipEnd::Reverse
+}
+
+/// What a recorded clip does at its end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ClipEnd {
+    /// Stand still in the last frame.
+    Hold,
+    /// Start again from the first frame (a jump back, unless the clip ends where it began).
+    Loop,
+    /// Play backwards to the start, then forwards again: no jump.
+    Reverse,
 }
 
 impl Default for HumanConfig {
