@@ -162,29 +162,23 @@ fn arm_links(model: &RobotModel) -> Result<[LinkId; 3]> {
     Ok([find("upper_arm")?, find("forearm")?, find("hand")?])
 }
 
+/// Filtered tracks by landmark.
+type Tracks = std::collections::BTreeMap<Landmark, Vec<Vector>>;
+
 /// The torso's axes in the recording at frame `f`: forward, left, up.
-fn torso(clip: &Clip, tracks: &BTreeTracks, f: usize) -> Option<[Vector; 3]> {
-    let l = tracks.get(Landmark::LeftShoulder)?[f];
-    let r = tracks.get(Landmark::RightShoulder)?[f];
-    let y = (l - r).normalize_or_zero();
-    let up = match (tracks.get(Landmark::Pelvis), tracks.get(Landmark::Neck)) {
+fn torso(tracks: &Tracks, f: usize) -> Option<[Vector; 3]> {
+    let l = tracks.get(&Landmark::LeftShoulder)?.get(f)?;
+    let r = tracks.get(&Landmark::RightShoulder)?.get(f)?;
+    let y = (*l - *r).normalize_or_zero();
+    let up = match (tracks.get(&Landmark::Pelvis), tracks.get(&Landmark::Neck)) {
         (Some(p), Some(n)) => n[f] - p[f],
         _ => Vector::Z,
     };
     let z = (up - y * up.dot(y)).normalize_or_zero();
-    if y == Vector::ZERO || z == Vector::ZERO || clip.frames() <= f {
+    if y == Vector::ZERO || z == Vector::ZERO {
         return None;
     }
     Some([y.cross(z), y, z])
-}
-
-/// Filtered tracks by landmark.
-struct BTreeTracks(std::collections::BTreeMap<Landmark, Vec<Vector>>);
-
-impl BTreeTracks {
-    fn get(&self, l: Landmark) -> Option<&Vec<Vector>> {
-        self.0.get(&l)
-    }
 }
 
 /// Retargets `clip` onto `model` (the human's model, its base frame the torso's).
@@ -228,13 +222,11 @@ pub fn retarget(
         ))
     })?;
     let pad = piece.rate_hz.round() as usize;
-    let tracks = BTreeTracks(
-        piece
-            .landmarks
-            .iter()
-            .map(|&l| (l, filter_track(&filter, &piece.track(l), pad)))
-            .collect(),
-    );
+    let tracks: Tracks = piece
+        .landmarks
+        .iter()
+        .map(|&l| (l, filter_track(&filter, &piece.track(l), pad)))
+        .collect();
     let links = arm_links(model)?;
     let dof = model.dof();
     let limits = model.position_limits();
@@ -255,12 +247,12 @@ pub fn retarget(
     let mut targets = Vec::with_capacity(frames);
     let (mut upper, mut fore) = (Vec::new(), Vec::new());
     for f in 0..frames {
-        let r = torso(&piece, &tracks, f)
+        let r = torso(&tracks, f)
             .ok_or_else(|| invalid(format!("no torso frame at frame {f} (shoulders together)")))?;
         let (s, e, w) = (
-            tracks.get(shoulder).map_or(Vector::ZERO, |t| t[f]),
-            tracks.get(elbow).map_or(Vector::ZERO, |t| t[f]),
-            tracks.get(wrist).map_or(Vector::ZERO, |t| t[f]),
+            tracks.get(&shoulder).map_or(Vector::ZERO, |t| t[f]),
+            tracks.get(&elbow).map_or(Vector::ZERO, |t| t[f]),
+            tracks.get(&wrist).map_or(Vector::ZERO, |t| t[f]),
         );
         upper.push((e - s).length());
         fore.push((w - e).length());
