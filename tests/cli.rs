@@ -53,7 +53,7 @@ fn robot_check_reports_json_with_link_poses() {
 
 #[test]
 fn catalogue_models_check_clean() {
-    for name in ["ur5e_kinematics", "iiwa14_kinematics", "human_arm"] {
+    for name in ["ur5e_kinematics", "iiwa14_kinematics", "human_arm", "human"] {
         let out = workcell(&["robot", "check", name, "--json"]);
         assert!(out.status.success(), "{name}: {}", text(&out.stderr));
         let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");

@@ -22,7 +22,13 @@ pub struct CatalogueEntry {
 }
 
 /// All built-in models, sorted by name.
-pub const CATALOGUE: [CatalogueEntry; 3] = [
+pub const CATALOGUE: [CatalogueEntry; 4] = [
+    CatalogueEntry {
+        name: "human",
+        summary: "human: trunk that moves, turns and leans, head, right arm with 3-DoF shoulder, \
+                  elbow and forearm rotation (anthropometric sizes)",
+        urdf: include_str!("../urdf/human/human.urdf"),
+    },
     CatalogueEntry {
         name: "human_arm",
         summary: "human right arm: torso, 2-DoF shoulder, 1-DoF elbow, hand (anthropometric sizes)",

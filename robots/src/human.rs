@@ -4,7 +4,9 @@
 use serde::{Deserialize, Serialize};
 
 /// A part of the human body that the cell models, named as the links of the catalogue's
-/// `human_arm` and as the segmentation classes (`snake_case` in files).
+/// `human` and `human_arm` and as the segmentation classes (`snake_case` in files). The head
+/// is a part of the safety layer's (ISO/TS 15066's head and face: no contact permitted); a
+/// camera's classes show it as the torso's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum HumanPart {
@@ -12,15 +14,17 @@ pub enum HumanPart {
     UpperArm,
     Forearm,
     Hand,
+    Head,
 }
 
 impl HumanPart {
     /// Every part, torso first.
-    pub const ALL: [HumanPart; 4] = [
+    pub const ALL: [HumanPart; 5] = [
         HumanPart::Torso,
         HumanPart::UpperArm,
         HumanPart::Forearm,
         HumanPart::Hand,
+        HumanPart::Head,
     ];
 
     /// The parts of the arm, in the order used in tables (the safety layer's capsules).
@@ -35,6 +39,7 @@ impl HumanPart {
             HumanPart::UpperArm => "upper_arm",
             HumanPart::Forearm => "forearm",
             HumanPart::Hand => "hand",
+            HumanPart::Head => "head",
         }
     }
 
@@ -45,7 +50,8 @@ impl HumanPart {
     }
 
     /// The part a human model's link of this name belongs to: the part names themselves,
-    /// and `shoulder` (the upper arm's first joint frame) as the upper arm.
+    /// and `shoulder` (the upper arm's first joint frame) as the upper arm. Other links
+    /// (the frames between a joint's axes) belong to their parent's part.
     #[must_use]
     pub fn of_link_name(name: &str) -> Option<HumanPart> {
         match name {

@@ -58,11 +58,28 @@ fn distance_to_segment(p: Vector, a: Vector, b: Vector) -> f64 {
 }
 
 #[test]
-fn the_flesh_of_the_arm_lies_inside_its_collision_envelope() {
-    let human = RobotModel::from_catalogue("human_arm").unwrap();
-    for part in HumanPart::ARM {
+fn the_flesh_of_the_arm_and_head_lies_inside_its_collision_envelope() {
+    for (name, parts) in [
+        ("human_arm", &HumanPart::ARM[..]),
+        (
+            "human",
+            &[
+                HumanPart::UpperArm,
+                HumanPart::Forearm,
+                HumanPart::Hand,
+                HumanPart::Head,
+            ][..],
+        ),
+    ] {
+        let human = RobotModel::from_catalogue(name).unwrap();
+        flesh_inside_envelopes(&human, parts);
+    }
+}
+
+fn flesh_inside_envelopes(human: &RobotModel, parts: &[HumanPart]) {
+    for &part in parts {
         let l = human.link_id(part.link_name()).unwrap();
-        let capsule = link_bounding_capsule(&human, l).unwrap();
+        let capsule = link_bounding_capsule(human, l).unwrap();
         let flesh: Vec<_> = human.links()[l]
             .visuals
             .iter()
@@ -110,4 +127,46 @@ fn each_look_draws_its_own_visuals_and_the_flesh_has_the_cited_girths() {
     // Every visual is in exactly one look or in both: none is lost.
     let all = human.links()[forearm].visuals.len();
     assert_eq!(flesh.len() + bones.len(), all);
+}
+
+/// At every joint's zero the whole body is the arm model: the same link frames for the parts
+/// both have, the same visuals and collision shapes (the head moved to a link of its own and
+/// the same in the world), the same mass in the arm.
+#[test]
+fn the_whole_body_at_zero_is_the_arm_model() {
+    use workcell_robots::math::Pose;
+    let arm = RobotModel::from_catalogue("human_arm").unwrap();
+    let body = RobotModel::from_catalogue("human").unwrap();
+    let k_arm = arm.fk(Pose::IDENTITY, &vec![0.0; arm.dof()]).unwrap();
+    let k_body = body.fk(Pose::IDENTITY, &vec![0.0; body.dof()]).unwrap();
+    // Every visual and collision shape of a model in the world, as text to compare.
+    let shapes = |model: &RobotModel, k: &workcell_robots::KinematicState| {
+        let mut out = Vec::new();
+        for (l, link) in model.links().iter().enumerate() {
+            let X = k.link_pose(l);
+            for g in link.visuals.iter().chain(&link.collisions) {
+                let p = X.transform_point(g.X_LG.translation);
+                out.push(format!(
+                    "{:?} {:?} at {:.6} {:.6} {:.6}",
+                    g.name, g.shape, p.x, p.y, p.z
+                ));
+            }
+        }
+        out.sort();
+        out
+    };
+    assert_eq!(shapes(&arm, &k_arm), shapes(&body, &k_body));
+    for part in HumanPart::ARM.into_iter().chain([HumanPart::Torso]) {
+        let (a, b) = (
+            arm.link_id(part.link_name()).unwrap(),
+            body.link_id(part.link_name()).unwrap(),
+        );
+        let (pa, pb) = (k_arm.link_pose(a), k_body.link_pose(b));
+        assert!((pa.translation - pb.translation).length() < 1e-12, "{part}");
+        assert!(pa.rotation.angle_between(pb.rotation) < 1e-12, "{part}");
+        if part != HumanPart::Torso {
+            assert_eq!(arm.links()[a].inertial, body.links()[b].inertial, "{part}");
+        }
+    }
+    assert!(body.link_id(HumanPart::Head.link_name()).is_some());
 }

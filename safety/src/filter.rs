@@ -326,7 +326,7 @@ pub struct SafetyFilter {
     position_limits: Vec<[f64; 2]>,
     /// Power and force limiting: the largest approach speed per part, indexed by
     /// [`HumanPart::ALL`] (infinite when PFL is off).
-    pfl_limits_m_s: [f64; 4],
+    pfl_limits_m_s: [f64; HumanPart::ALL.len()],
     obstacles: Vec<crate::distance::Obstacle>,
     /// The human parts' anticipated copies of this tick (`anticipation_s`).
     ahead: Vec<AnticipatedPart>,
@@ -379,7 +379,7 @@ impl SafetyFilter {
                 }
             })
             .collect();
-        let mut pfl_limits_m_s = [f64::INFINITY; 4];
+        let mut pfl_limits_m_s = [f64::INFINITY; HumanPart::ALL.len()];
         if config.pfl_distance_m > 0.0 {
             let m_r = effective_robot_mass_kg(robot.mass_kg(), config.payload_kg);
             if !(m_r.is_finite() && m_r > 0.0) {
@@ -733,5 +733,6 @@ fn part_index(part: HumanPart) -> usize {
         HumanPart::UpperArm => 1,
         HumanPart::Forearm => 2,
         HumanPart::Hand => 3,
+        HumanPart::Head => 4,
     }
 }

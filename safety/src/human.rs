@@ -1,5 +1,5 @@
-//! The human as the safety layer sees it: one capsule per arm part, with velocities and the
-//! uncertainty that perception reports.
+//! The human as the safety layer sees it: one capsule per arm part (and the head, where the
+//! model has one of its own), with velocities and the uncertainty that perception reports.
 
 pub use workcell_robots::HumanPart;
 use workcell_robots::collision::{LinkCapsule, link_bounding_capsule};
@@ -116,12 +116,15 @@ pub struct HumanGeometry {
 
 impl HumanGeometry {
     /// Bounding capsules of the `upper_arm`, `forearm` and `hand` links of `human` (the
-    /// catalogue `human_arm` or a model with links of those names).
+    /// catalogue's `human` or `human_arm`, or a model with links of those names), then of its
+    /// `head` link when it has one with collision geometry (the catalogue's `human`; the
+    /// head of `human_arm` is a part of its torso, which the safety layer does not guard).
     ///
     /// # Errors
-    /// [`SafetyError::Robot`] when a part's link is missing or has no collision geometry.
+    /// [`SafetyError::Robot`] when an arm part's link is missing or has no collision
+    /// geometry.
     pub fn new(human: &RobotModel) -> Result<Self> {
-        let mut parts = Vec::with_capacity(HumanPart::ARM.len());
+        let mut parts = Vec::with_capacity(HumanPart::ARM.len() + 1);
         for part in HumanPart::ARM {
             let missing = |what: &str| SafetyError::Robot {
                 robot: human.name().to_string(),
@@ -134,10 +137,21 @@ impl HumanGeometry {
                 .ok_or_else(|| missing("the link has no collision geometry"))?;
             parts.push((part, capsule));
         }
+        if let Some(capsule) = human
+            .link_id(HumanPart::Head.link_name())
+            .and_then(|link| link_bounding_capsule(human, link))
+        {
+            parts.push((HumanPart::Head, capsule));
+        }
         Ok(Self {
             parts,
             jacobian: Jacobian::zeros(human.dof()),
         })
+    }
+
+    /// The parts guarded, in the order of every estimate's `parts`.
+    pub fn parts(&self) -> impl Iterator<Item = HumanPart> + '_ {
+        self.parts.iter().map(|(p, _)| *p)
     }
 
     /// The exact estimate of a human in state `kinematics` (forward kinematics done) moving

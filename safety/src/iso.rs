@@ -127,15 +127,20 @@ pub struct BodyRegion {
     pub stiffness_n_m: f64,
     /// Effective mass of the region, kg.
     pub mass_kg: f64,
+    /// Whether the region may be touched at all (not the head and face).
+    pub contact_permitted: bool,
 }
 
 impl BodyRegion {
     /// The Annex A values of `part` (forearm/wrist 160 N, 40 N/mm, 2 kg; hand 140 N,
     /// 75 N/mm, 0.6 kg; upper arm 150 N, 30 N/mm, 3 kg; torso: the chest's 140 N, 25 N/mm
-    /// and the torso's effective mass of 40 kg, Tables A.2 and A.3).
+    /// and the torso's effective mass of 40 kg, Tables A.2 and A.3). The head and face may
+    /// not be touched in any mode: their contact speed is 0 (the skull and forehead's 130 N,
+    /// 150 N/mm and 4.4 kg are carried for reports, never for a speed).
     #[must_use]
     pub fn of(part: HumanPart) -> Self {
         let (force_n, stiffness_n_mm, mass_kg) = match part {
+            HumanPart::Head => (130.0, 150.0, 4.4),
             HumanPart::Forearm => (160.0, 40.0, 2.0),
             HumanPart::Hand => (140.0, 75.0, 0.6),
             HumanPart::UpperArm => (150.0, 30.0, 3.0),
@@ -146,14 +151,19 @@ impl BodyRegion {
             force_n,
             stiffness_n_m: stiffness_n_mm * 1000.0,
             mass_kg,
+            contact_permitted: part != HumanPart::Head,
         }
     }
 
     /// The largest relative speed at which a robot of effective mass `robot_mass_kg`
     /// (M/2 + payload) may hit this region: v = F / sqrt(mu k), mu = (1/m_H + 1/m_R)^-1.
-    /// `transient` doubles the force limit (allowed for these regions).
+    /// `transient` doubles the force limit (allowed for these regions). 0 where contact is
+    /// not permitted.
     #[must_use]
     pub fn max_contact_speed_m_s(&self, robot_mass_kg: f64, transient: bool) -> f64 {
+        if !self.contact_permitted {
+            return 0.0;
+        }
         let force = if transient {
             2.0 * self.force_n
         } else {

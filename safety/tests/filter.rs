@@ -219,8 +219,16 @@ fn qp_caps_the_approach_speed_of_a_pair() {
 /// transient contact speed (effective mass M/2 for this robot) as its cap, the pairs beyond
 /// a braking ramp up from it, and the command keeps the caps: an iiwa driven straight at a chest (the torso's
 /// 0.55 m/s, the strictest region) 0.35 m ahead of its tool.
+/// Near the chest the robot approaches no faster than its ISO/TS 15066 contact speed; near
+/// the head, where contact is not permitted, not at all.
 #[test]
 fn filter_caps_the_approach_speed_near_each_part() {
+    for part in [HumanPart::Torso, HumanPart::Head] {
+        caps_the_approach_speed_near(part);
+    }
+}
+
+fn caps_the_approach_speed_near(part: HumanPart) {
     let robot = iiwa();
     let config = FilterConfig {
         gamma_per_s: 40.0,
@@ -235,7 +243,7 @@ fn filter_caps_the_approach_speed_near_each_part() {
     let p_tool = k.link_pose(tool).translation;
     let chest = |at: Vector| HumanEstimate {
         parts: vec![PartEstimate {
-            part: HumanPart::Torso,
+            part,
             capsule: Capsule::new(at, at + Vector::new(0.0, 0.1, 0.0), 0.04),
             v_a_W: Vector::ZERO,
             v_b_W: Vector::ZERO,
@@ -270,12 +278,13 @@ fn filter_caps_the_approach_speed_near_each_part() {
         "{:?}",
         out.status
     );
-    let limit = BodyRegion::of(HumanPart::Torso)
+    let limit = BodyRegion::of(part)
         .max_contact_speed_m_s(effective_robot_mass_kg(robot.mass_kg(), 0.0), true);
     assert!(
-        v_tool.length() > 2.0 * limit,
+        v_tool.length() > 2.0 * limit.max(0.5),
         "the nominal must approach faster than the cap"
     );
+    assert_eq!(limit == 0.0, part == HumanPart::Head, "{part}: {limit}");
     let (mut capped, mut binding) = (0, 0);
     for c in filter.pairs() {
         let approach = c.approach_m_s(filter.command());

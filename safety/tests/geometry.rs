@@ -466,3 +466,43 @@ fn penetrating_capsule_box_pairs_are_never_reported_shallower() {
         "deeper than exact by up to {worst_deeper} m"
     );
 }
+
+/// The catalogue's `human` is guarded arm and head (its own link, a 0.095 m sphere at the
+/// head's centre, 0.68 m above the pelvis at rest); `human_arm`, whose head is part of its
+/// torso, arm only.
+#[test]
+fn the_whole_body_guards_its_head() {
+    use workcell_safety::HumanGeometry;
+    for (name, parts) in [
+        ("human_arm", &HumanPart::ARM[..]),
+        (
+            "human",
+            &[
+                HumanPart::UpperArm,
+                HumanPart::Forearm,
+                HumanPart::Hand,
+                HumanPart::Head,
+            ][..],
+        ),
+    ] {
+        let human = RobotModel::from_catalogue(name).expect("catalogue");
+        let mut geometry = HumanGeometry::new(&human).expect("geometry");
+        assert_eq!(geometry.parts().collect::<Vec<_>>(), parts, "{name}");
+        let mut k = KinematicState::new(&human);
+        human
+            .forward_kinematics(&vec![0.0; human.dof()], &mut k)
+            .expect("fk");
+        let mut estimate = HumanEstimate::default();
+        geometry.estimate_into(&human, &k, &vec![0.0; human.dof()], &mut estimate);
+        if let Some(head) = estimate.parts.iter().find(|p| p.part == HumanPart::Head) {
+            let centre = workcell_robots::math::Vector::new(0.01, 0.0, 0.68);
+            assert!(
+                (head.capsule.a_W - centre).length() < 1e-9,
+                "{:?}",
+                head.capsule
+            );
+            assert!((head.capsule.b_W - centre).length() < 1e-9);
+            assert!((head.capsule.radius_m - 0.095).abs() < 1e-12);
+        }
+    }
+}

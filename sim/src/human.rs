@@ -1,6 +1,9 @@
 //! Seeded motions of the human arm: resting, reaching into the shared space, waving,
-//! withdrawing. Joint order of the catalogue `human_arm`: shoulder abduction, shoulder
-//! flexion, elbow flexion (radians; 0 is the arm hanging straight down).
+//! withdrawing. The movements are drawn in the joints named `shoulder_abduction`,
+//! `shoulder_flexion` and `elbow_flexion` (radians; 0 is the arm hanging straight down), the
+//! first three joints of a model without those names; the catalogue's `human` also turns and
+//! leans its trunk as it reaches and turns its upper arm and forearm (`trunk_turn`,
+//! `trunk_lean`, `shoulder_rotation`, `forearm_rotation`). Other joints stay at 0.
 //!
 //! Every point-to-point movement follows the minimum-jerk time profile
 //! `s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5` (Flash and Hogan 1985, J. Neurosci. 5(7)
@@ -43,6 +46,8 @@ struct Phase {
     q_to: Vec<f64>,
     /// Elbow oscillation while holding (wave): amplitude rad, frequency Hz.
     wave: Option<(f64, f64)>,
+    /// The joint that waves (the elbow).
+    elbow: usize,
 }
 
 impl Phase {
@@ -61,9 +66,10 @@ impl Phase {
             qd[j] = d * ds;
         }
         // Waving: the elbow swings about its target, faded in and out with sin^2 envelopes.
+        let j = self.elbow;
         if let Some((amplitude, frequency_hz)) = self.wave
             && local_s > self.transition_s
-            && q.len() > 2
+            && j < q.len()
         {
             use std::f64::consts::PI;
             let h = local_s - self.transition_s;
@@ -71,8 +77,8 @@ impl Phase {
             let envelope = (PI * h / self.hold_s).sin();
             let d_envelope = PI / self.hold_s * (PI * h / self.hold_s).cos();
             let e2 = envelope * envelope;
-            q[2] += amplitude * e2 * (w * h).sin();
-            qd[2] +=
+            q[j] += amplitude * e2 * (w * h).sin();
+            qd[j] +=
                 amplitude * (2.0 * envelope * d_envelope * (w * h).sin() + e2 * w * (w * h).cos());
         }
     }
@@ -161,6 +167,48 @@ impl<'a> ArmSpeed<'a> {
     }
 }
 
+/// Ranges the extra joints (trunk turn, trunk lean, shoulder rotation, forearm rotation,
+/// rad) are drawn from at rest, in a reach and in a wave: a reach turns the trunk a little
+/// towards either side and leans it forward, as people reaching over a table do.
+const REST_EXTRA: [[f64; 2]; 4] = [[-0.1, 0.1], [0.0, 0.1], [-0.2, 0.2], [0.6, 1.6]];
+const REACH_EXTRA: [[f64; 2]; 4] = [[-0.25, 0.25], [0.05, 0.3], [-0.4, 0.4], [0.8, 2.2]];
+const WAVE_EXTRA: [[f64; 2]; 4] = [[-0.1, 0.1], [0.0, 0.05], [-0.6, -0.2], [0.0, 0.4]];
+
+/// The joints the generator moves, by index in the model's joint order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct GeneratedJoints {
+    /// Shoulder abduction, shoulder flexion, elbow flexion.
+    arm: [Option<usize>; 3],
+    /// Trunk turn, trunk lean, shoulder rotation, forearm rotation.
+    extra: [Option<usize>; 4],
+}
+
+impl GeneratedJoints {
+    fn of(arm: &RobotModel) -> Self {
+        let index = |name: &str| {
+            arm.actuated_joints()
+                .iter()
+                .position(|&j| arm.joints()[j].name == name)
+        };
+        let named = ["shoulder_abduction", "shoulder_flexion", "elbow_flexion"].map(index);
+        let arm3 = if named.iter().all(Option::is_some) {
+            named
+        } else {
+            [0, 1, 2].map(|j| (j < arm.dof()).then_some(j))
+        };
+        Self {
+            arm: arm3,
+            extra: [
+                "trunk_turn",
+                "trunk_lean",
+                "shoulder_rotation",
+                "forearm_rotation",
+            ]
+            .map(index),
+        }
+    }
+}
+
 /// A periodic sequence of human motion phases, fixed by the seed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HumanMotion {
@@ -183,8 +231,8 @@ struct Playback {
 }
 
 impl HumanMotion {
-    /// Generates the motion of `arm` (at least 3 joints for the motion primitives; extra
-    /// joints stay at 0, every joint within its position limits), cycling through `kinds`.
+    /// Generates the motion of `arm` (its joints found by name, see the module's summary;
+    /// every joint within its position limits), cycling through `kinds`.
     /// Each movement's fastest point peaks at a speed drawn from `peak_speed_m_s` (m/s, low
     /// and high end) or slower.
     #[must_use]
@@ -197,20 +245,45 @@ impl HumanMotion {
     ) -> Self {
         let limits = arm.position_limits();
         let dof = limits.len();
+        let joints = GeneratedJoints::of(arm);
         let mut speed = ArmSpeed::new(arm);
         let [slowest, fastest] = peak_speed_m_s;
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4855_4d41_4e00_0000); // "HUMAN"
-        let clamp = |q: [f64; 3]| -> Vec<f64> {
-            (0..dof)
-                .map(|j| {
-                    q.get(j)
-                        .copied()
-                        .unwrap_or(0.0)
-                        .clamp(limits[j][0], limits[j][1])
-                })
+        // A configuration from the arm's three angles (abduction, flexion, elbow) and the
+        // extra joints' values, within the limits.
+        let clamp = |arm3: [f64; 3], extra: [f64; 4]| -> Vec<f64> {
+            let mut q = vec![0.0; dof];
+            for (j, v) in joints.arm.iter().zip(arm3) {
+                if let Some(&j) = j.as_ref() {
+                    q[j] = v;
+                }
+            }
+            for (j, v) in joints.extra.iter().zip(extra) {
+                if let Some(&j) = j.as_ref() {
+                    q[j] = v;
+                }
+            }
+            q.iter()
+                .zip(&limits)
+                .map(|(v, [lo, hi])| v.clamp(*lo, *hi))
                 .collect()
         };
-        let rest = clamp([0.08, 0.05, 0.15]);
+        // The extra joints' draws, only for a model that has them (the same seed moves a model
+        // without them exactly as before they existed).
+        let has_extra = joints.extra.iter().any(Option::is_some);
+        let extra = |rng: &mut ChaCha8Rng, ranges: [[f64; 2]; 4]| -> [f64; 4] {
+            if !has_extra {
+                return [0.0; 4];
+            }
+            ranges.map(|[lo, hi]| {
+                if lo < hi {
+                    rng.random_range(lo..hi)
+                } else {
+                    lo
+                }
+            })
+        };
+        let rest = clamp([0.08, 0.05, 0.15], [0.0; 4]);
         let mut order: Vec<HumanMotionKind> = kinds.iter().copied().cycle().take(PHASES).collect();
         if shuffle {
             // Fisher-Yates with the seeded generator.
@@ -223,33 +296,36 @@ impl HumanMotion {
         let mut q = rest.clone();
         for kind in order {
             let (q_to, transition_s, hold_s, wave) = match kind {
-                HumanMotionKind::Rest => (
-                    clamp([
+                HumanMotionKind::Rest => {
+                    let arm3 = [
                         rng.random_range(0.0..0.15),
                         rng.random_range(-0.1..0.15),
                         rng.random_range(0.05..0.35),
-                    ]),
-                    rng.random_range(0.6..1.0),
-                    rng.random_range(0.8..2.0),
-                    None,
-                ),
-                HumanMotionKind::Reach => (
-                    clamp([
+                    ];
+                    let (transition, hold) =
+                        (rng.random_range(0.6..1.0), rng.random_range(0.8..2.0));
+                    let extra = extra(&mut rng, REST_EXTRA);
+                    (clamp(arm3, extra), transition, hold, None)
+                }
+                HumanMotionKind::Reach => {
+                    let arm3 = [
                         rng.random_range(0.0..0.35),
                         rng.random_range(1.0..1.6),
                         rng.random_range(0.05..0.6),
-                    ]),
-                    rng.random_range(0.7..1.2),
-                    rng.random_range(0.5..1.5),
-                    None,
-                ),
+                    ];
+                    let (transition, hold) =
+                        (rng.random_range(0.7..1.2), rng.random_range(0.5..1.5));
+                    let extra = extra(&mut rng, REACH_EXTRA);
+                    (clamp(arm3, extra), transition, hold, None)
+                }
                 HumanMotionKind::Withdraw => (rest.clone(), rng.random_range(0.4..0.7), 0.3, None),
-                HumanMotionKind::Wave => (
-                    clamp([rng.random_range(0.3..0.7), rng.random_range(2.0..2.5), 1.0]),
-                    0.8,
-                    rng.random_range(1.5..2.5),
-                    Some((rng.random_range(0.3..0.5), rng.random_range(1.2..2.0))),
-                ),
+                HumanMotionKind::Wave => {
+                    let arm3 = [rng.random_range(0.3..0.7), rng.random_range(2.0..2.5), 1.0];
+                    let hold = rng.random_range(1.5..2.5);
+                    let wave = (rng.random_range(0.3..0.5), rng.random_range(1.2..2.0));
+                    let extra = extra(&mut rng, WAVE_EXTRA);
+                    (clamp(arm3, extra), 0.8, hold, Some(wave))
+                }
             };
             let mut phase = Phase {
                 kind,
@@ -259,6 +335,7 @@ impl HumanMotion {
                 q_from: q.clone(),
                 q_to: q_to.clone(),
                 wave,
+                elbow: joints.arm[2].unwrap_or(usize::MAX),
             };
             phase.keep_below(&mut speed, rng.random_range(slowest..=fastest));
             t += phase.transition_s + phase.hold_s;
@@ -274,6 +351,7 @@ impl HumanMotion {
             q_from: q,
             q_to: rest,
             wave: None,
+            elbow: joints.arm[2].unwrap_or(usize::MAX),
         };
         closing.keep_below(&mut speed, slowest);
         t += closing.transition_s + closing.hold_s;

@@ -1,20 +1,28 @@
-//! Retargeting a recorded clip onto the cell's human model: the recorded arm, seen from the
-//! person's torso, becomes joint angles of the model's arm.
+//! Retargeting a recorded clip onto the cell's human model: the recorded trunk and arm
+//! become joint angles of the model.
 //!
 //! 1. The clip is cleaned of capture artefacts and its longest piece kept
 //!    (`workcell_mocap::clean`), then each landmark is low-pass filtered (zero phase,
 //!    `cutoff_hz`, 6 Hz by default; `workcell_mocap::filter`).
 //! 2. Each frame's torso frame: y from the right shoulder to the left, z up (from the pelvis
 //!    to the neck where the clip has them, the recording's up otherwise) made orthogonal to
-//!    y, x = y x z (forward). The model's torso faces +x with z up (`human.base`), so the
-//!    person stands where the model does; the torso's own motion is not followed.
-//! 3. The followed side's upper arm and forearm directions, in the torso frame, are laid on
-//!    the model's bones from the model's shoulder: elbow and wrist targets the model's arm can
-//!    reach whatever the person's size.
-//! 4. Damped least squares on both targets (the wrist weighted 1, the elbow `elbow_weight`, 0.05),
-//!    from the previous frame's solution, within the joint limits: a model whose shoulder
-//!    has fewer joints than a person's leaves an error, which the report states.
-//! 5. From frame to frame no joint moves faster than the model's velocity limit; the frames
+//!    y, x = y x z (forward). The model's base faces +x with z up (`human.base`): the person
+//!    stands there, facing the way they face at the first frame.
+//! 3. A model with a trunk of its own (the catalogue's `human`: `pelvis_x`, `pelvis_y`,
+//!    `trunk_turn`, `trunk_lean`, `trunk_side`) follows the recording's: the torso frame
+//!    relative to the first frame's heading, as turn, lean and side bend (z-y-x angles), and
+//!    the pelvis's travel over the floor where the clip has a pelvis. A model without one
+//!    (`human_arm`) keeps its torso where it stands.
+//! 4. The followed side's upper arm and forearm directions, in the torso frame, are laid on
+//!    the model's bones from the model's shoulder in its torso: elbow and wrist targets the
+//!    model's arm can reach whatever the person's size.
+//! 5. Damped least squares of the arm's joints on both targets (the wrist weighted 1, the
+//!    elbow `elbow_weight`), from the previous frame's solution, within the joint limits. A
+//!    shoulder of three joints reaches both targets; a two-joint shoulder (`human_arm`)
+//!    cannot turn the arm about its own axis and leaves an error, which the report states.
+//!    The forearm's rotation is not seen in shoulder, elbow and wrist positions: it stays at
+//!    the middle of its range.
+//! 6. From frame to frame no joint moves faster than the model's velocity limit; the frames
 //!    where that held a joint back are counted.
 
 use serde::{Deserialize, Serialize};
@@ -69,10 +77,10 @@ pub struct RetargetConfig {
     pub side: Side,
     /// Cut-off of the low-pass on the recorded positions, Hz. Default 6.
     pub cutoff_hz: f64,
-    /// Weight of the elbow's target against the wrist's in the fit: small, so that the hand,
-    /// the part that meets the robot first, follows the recording where the model's joints
-    /// cannot follow both (a 2-joint shoulder cannot turn the arm about its own axis).
-    /// Default 0.05.
+    /// Weight of the elbow's target against the wrist's in the fit: where the model's joints
+    /// cannot follow both (a 2-joint shoulder cannot turn the arm about its own axis), a small
+    /// weight keeps the hand, the part that meets the robot first, on the recording. Default
+    /// 0.05; a 3-joint shoulder reaches both, and the weight only matters at a joint limit.
     pub elbow_weight: f64,
 }
 
@@ -143,6 +151,71 @@ pub struct RetargetReport {
     /// The recorded person's upper arm and forearm, median length, m, and the model's.
     pub recorded_bones_m: [f64; 2],
     pub model_bones_m: [f64; 2],
+    /// How far the model's trunk followed the recording's, when it has joints to: the
+    /// largest turn, lean and side bend either way, degrees, and the pelvis's farthest
+    /// travel from where it started, m.
+    pub trunk: Option<TrunkReport>,
+}
+
+/// The model's trunk over a retargeted clip.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TrunkReport {
+    pub turn_deg: [f64; 2],
+    pub lean_deg: [f64; 2],
+    pub side_deg: [f64; 2],
+    pub pelvis_travel_m: f64,
+}
+
+/// The joints of a model's trunk, by index: pelvis x and y, turn, lean, side bend.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TrunkJoints([Option<usize>; 5]);
+
+impl TrunkJoints {
+    const NAMES: [&'static str; 5] = [
+        "pelvis_x",
+        "pelvis_y",
+        "trunk_turn",
+        "trunk_lean",
+        "trunk_side",
+    ];
+
+    fn of(model: &RobotModel) -> Self {
+        Self(Self::NAMES.map(|name| {
+            model
+                .actuated_joints()
+                .iter()
+                .position(|&j| model.joints()[j].name == name)
+        }))
+    }
+
+    fn any(&self) -> bool {
+        self.0.iter().any(Option::is_some)
+    }
+
+    fn contains(&self, j: usize) -> bool {
+        self.0.contains(&Some(j))
+    }
+
+    /// Writes `values` (pelvis x, y, turn, lean, side) into `q`.
+    fn set(&self, q: &mut [f64], values: [f64; 5]) {
+        for (j, v) in self.0.iter().zip(values) {
+            if let Some(j) = *j {
+                q[j] = v;
+            }
+        }
+    }
+}
+
+/// Turn, lean and side bend (z-y-x angles) of the rotation with columns `r`, rad.
+fn trunk_angles(r: [Vector; 3]) -> [f64; 3] {
+    // r = Rz(turn) Ry(lean) Rx(side): r[0] = (c_t c_l, s_t c_l, -s_l),
+    // r[1].z = c_l s_s, r[2].z = c_l c_s.
+    let turn = r[0].y.atan2(r[0].x);
+    let lean = (-r[0].z).clamp(-1.0, 1.0).asin();
+    let side = r[1].z.atan2(r[2].z);
+    // Rx about +x turns z toward -y: a positive angle bends to the right (-y), as the
+    // model's `trunk_side` does.
+    [turn, lean, side]
 }
 
 /// The model's links a recorded arm drives: the shoulder (`upper_arm`'s origin), the elbow
@@ -231,24 +304,56 @@ pub fn retarget(
     let dof = model.dof();
     let limits = model.position_limits();
     let velocity = model.velocity_limits();
-    // The model at rest: its shoulder and bone lengths in its base (torso) frame.
+    let trunk = TrunkJoints::of(model);
+    // The frame the recorded directions are laid in: the model's `torso` link (its root
+    // without one).
+    let torso_link = model.link_id("torso").unwrap_or(0);
+    // The model at rest: its shoulder (in its torso frame) and bone lengths.
     let mut state = KinematicState::new(model);
     let mut q = model.neutral_configuration();
+    trunk.set(&mut q, [0.0; 5]);
     model
         .forward_kinematics(&q, &mut state)
         .map_err(|e| invalid(e.to_string()))?;
     let at = |state: &KinematicState, k: usize| state.link_pose(links[k]).translation;
-    let s_model = at(&state, 0);
+    let s_torso = state
+        .link_pose(torso_link)
+        .inverse()
+        .transform_point(at(&state, 0));
     let bones = [
-        (at(&state, 1) - s_model).length(),
+        (at(&state, 1) - at(&state, 0)).length(),
         (at(&state, 2) - at(&state, 1)).length(),
     ];
     let frames = piece.frames();
+    let axes: Vec<[Vector; 3]> = (0..frames)
+        .map(|f| {
+            torso(&tracks, f)
+                .ok_or_else(|| invalid(format!("no torso frame at frame {f} (shoulders together)")))
+        })
+        .collect::<Result<_>>()?;
+    // The trunk's joints, frame by frame, relative to the first frame's heading.
+    let heading = {
+        let forward = Vector::new(axes[0][0].x, axes[0][0].y, 0.0).normalize_or(Vector::X);
+        [forward, Vector::Z.cross(forward), Vector::Z]
+    };
+    let in_heading =
+        |v: Vector| Vector::new(v.dot(heading[0]), v.dot(heading[1]), v.dot(heading[2]));
+    let pelvis = tracks.get(&Landmark::Pelvis);
+    let mut trunk_q: Vec<[f64; 5]> = Vec::with_capacity(frames);
+    let mut turn_prev = 0.0;
+    for (f, r) in axes.iter().enumerate() {
+        let [turn, lean, side] = trunk_angles(r.map(in_heading));
+        // Unwrapped: a person turning past behind themselves keeps turning.
+        let turn = turn_prev
+            + (turn - turn_prev + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        turn_prev = turn;
+        let travel = pelvis.map_or(Vector::ZERO, |p| in_heading(p[f] - p[0]));
+        trunk_q.push([travel.x, travel.y, turn, lean, side]);
+    }
     let mut targets = Vec::with_capacity(frames);
     let (mut upper, mut fore) = (Vec::new(), Vec::new());
-    for f in 0..frames {
-        let r = torso(&tracks, f)
-            .ok_or_else(|| invalid(format!("no torso frame at frame {f} (shoulders together)")))?;
+    for (f, r) in axes.iter().enumerate() {
         let (s, e, w) = (
             tracks.get(&shoulder).map_or(Vector::ZERO, |t| t[f]),
             tracks.get(&elbow).map_or(Vector::ZERO, |t| t[f]),
@@ -256,32 +361,45 @@ pub fn retarget(
         );
         upper.push((e - s).length());
         fore.push((w - e).length());
+        // The model's torso where its trunk follows the recording's (clamped to its limits).
+        trunk.set(&mut q, trunk_q[f]);
+        for j in (0..dof).filter(|&j| trunk.contains(j)) {
+            q[j] = q[j].clamp(limits[j][0], limits[j][1]);
+        }
+        model
+            .forward_kinematics(&q, &mut state)
+            .map_err(|e| invalid(e.to_string()))?;
+        let X_BT = *state.link_pose(torso_link);
         let to_torso = |v: Vector| Vector::new(v.dot(r[0]), v.dot(r[1]), v.dot(r[2]));
-        let e_t = s_model + to_torso(e - s).normalize_or_zero() * bones[0];
+        let e_t = s_torso + to_torso(e - s).normalize_or_zero() * bones[0];
         let w_t = e_t + to_torso(w - e).normalize_or_zero() * bones[1];
-        targets.push((e_t, w_t));
+        targets.push((X_BT.transform_point(e_t), X_BT.transform_point(w_t)));
+        trunk_q[f] = std::array::from_fn(|k| trunk.0[k].map_or(0.0, |j| q[j]));
     }
     let median = |v: &mut Vec<f64>| Spread::of(v).median;
     let recorded_bones_m = [median(&mut upper), median(&mut fore)];
-    // Damped least squares, warm-started from the previous frame.
+    // Damped least squares of the arm's joints, warm-started from the previous frame.
+    let free: Vec<bool> = (0..dof).map(|j| !trunk.contains(j)).collect();
     let mut out: Vec<Vec<f64>> = Vec::with_capacity(frames);
     let mut clamped_frames = 0;
     let mut fit = Fit {
         model,
         links,
         limits: &limits,
+        free: &free,
         elbow_weight: config.elbow_weight,
         state: KinematicState::new(model),
         jacobian: Jacobian::zeros(dof),
     };
     for (f, &(e_t, w_t)) in targets.iter().enumerate() {
+        trunk.set(&mut q, trunk_q[f]);
         let mut cost = fit
             .solve(&mut q, e_t, w_t)
             .map_err(|e| invalid(e.to_string()))?;
         // The first frame, and any the previous frame's solution leaves far off (a local
-        // minimum at a limit), start again from a grid over the joints' ranges.
+        // minimum at a limit), start again from a grid over the arm joints' ranges.
         if f == 0 || cost.sqrt() > 0.05 {
-            for seed in grid(&limits) {
+            for seed in grid(&limits, &free, &q) {
                 let mut candidate = seed;
                 let c = fit
                     .solve(&mut candidate, e_t, w_t)
@@ -330,6 +448,7 @@ pub fn retarget(
         velocity_limited_frames,
         recorded_bones_m,
         model_bones_m: bones,
+        trunk: trunk.any().then(|| trunk_report(&trunk, &out)),
     };
     Ok((
         RecordedMotion {
@@ -346,6 +465,8 @@ struct Fit<'a> {
     model: &'a RobotModel,
     links: [LinkId; 3],
     limits: &'a [[f64; 2]],
+    /// The joints the fit moves (the others stay as given).
+    free: &'a [bool],
     elbow_weight: f64,
     state: KinematicState,
     jacobian: Jacobian,
@@ -408,23 +529,39 @@ impl Fit<'_> {
             self.model
                 .point_jacobian(&self.state, link, p, &mut self.jacobian);
             let columns = self.jacobian.columns();
-            for ((ci, row), bi) in columns.iter().zip(&mut a).zip(&mut b) {
-                *bi += weight * (ci[0] * err.x + ci[1] * err.y + ci[2] * err.z);
-                for (cj, aij) in columns.iter().zip(row.iter_mut()) {
-                    *aij += weight * (ci[0] * cj[0] + ci[1] * cj[1] + ci[2] * cj[2]);
+            let free = |j: usize| self.free.get(j).copied().unwrap_or(true);
+            for (i, ((ci, row), bi)) in columns.iter().zip(&mut a).zip(&mut b).enumerate() {
+                if !free(i) {
+                    continue;
                 }
+                *bi += weight * (ci[0] * err.x + ci[1] * err.y + ci[2] * err.z);
+                for (j, (cj, aij)) in columns.iter().zip(row.iter_mut()).enumerate() {
+                    if free(j) {
+                        *aij += weight * (ci[0] * cj[0] + ci[1] * cj[1] + ci[2] * cj[2]);
+                    }
+                }
+            }
+        }
+        // A joint held still: its row says "no step".
+        for (i, row) in a.iter_mut().enumerate() {
+            if !self.free.get(i).copied().unwrap_or(true) {
+                row[i] = 1.0;
             }
         }
         Ok((cost, a, b))
     }
 }
 
-/// Starting points over the joints' ranges: three per joint (at a quarter, half and three
-/// quarters of the range), every combination for up to four joints, the middle elsewhere.
-fn grid(limits: &[[f64; 2]]) -> Vec<Vec<f64>> {
+/// Starting points over the free joints' ranges: three per joint (at a quarter, half and
+/// three quarters of the range), every combination for the first four free joints, the
+/// middle for the others; the joints held still keep their values in `q`.
+fn grid(limits: &[[f64; 2]], free: &[bool], q: &[f64]) -> Vec<Vec<f64>> {
     let mut out = vec![Vec::new()];
+    let mut free_seen = 0;
     for (j, [lo, hi]) in limits.iter().enumerate() {
-        let values: Vec<f64> = if j < 4 {
+        let values: Vec<f64> = if !free[j] {
+            vec![q[j]]
+        } else if free_seen < 4 {
             [0.25, 0.5, 0.75]
                 .iter()
                 .map(|s| lo + s * (hi - lo))
@@ -432,6 +569,7 @@ fn grid(limits: &[[f64; 2]]) -> Vec<Vec<f64>> {
         } else {
             vec![0.5 * (lo + hi)]
         };
+        free_seen += usize::from(free[j]);
         out = out
             .into_iter()
             .flat_map(|p| {
@@ -444,6 +582,36 @@ fn grid(limits: &[[f64; 2]]) -> Vec<Vec<f64>> {
             .collect();
     }
     out
+}
+
+/// The trunk's ranges over the retargeted frames.
+fn trunk_report(trunk: &TrunkJoints, q: &[Vec<f64>]) -> TrunkReport {
+    let range = |k: usize, scale: f64| -> [f64; 2] {
+        trunk.0[k].map_or([0.0, 0.0], |j| {
+            let (lo, hi) = q.iter().fold((f64::MAX, f64::MIN), |(lo, hi), f| {
+                (lo.min(f[j]), hi.max(f[j]))
+            });
+            [lo * scale, hi * scale]
+        })
+    };
+    let deg = 180.0 / std::f64::consts::PI;
+    let start = q
+        .first()
+        .map(|f| [0, 1].map(|k| trunk.0[k].map_or(0.0, |j| f[j])));
+    let pelvis_travel_m = q
+        .iter()
+        .map(|f| {
+            let p = [0, 1].map(|k| trunk.0[k].map_or(0.0, |j| f[j]));
+            let s = start.unwrap_or([0.0; 2]);
+            (p[0] - s[0]).hypot(p[1] - s[1])
+        })
+        .fold(0.0, f64::max);
+    TrunkReport {
+        turn_deg: range(2, deg),
+        lean_deg: range(3, deg),
+        side_deg: range(4, deg),
+        pelvis_travel_m,
+    }
 }
 
 /// `a x = b` by Gaussian elimination with partial pivoting; `None` when singular.
@@ -552,6 +720,118 @@ mod tests {
             let (a, b) = (motion.q[100][j], motion.q[101][j]);
             assert!((q[j] - 0.5 * (a + b)).abs() < 1e-12);
             assert!((qd[j] - (b - a) * rate).abs() < 1e-9);
+        }
+    }
+
+    /// The catalogue's `human` moving every joint the landmarks show (the pelvis over the
+    /// floor, the trunk's turn, lean and side bend, the three shoulder joints and the elbow;
+    /// the forearm's rotation at the middle of its range, which they do not show) comes back
+    /// as that motion: trunk and arm.
+    #[test]
+    fn the_whole_bodys_own_motion_round_trips() {
+        let model = RobotModel::from_catalogue("human").expect("catalogue");
+        let links = arm_links(&model).expect("links");
+        let torso = model.link_id("torso").expect("torso");
+        let index = |name: &str| {
+            model
+                .actuated_joints()
+                .iter()
+                .position(|&j| model.joints()[j].name == name)
+                .expect(name)
+        };
+        let mut state = KinematicState::new(&model);
+        let (rate, frames) = (100.0, 500);
+        let truth: Vec<Vec<f64>> = (0..frames)
+            .map(|f| {
+                let t = f as f64 / rate;
+                let mut q = model.neutral_configuration();
+                for (name, v) in [
+                    ("pelvis_x", 0.2 * (0.4 * t).sin()),
+                    ("pelvis_y", -0.15 * (0.3 * t).sin()),
+                    ("trunk_turn", 0.6 * (1.2 * t).sin()),
+                    ("trunk_lean", 0.2 + 0.15 * (0.5 * t).cos()),
+                    ("trunk_side", 0.1 * (0.6 * t).sin()),
+                    ("shoulder_flexion", 0.9 + 0.5 * (0.5 * t).sin()),
+                    ("shoulder_abduction", 0.3 + 0.2 * (0.7 * t).sin()),
+                    ("shoulder_rotation", 0.2 + 0.4 * (0.8 * t).sin()),
+                    ("elbow_flexion", 1.0 + 0.4 * (0.9 * t).cos()),
+                ] {
+                    q[index(name)] = v;
+                }
+                q
+            })
+            .collect();
+        let landmarks = vec![
+            Landmark::Pelvis,
+            Landmark::Neck,
+            Landmark::LeftShoulder,
+            Landmark::RightShoulder,
+            Landmark::RightElbow,
+            Landmark::RightWrist,
+        ];
+        let mut positions = Vec::new();
+        for q in &truth {
+            model.forward_kinematics(q, &mut state).expect("fk");
+            let X_BT = *state.link_pose(torso);
+            let s = state.link_pose(links[0]).translation;
+            positions.extend([
+                X_BT.translation,
+                X_BT.transform_point(Vector::new(0.0, 0.0, 0.6)),
+                s + X_BT.rotation * Vector::new(0.0, 0.38, 0.0),
+                s,
+                state.link_pose(links[1]).translation,
+                state.link_pose(links[2]).translation,
+            ]);
+        }
+        let clip = Clip {
+            name: "own".into(),
+            rate_hz: rate,
+            landmarks,
+            positions,
+            filled: vec![false; frames],
+        };
+        let config = RetargetConfig {
+            elbow_weight: 1.0,
+            ..RetargetConfig::default()
+        };
+        let (motion, report) = retarget(&clip, &model, &config).expect("retarget");
+        assert!(report.wrist_error_m.peak < 1e-3, "{report:?}");
+        assert!(report.elbow_error_m.peak < 1e-3, "{report:?}");
+        let trunk = report.trunk.expect("a trunk");
+        assert!(
+            trunk.turn_deg[1] > 30.0 && trunk.turn_deg[0] < -30.0,
+            "{trunk:?}"
+        );
+        for (f, (got, want)) in motion
+            .q
+            .iter()
+            .zip(&truth)
+            .enumerate()
+            .take(frames - 50)
+            .skip(50)
+        {
+            for (j, (g, w)) in got.iter().zip(want).enumerate() {
+                assert!(
+                    (g - w).abs() < 3e-3,
+                    "{f} {}: {g} against {w}",
+                    model.joints()[model.actuated_joints()[j]].name
+                );
+            }
+        }
+    }
+
+    /// The trunk's angles are the z-y-x angles of its rotation.
+    #[test]
+    fn trunk_angles_invert_the_turn_lean_side_product() {
+        use workcell_robots::math::Rotation;
+        for (turn, lean, side) in [(0.3, 0.2, -0.1), (-2.5, 0.7, 0.4), (0.0, -0.3, 0.0)] {
+            let r = Rotation::from_rotation_z(turn)
+                * Rotation::from_rotation_y(lean)
+                * Rotation::from_rotation_x(side);
+            let got = trunk_angles([r * Vector::X, r * Vector::Y, r * Vector::Z]);
+            for (g, w) in got.iter().zip([turn, lean, side]) {
+                assert!((g - w).abs() < 1e-12, "{got:?} vs {turn} {lean} {side}");
+            }
         }
     }
 

@@ -531,6 +531,10 @@ pub struct RetargetArgs {
     /// The cell whose human model the clips are laid on.
     #[arg(long, default_value = "configs/default.toml")]
     pub cell: PathBuf,
+    /// Lay the clips on this human model instead of the cell's (a catalogue name such as
+    /// `human` or `human_arm`, an added robot or a URDF path).
+    #[arg(long)]
+    pub model: Option<String>,
     /// The recorded arm the model follows.
     #[arg(long, value_enum, default_value_t = SideArg::Right)]
     pub side: SideArg,
@@ -566,6 +570,9 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
     }
     let mut scenario = Scenario::from_file(&args.cell)?;
     scenario.human.recorded = None;
+    if let Some(name) = &args.model {
+        scenario.human.model.clone_from(name);
+    }
     let model = CellModel::new(&scenario, &args.cell)?;
     let config = RetargetConfig {
         side: match args.side {
@@ -587,11 +594,11 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
     );
     say!();
     say!(
-        "| clip | frames kept | wrist error median (mm) | wrist peak (mm) | elbow median (mm) | elbow peak (mm) | at a joint limit | velocity-limited | recorded bones (m) |"
+        "| clip | frames kept | wrist error median (mm) | wrist peak (mm) | elbow median (mm) | elbow peak (mm) | at a joint limit | velocity-limited | recorded bones (m) | trunk turn, lean (deg); pelvis travel (m) |"
     );
-    say!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    say!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     let mut reports = Vec::new();
-    let (mut wrist, mut limited, mut frames) = (Vec::new(), 0, 0);
+    let (mut wrist, mut elbow, mut limited, mut frames) = (Vec::new(), Vec::new(), 0, 0);
     for source in &sources {
         let clip = workcell::mocap::read_clip(&source.path, &source.format, source.id.clone())?;
         let (motion, r) = retarget(&clip, &model.human, &config)?;
@@ -600,8 +607,17 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
             workcell::robots::output::write_atomic(path, &glb)
                 .with_context(|| format!("writing {}", path.display()))?;
         }
+        let trunk = r.trunk.map_or_else(
+            || "-".to_string(),
+            |t| {
+                format!(
+                    "{:.0} to {:.0}, {:.0} to {:.0}; {:.2}",
+                    t.turn_deg[0], t.turn_deg[1], t.lean_deg[0], t.lean_deg[1], t.pelvis_travel_m
+                )
+            },
+        );
         say!(
-            "| {} | {} of {} | {:.0} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2}, {:.2} |",
+            "| {} | {} of {} | {:.0} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2}, {:.2} | {trunk} |",
             r.clip,
             r.frames,
             r.clip_frames,
@@ -615,16 +631,19 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
             r.recorded_bones_m[1]
         );
         wrist.push(r.wrist_error_m.median);
+        elbow.push(r.elbow_error_m.median);
         limited += r.velocity_limited_frames;
         frames += r.frames;
         reports.push(r);
     }
-    let spread = Spread::of(&mut wrist);
+    let (spread, elbow) = (Spread::of(&mut wrist), Spread::of(&mut elbow));
     say!();
     say!(
-        "median over clips of the wrist's median error {:.0} mm (worst clip {:.0} mm); {limited} of {frames} frames velocity-limited; the model's bones {:.2}, {:.2} m",
+        "median over clips of the wrist's median error {:.0} mm (worst clip {:.0} mm), of the elbow's {:.0} mm (worst clip {:.0} mm); {limited} of {frames} frames velocity-limited; the model's bones {:.2}, {:.2} m",
         1e3 * spread.median,
         1e3 * spread.peak,
+        1e3 * elbow.median,
+        1e3 * elbow.peak,
         reports.first().map_or(0.0, |r| r.model_bones_m[0]),
         reports.first().map_or(0.0, |r| r.model_bones_m[1])
     );

@@ -66,15 +66,11 @@ impl Class {
         }
     }
 
-    /// The class that shows `part`.
+    /// The class that shows `part`: its own, the torso's for the head (the network's classes
+    /// are the paper's: the head is drawn as the torso it sat on).
     #[must_use]
     pub fn of_part(part: HumanPart) -> Class {
-        match part {
-            HumanPart::Torso => Class::Torso,
-            HumanPart::UpperArm => Class::UpperArm,
-            HumanPart::Forearm => Class::Forearm,
-            HumanPart::Hand => Class::Hand,
-        }
+        Class::from(part)
     }
 
     /// A colour to draw the class with (sRGB).
@@ -94,7 +90,7 @@ impl Class {
 impl From<HumanPart> for Class {
     fn from(part: HumanPart) -> Self {
         match part {
-            HumanPart::Torso => Class::Torso,
+            HumanPart::Torso | HumanPart::Head => Class::Torso,
             HumanPart::UpperArm => Class::UpperArm,
             HumanPart::Forearm => Class::Forearm,
             HumanPart::Hand => Class::Hand,
