@@ -55,6 +55,11 @@ pub struct EvaluationConfig {
     /// `human.speed_scale` (the generated motions peak at `human.peak_speed_m_s`; ISO 13855
     /// assumes 1.6 to 2.0 m/s). Default: the cell's.
     pub human_speed_scale: Option<f64>,
+    /// The human model instead of the cell's `human.model` (a catalogue name such as `human`
+    /// or `human_arm`, an added robot, or a URDF path relative to this file). Default: the
+    /// cell's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub human_model: Option<String>,
     /// Recorded clips move the cell's human instead of its generator: the cell's
     /// `[human.recorded]` (`workcell_sim::scenario::RecordedConfig`), its `library` relative to
     /// this file. Episode `i` (seed `s`) plays clip `(s - 1) mod n`. Left out: the cell's own.
@@ -80,6 +85,7 @@ impl Default for EvaluationConfig {
             cell: "default.toml".into(),
             task_s: 12.0,
             human_speed_scale: None,
+            human_model: None,
             human_recorded: None,
             timeout_factor: 3.0,
             control_period_s: 0.004,
@@ -207,6 +213,13 @@ impl Evaluation {
             *weights = dir.join(&*weights);
         }
         let mut scenario = Scenario::from_file(&scenario_path)?;
+        if let Some(model) = &config.human_model {
+            // A path relative to this file, made absolute: the cell resolves its own against
+            // its folder.
+            let resolved = Scenario::resolve_model_path(model, path);
+            scenario.human.model = std::path::absolute(&resolved)
+                .map_or(resolved, |p| p.to_string_lossy().into_owned());
+        }
         if let Some(recorded) = &mut config.human_recorded {
             // Relative to this file, wherever the cell's file is.
             if recorded.library.is_relative() {

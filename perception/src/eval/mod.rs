@@ -239,7 +239,7 @@ pub fn evaluate_pose(
                     let t1 = Instant::now();
                     let outcome = fitter.fit(&camera, &masks)?;
                     let pose_ms = t1.elapsed().as_secs_f64() * 1e3;
-                    if labels.human_q.len() == fitter.arm().dof()
+                    if labels.human_q.len() == fitter.arm().model_dof()
                         && let Some(g) = fitter.gain_at(&camera, &masks, &labels.human_q)?
                     {
                         let [upper, forearm, hand] = g.parts;

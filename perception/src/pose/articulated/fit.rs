@@ -15,7 +15,8 @@ use crate::pose::{NoPose, f_m};
 /// The arm found in one frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArmFit {
-    /// The human model's joint positions, rad.
+    /// The human model's joint positions, rad (the trunk's at their held values:
+    /// [`ArticulatedArm::configuration`]).
     pub q: Vec<f64>,
     /// The link frames of the upper arm, the forearm and the hand in the camera frame.
     pub X_CL: [Pose; 3],
@@ -25,7 +26,8 @@ pub struct ArmFit {
     pub gain: f64,
     /// Each part's share of [`ArmFit::gain`].
     pub part_gain: [f64; 3],
-    /// Per joint, the spread of its position (the covariance's diagonal), rad.
+    /// Per fitted joint ([`ArticulatedArm::fitted`]), the spread of its position (the
+    /// covariance's diagonal), rad.
     pub sigma_q: Vec<f64>,
     /// The farthest the other surviving hypotheses put the forearm's centre or wrist, m.
     pub spread_m: f64,
@@ -166,9 +168,10 @@ impl<R: Renderer> ArmFitter<R> {
         self.last_points = None;
     }
 
-    /// Tracks from `q` on the next frame (as if it had been the last fit).
+    /// Tracks from the model's configuration `q` on the next frame (as if it had been the
+    /// last fit).
     pub fn set_prior(&mut self, q: &[f64]) {
-        self.tracks = vec![vec![q.to_vec()]];
+        self.tracks = vec![vec![self.arm.fitted_of(q)]];
         self.last_points = None;
     }
 
@@ -333,7 +336,7 @@ impl<R: Renderer> ArmFitter<R> {
             .map(|i| covariance[i][i].max(0.0).sqrt())
             .collect();
         let sigma_m = self.position_sigma(&climb.q, &covariance, &target.X_WC)?;
-        let X_CL = self.arm.part_poses(&climb.q, &target.X_WC)?;
+        let X_CL = self.arm.fitted_part_poses(&climb.q, &target.X_WC)?;
         let hidden_share = self.hidden_share(&target, &X_CL);
         let forearm = self.arm.forearm.mesh.clone();
         self.renderer
@@ -342,7 +345,7 @@ impl<R: Renderer> ArmFitter<R> {
         Ok(Ok(ArmFit {
             f_m: f_m(masks.forearm(), self.batch.mask(0)),
             X_CL,
-            q: climb.q,
+            q: self.arm.configuration(&climb.q),
             gain: climb.score.gain,
             part_gain: climb.score.part_gain,
             sigma_q,
@@ -362,7 +365,8 @@ impl<R: Renderer> ArmFitter<R> {
     /// search's failure, one above it the masks' ambiguity.
     ///
     /// # Errors
-    /// As [`ArmFitter::fit`]; `q` of the wrong length or not finite.
+    /// As [`ArmFitter::fit`]; `q` (the model's configuration) of the wrong length or not
+    /// finite.
     pub fn gain_at(
         &mut self,
         camera: &Camera,
@@ -372,7 +376,16 @@ impl<R: Renderer> ArmFitter<R> {
         let Some(target) = self.target(camera, masks, self.config.supersample)? else {
             return Ok(None);
         };
-        let score = self.score(&target, &[q.to_vec()], None)?[0];
+        if q.len() != self.arm.model_dof() {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "{} joint values for {} joints",
+                    q.len(),
+                    self.arm.model_dof()
+                ),
+            });
+        }
+        let score = self.score(&target, &[self.arm.fitted_of(q)], None)?[0];
         Ok(Some(ArmGain {
             total: score.gain,
             parts: score.part_gain,
@@ -381,7 +394,7 @@ impl<R: Renderer> ArmFitter<R> {
 
     /// The forearm's centre and far end (the wrist) in the camera frame at `q`.
     pub(super) fn forearm_points(&self, q: &[f64], X_WC: &Pose) -> Result<[Vector; 2]> {
-        let X = self.arm.part_poses(q, X_WC)?[1];
+        let X = self.arm.fitted_part_poses(q, X_WC)?[1];
         let m = &self.arm.forearm;
         let far = m.centre_O + 0.5 * m.length_m * m.axis_O;
         let near = m.centre_O - 0.5 * m.length_m * m.axis_O;
@@ -639,7 +652,7 @@ impl<R: Renderer> ArmFitter<R> {
         let mut scores = vec![Score::default(); qs.len()];
         let all: Vec<[Pose; 3]> = qs
             .iter()
-            .map(|q| self.arm.part_poses(q, &target.X_WC))
+            .map(|q| self.arm.fitted_part_poses(q, &target.X_WC))
             .collect::<Result<_>>()?;
         let ss = target.ss;
         let per_sample = 1.0 / (ss * ss) as f64;
@@ -848,18 +861,24 @@ impl<R: Renderer> ArmFitter<R> {
     }
 
     /// The global search: a grid over the joints' ranges, the best distinct cells climbed.
+    /// The grid spans the first [`MAX_GRID_JOINTS`] joints with at most `grid^3` cells in all
+    /// (`grid` points a joint for three joints, 6 for four of 12); the joints after them
+    /// start at the middle of their range (the forearm's rotation, which only the hand
+    /// shows).
     pub(super) fn search(&mut self, target: &Target) -> Result<Vec<Climb>> {
         let c = self.config.clone();
-        let n = c.grid.max(1);
         let limits = self.arm.limits().to_vec();
+        let spanned = limits.len().min(MAX_GRID_JOINTS);
+        let n = grid_points(c.grid, spanned);
         let mut grid: Vec<Vec<f64>> = vec![Vec::new()];
-        for [lo, hi] in &limits {
+        for (j, [lo, hi]) in limits.iter().enumerate() {
+            let points = if j < spanned { n } else { 1 };
             grid = grid
                 .into_iter()
                 .flat_map(|q| {
-                    (0..n).map(move |k| {
+                    (0..points).map(move |k| {
                         let mut v = q.clone();
-                        v.push(lo + (k as f64 + 0.5) * (hi - lo) / n as f64);
+                        v.push(lo + (k as f64 + 0.5) * (hi - lo) / points as f64);
                         v
                     })
                 })
@@ -869,7 +888,11 @@ impl<R: Renderer> ArmFitter<R> {
         let mut order: Vec<usize> = (0..grid.len()).collect();
         order.sort_by(|&a, &b| scores[b].objective.total_cmp(&scores[a].objective));
         // Cells at least 1.5 cells apart in some joint.
-        let cell: Vec<f64> = limits.iter().map(|[lo, hi]| (hi - lo) / n as f64).collect();
+        let cell: Vec<f64> = limits
+            .iter()
+            .enumerate()
+            .map(|(j, [lo, hi])| (hi - lo) / if j < spanned { n } else { 1 } as f64)
+            .collect();
         let mut starts: Vec<Vec<f64>> = Vec::new();
         for i in order {
             if starts.len() >= c.refine.max(1) {
@@ -891,4 +914,23 @@ impl<R: Renderer> ArmFitter<R> {
             .map(|s| self.climb(target, s, None))
             .collect()
     }
+}
+
+/// Joints the global search's grid spans at most.
+pub const MAX_GRID_JOINTS: usize = 4;
+
+/// Grid points per joint for `joints` joints: `grid` for up to three, fewer beyond so that
+/// the cells stay at most `grid^3` (at least 2 a joint).
+pub(super) fn grid_points(grid: usize, joints: usize) -> usize {
+    let grid = grid.max(1);
+    if joints <= 3 {
+        return grid;
+    }
+    let budget = (grid as f64).powi(3);
+    let mut n = budget.powf(1.0 / joints as f64).floor().max(2.0) as usize;
+    // Floating point may leave the root a hair below an exact integer.
+    while (n + 1).pow(joints as u32) as f64 <= budget {
+        n += 1;
+    }
+    n
 }

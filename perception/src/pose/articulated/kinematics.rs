@@ -19,7 +19,13 @@ pub struct ArticulatedArm {
     pub(super) meshes: [Option<Arc<RenderMesh>>; 3],
     /// Each part's box axis and size, for the depth term.
     pub(super) models: [Option<RigidModel>; 3],
+    /// The fitted joints' ranges (clamped to +-pi), in [`ArticulatedArm::fitted`] order.
     pub(super) limits: Vec<[f64; 2]>,
+    /// The joints the fit moves, by index in the model's joint order: those below the torso
+    /// (the arm's). The trunk's joints above it stay at `held`'s values.
+    pub(super) fitted: Vec<usize>,
+    /// A whole configuration of the model: the values of the joints not fitted.
+    pub(super) held: Vec<f64>,
     pub(super) forearm: RigidModel,
     /// The shoulder (the upper arm's link origin), world frame, and the radius about it
     /// that holds every point of the three parts whatever the joints, m.
@@ -71,7 +77,7 @@ impl ArticulatedArm {
         let forearm = models[1]
             .clone()
             .ok_or_else(|| missing("the forearm link has no visual geometry".into()))?;
-        let limits = human
+        let all_limits = human
             .position_limits()
             .into_iter()
             .map(|[lo, hi]| {
@@ -79,10 +85,36 @@ impl ArticulatedArm {
                 if lo <= hi { [lo, hi] } else { [0.0, 0.0] }
             })
             .collect::<Vec<_>>();
+        // The trunk's joints: those that move the torso (the links from the root to it).
+        let torso = human.link_id(HumanPart::Torso.link_name()).unwrap_or(0);
+        let mut trunk = Vec::new();
+        let mut link = torso;
+        while let Some(j) = human.links()[link].parent_joint {
+            trunk.push(j);
+            link = human.joints()[j].parent;
+        }
+        let fitted: Vec<usize> = human
+            .actuated_joints()
+            .iter()
+            .enumerate()
+            .filter(|(_, j)| !trunk.contains(j))
+            .map(|(i, _)| i)
+            .collect();
+        if fitted.is_empty() {
+            return Err(missing("no joints below the torso to fit".into()));
+        }
+        let held: Vec<f64> = all_limits
+            .iter()
+            .map(|[lo, hi]| 0.0_f64.clamp(*lo, *hi))
+            .collect();
+        let limits: Vec<[f64; 2]> = fitted.iter().map(|&i| all_limits[i]).collect();
         // The reach: each part's farthest box corner from its link's origin, plus the
         // distances between consecutive parts' origins, which their joints leave unchanged
         // (a URDF joint sits at its child link's origin, fixed in its parent's frame).
-        let middle: Vec<f64> = limits.iter().map(|[lo, hi]| 0.5 * (lo + hi)).collect();
+        let mut middle = held.clone();
+        for (&i, [lo, hi]) in fitted.iter().zip(&limits) {
+            middle[i] = 0.5 * (lo + hi);
+        }
         let k = human.fk(*X_WH, &middle)?;
         let origin = |i: usize| k.link_pose(links[i]).translation;
         let (mut chain, mut reach_m) = (0.0, 0.0f64);
@@ -106,6 +138,8 @@ impl ArticulatedArm {
             meshes,
             models,
             limits,
+            fitted,
+            held,
             forearm,
             shoulder_W: origin(0),
             reach_m,
@@ -120,16 +154,48 @@ impl ArticulatedArm {
         X_WC.inverse().transform_point(self.shoulder_W).z - self.reach_m
     }
 
-    /// Joints fitted.
+    /// Joints fitted: the arm's, below the torso.
     #[must_use]
     pub fn dof(&self) -> usize {
         self.limits.len()
     }
 
-    /// Each joint's range, rad (clamped to +-pi).
+    /// Joints of the human model (fitted or held).
+    #[must_use]
+    pub fn model_dof(&self) -> usize {
+        self.held.len()
+    }
+
+    /// The fitted joints, by index in the human model's joint order.
+    #[must_use]
+    pub fn fitted(&self) -> &[usize] {
+        &self.fitted
+    }
+
+    /// Each fitted joint's range, rad (clamped to +-pi).
     #[must_use]
     pub fn limits(&self) -> &[[f64; 2]] {
         &self.limits
+    }
+
+    /// The model's whole configuration for fitted joints `q_fit`: the trunk's joints at
+    /// their held values (0, the trunk upright at the human's base, within their limits).
+    #[must_use]
+    pub fn configuration(&self, q_fit: &[f64]) -> Vec<f64> {
+        let mut q = self.held.clone();
+        for (&i, v) in self.fitted.iter().zip(q_fit) {
+            q[i] = *v;
+        }
+        q
+    }
+
+    /// The fitted joints of the model's configuration `q` (missing values: 0).
+    #[must_use]
+    pub fn fitted_of(&self, q: &[f64]) -> Vec<f64> {
+        self.fitted
+            .iter()
+            .map(|&i| q.get(i).copied().unwrap_or(0.0))
+            .collect()
     }
 
     /// The links of the upper arm, the forearm and the hand ([`FITTED_PARTS`]).
@@ -145,7 +211,7 @@ impl ArticulatedArm {
     }
 
     /// The link frames of the upper arm, the forearm and the hand in the camera frame (the
-    /// camera at `X_WC`) at configuration `q`.
+    /// camera at `X_WC`) at the model's configuration `q`.
     ///
     /// # Errors
     /// `q` has the wrong length or a value that is not finite.
@@ -153,6 +219,20 @@ impl ArticulatedArm {
         let k = self.human.fk(self.X_WH, q)?;
         let X_CW = X_WC.inverse();
         Ok(self.links.map(|l| X_CW * *k.link_pose(l)))
+    }
+
+    /// [`ArticulatedArm::part_poses`] at fitted joints `q_fit`.
+    pub(super) fn fitted_part_poses(&self, q_fit: &[f64], X_WC: &Pose) -> Result<[Pose; 3]> {
+        if q_fit.len() != self.fitted.len() {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "{} fitted joint values for {} joints",
+                    q_fit.len(),
+                    self.fitted.len()
+                ),
+            });
+        }
+        self.part_poses(&self.configuration(q_fit), X_WC)
     }
 
     pub(super) fn clamp(&self, q: &mut [f64]) {

@@ -97,7 +97,8 @@ pub use calibration::{
     NetworkCalibration, calibration_path, file_sha256,
 };
 pub use config::ArmFitConfig;
-pub use fit::{ArmFit, ArmFitOutcome, ArmFitter, ArmGain};
+use fit::grid_points;
+pub use fit::{ArmFit, ArmFitOutcome, ArmFitter, ArmGain, MAX_GRID_JOINTS};
 pub use kinematics::ArticulatedArm;
 pub use masks::ArmMasks;
 use masks::*;

@@ -266,6 +266,60 @@ fn fits_the_arm_it_rendered() {
     }
 }
 
+/// The whole body (the catalogue's `human`): the fit moves the arm's five joints below the
+/// torso and holds the trunk's at 0 (upright at the base); it finds an arm posed in all of
+/// its shoulder's three joints, globally and then tracking.
+#[test]
+fn fits_the_whole_bodys_arm_with_the_trunk_held() {
+    let human = RobotModel::from_catalogue("human").expect("catalogue human");
+    let arm = ArticulatedArm::new(&human, &Pose::IDENTITY).expect("arm");
+    let names: Vec<&str> = arm
+        .fitted()
+        .iter()
+        .map(|&i| human.joints()[human.actuated_joints()[i]].name.as_str())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "shoulder_flexion",
+            "shoulder_abduction",
+            "shoulder_rotation",
+            "elbow_flexion",
+            "forearm_rotation"
+        ]
+    );
+    assert_eq!(arm.model_dof(), human.dof());
+    let q_fit = [0.9, 0.4, 0.3, 1.0, 1.2];
+    let q = arm.configuration(&q_fit);
+    assert_eq!(arm.fitted_of(&q), q_fit);
+    assert!(
+        q.iter()
+            .enumerate()
+            .all(|(i, v)| arm.fitted().contains(&i) || *v == 0.0)
+    );
+    assert_eq!(grid_points(12, 3), 12);
+    assert_eq!(grid_points(12, 4), 6);
+    assert_eq!(grid_points(12, 5), 4);
+    let (_, camera) = setup();
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+    for k in 0..3 {
+        let t = f64::from(k) * 0.3;
+        let truth = arm.configuration(&[0.9 - 0.1 * t, 0.4 + 0.1 * t, 0.3, 1.0 + 0.2 * t, 1.2]);
+        let masks =
+            ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
+        let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+        assert_eq!(fit.q.len(), human.dof());
+        assert_eq!(fit.sigma_q.len(), arm.dof());
+        let err = distance_cm(&arm, &camera, &fit.q, &truth);
+        assert!(
+            err < 1.5,
+            "frame {k}: {err:.2} cm, q {:?} vs {truth:?}",
+            fit.q
+        );
+        assert!(fit.gain > 0.9, "frame {k}: gain {}", fit.gain);
+    }
+}
+
 /// A track that explains the masks poorly (a gain between `min_gain` and
 /// `search_below_gain`) calls the global search beside it, which finds the arm; with the
 /// threshold at 0 the poor track is kept.
