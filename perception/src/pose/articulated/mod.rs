@@ -97,7 +97,6 @@ pub use calibration::{
     NetworkCalibration, calibration_path, file_sha256,
 };
 pub use config::ArmFitConfig;
-use fit::grid_points;
 pub use fit::{ArmFit, ArmFitOutcome, ArmFitter, ArmGain, MAX_GRID_JOINTS};
 pub use kinematics::ArticulatedArm;
 pub use masks::ArmMasks;

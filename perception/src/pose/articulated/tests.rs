@@ -6,6 +6,7 @@ use workcell_render::{Camera, Class, MaskBatch, RenderMesh, Renderer, SpanBatch}
 use workcell_robots::RobotModel;
 use workcell_robots::math::{Pose, Vector};
 
+use super::fit::grid_points;
 use super::*;
 use crate::pose::{NoPose, POSE_MESH_SEGMENTS};
 use workcell_render::CpuRenderer;
