@@ -58,9 +58,18 @@ fn catalogue_models_check_clean() {
         assert!(out.status.success(), "{name}: {}", text(&out.stderr));
         let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
         assert_eq!(report["problems"], serde_json::json!([]), "{name}");
-        // Held off-neutral under gravity, the servos keep every joint within 10 mrad.
-        let hold = report["rapier"]["hold_error"].as_f64().expect("hold error");
-        assert!(hold < 0.01, "{name}: {hold}");
+        let rapier = &report["rapier"];
+        assert!(
+            rapier["fk_mismatch_m"].as_f64().expect("mismatch") < 1e-9,
+            "{name}"
+        );
+        // Held off-neutral under gravity, a robot's servos keep every joint within 10 mrad.
+        // The humans are not servoed: the cell moves their links as kinematic bodies
+        // (sim/src/cell.rs), so what the servos hold says nothing about them.
+        if !name.starts_with("human") {
+            let hold = rapier["hold_error"].as_f64().expect("hold error");
+            assert!(hold < 0.01, "{name}: {hold}");
+        }
     }
 }
 

@@ -368,8 +368,9 @@ def human():
     shoulder extension (50) and elbow flexion (145); the forearm's range reaches 10 degrees
     past full supination so that its zero lies inside it, the shoulder's adduction across the
     body is 40 degrees, and the turn (170 degrees each way) counts the feet's as well as the
-    trunk's 45. Velocity limits bound the shipped recordings'
-    retargeted joint speeds (docs/human.md gives the measurement).
+    trunk's 45. Velocity limits are above the 99th-percentile
+    joint speeds that retargeting asks for in most shipped clips (docs/human.md gives the
+    measurement).
     """
     parts, _ = human_sizes()
     trunk_links = ["pelvis", "pelvis_slide_x", "pelvis_slide_y", "trunk_turned", "trunk_leaned"]

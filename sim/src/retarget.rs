@@ -148,6 +148,10 @@ pub struct RetargetReport {
     pub clamped_frames: usize,
     /// Frames where a joint was held back by its velocity limit.
     pub velocity_limited_frames: usize,
+    /// Each joint's speed from solved frame to solved frame before the velocity limits,
+    /// rad/s (m/s for a prismatic joint), in the model's joint order: what the limits must
+    /// cover for the retargeted motion to be the recorded one.
+    pub joint_speed: Vec<Spread>,
     /// The recorded person's upper arm and forearm, median length, m, and the model's.
     pub recorded_bones_m: [f64; 2],
     pub model_bones_m: [f64; 2],
@@ -396,9 +400,17 @@ pub fn retarget(
         let mut cost = fit
             .solve(&mut q, e_t, w_t)
             .map_err(|e| invalid(e.to_string()))?;
-        // The first frame, and any the previous frame's solution leaves far off (a local
-        // minimum at a limit), start again from a grid over the arm joints' ranges.
-        if f == 0 || cost.sqrt() > 0.05 {
+        // The first frame, and any where the previous frame's solution leaves the wrist far
+        // off (a local minimum at a limit), start again from a grid over the arm joints'
+        // ranges. The wrist's error decides, not the cost: where the recorded elbow lies
+        // beyond the model's reach (a bend no elbow makes), a restart on the cost would jump
+        // between equally poor branches from frame to frame.
+        if f == 0
+            || fit
+                .wrist_error(&q, w_t)
+                .map_err(|e| invalid(e.to_string()))?
+                > 0.05
+        {
             for seed in grid(&limits, &free, &q) {
                 let mut candidate = seed;
                 let c = fit
@@ -416,6 +428,15 @@ pub fn retarget(
     }
     // The model's velocity limits, frame to frame.
     let dt = 1.0 / piece.rate_hz;
+    let joint_speed = (0..dof)
+        .map(|j| {
+            let mut speeds: Vec<f64> = out
+                .windows(2)
+                .map(|w| (w[1][j] - w[0][j]).abs() / dt)
+                .collect();
+            Spread::of(&mut speeds)
+        })
+        .collect();
     let mut velocity_limited_frames = 0;
     for f in 1..out.len() {
         let mut limited = false;
@@ -446,6 +467,7 @@ pub fn retarget(
         elbow_error_m: Spread::of(&mut elbow_errors),
         clamped_frames,
         velocity_limited_frames,
+        joint_speed,
         recorded_bones_m,
         model_bones_m: bones,
         trunk: trunk.any().then(|| trunk_report(&trunk, &out)),
@@ -475,17 +497,51 @@ struct Fit<'a> {
 impl Fit<'_> {
     /// Moves `q` (within the limits) toward the targets; returns the weighted squared error
     /// left.
+    /// The model's wrist's distance from `w_t` at `q`.
+    fn wrist_error(&mut self, q: &[f64], w_t: Vector) -> workcell_robots::Result<f64> {
+        self.model.forward_kinematics(q, &mut self.state)?;
+        Ok((self.state.link_pose(self.links[2]).translation - w_t).length())
+    }
+
     fn solve(&mut self, q: &mut [f64], e_t: Vector, w_t: Vector) -> workcell_robots::Result<f64> {
         let dof = q.len();
         let lambda2 = 1e-4;
         for _ in 0..30 {
             let (cost, a, b) = self.normal_equations(q, e_t, w_t)?;
-            let mut a = a;
-            for (i, row) in a.iter_mut().enumerate() {
-                row[i] += lambda2;
-            }
-            let Some(step) = solve(a, b) else {
-                return Ok(cost);
+            // An active set: a joint at a limit that the step would push past it is held for
+            // this step and the rest solved again without it (clamping the full step instead
+            // leaves the other joints' steps computed as if it moved, and the fit stalls).
+            let mut held = vec![false; dof];
+            let step = loop {
+                let mut a = a.clone();
+                let mut b = b.clone();
+                for i in 0..dof {
+                    a[i][i] += lambda2;
+                    if held[i] {
+                        for j in 0..dof {
+                            a[i][j] = 0.0;
+                            a[j][i] = 0.0;
+                        }
+                        a[i][i] = 1.0;
+                        b[i] = 0.0;
+                    }
+                }
+                let Some(step) = solve(a, b) else {
+                    return Ok(cost);
+                };
+                let blocked: Vec<usize> = (0..dof)
+                    .filter(|&j| {
+                        !held[j]
+                            && ((q[j] <= self.limits[j][0] && step[j] < 0.0)
+                                || (q[j] >= self.limits[j][1] && step[j] > 0.0))
+                    })
+                    .collect();
+                if blocked.is_empty() {
+                    break step;
+                }
+                for j in blocked {
+                    held[j] = true;
+                }
             };
             let mut moved: f64 = 0.0;
             for j in 0..dof {

@@ -14,6 +14,7 @@ use workcell::mocap::stats::{Samples, Spread};
 use workcell::mocap::{Axes, ClipFormat, ColumnsSpec, Landmark};
 use workcell::robots::KinematicState;
 use workcell::robots::math::Vector;
+use workcell::sim::retarget::RetargetReport;
 use workcell::sim::{CellModel, Scenario};
 
 /// The most seeds of generated motion measured.
@@ -647,6 +648,7 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
         reports.first().map_or(0.0, |r| r.model_bones_m[0]),
         reports.first().map_or(0.0, |r| r.model_bones_m[1])
     );
+    joint_speed_table(&model.human, &reports);
     if let Some(path) = &args.gltf {
         say!("replay: {}", path.display());
     }
@@ -656,6 +658,43 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Per joint of `human`: its velocity limit beside the clips' 99th-percentile and peak
+/// speeds before the limits (the median clip's and the fastest clip's).
+fn joint_speed_table(human: &workcell::robots::RobotModel, reports: &[RetargetReport]) {
+    if reports.is_empty() {
+        return;
+    }
+    let limits = human.velocity_limits();
+    say!();
+    say!("joint speeds before the velocity limits, over the clips (rad/s; m/s for the pelvis):");
+    say!();
+    say!(
+        "| joint | limit | p99, median clip | p99, fastest clip | peak, median clip | clips whose p99 is above the limit |"
+    );
+    say!("|---|---:|---:|---:|---:|---:|");
+    for (j, &id) in human.actuated_joints().iter().enumerate() {
+        let speed =
+            |r: &RetargetReport| r.joint_speed.get(j).map_or((0.0, 0.0), |s| (s.p99, s.peak));
+        let mut p99: Vec<f64> = reports.iter().map(|r| speed(r).0).collect();
+        let mut peak: Vec<f64> = reports.iter().map(|r| speed(r).1).collect();
+        let above = p99.iter().filter(|&&v| v > limits[j]).count();
+        let fastest = reports
+            .iter()
+            .max_by(|a, b| speed(a).0.total_cmp(&speed(b).0))
+            .map_or("-", |r| r.clip.as_str());
+        let (p99, peak) = (Spread::of(&mut p99), Spread::of(&mut peak));
+        say!(
+            "| {} | {:.1} | {:.2} | {:.2} ({fastest}) | {:.2} | {above} of {} |",
+            human.joints()[id].name,
+            limits[j],
+            p99.median,
+            p99.peak,
+            peak.median,
+            reports.len()
+        );
+    }
 }
 
 /// The cell with its robot at rest and its human playing `motion`, at 30 frames a second, as

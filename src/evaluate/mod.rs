@@ -214,11 +214,15 @@ impl Evaluation {
         }
         let mut scenario = Scenario::from_file(&scenario_path)?;
         if let Some(model) = &config.human_model {
-            // A path relative to this file, made absolute: the cell resolves its own against
-            // its folder.
+            // A catalogue name as it is; a URDF path relative to this file, made absolute
+            // (the cell resolves its own against its folder).
             let resolved = Scenario::resolve_model_path(model, path);
-            scenario.human.model = std::path::absolute(&resolved)
-                .map_or(resolved, |p| p.to_string_lossy().into_owned());
+            scenario.human.model = if resolved.ends_with(".urdf") {
+                std::path::absolute(&resolved)
+                    .map_or(resolved, |p| p.to_string_lossy().into_owned())
+            } else {
+                resolved
+            };
         }
         if let Some(recorded) = &mut config.human_recorded {
             // Relative to this file, wherever the cell's file is.
@@ -496,6 +500,29 @@ pub struct EpisodeTrace {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `human_model` names a catalogue model as it is, and a URDF relative to the file.
+    #[test]
+    fn an_evaluations_human_model_is_a_name_or_a_path_beside_the_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let cell = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/default.toml");
+        let path = dir.path().join("eval.toml");
+        for (model, expected) in [
+            ("human", "human".to_string()),
+            (
+                "bodies/me.urdf",
+                dir.path()
+                    .join("bodies/me.urdf")
+                    .to_string_lossy()
+                    .into_owned(),
+            ),
+        ] {
+            let text = format!("cell = {cell:?}\nhuman_model = {model:?}\n");
+            std::fs::write(&path, text).expect("write");
+            let evaluation = Evaluation::from_file(&path).expect("evaluation");
+            assert_eq!(evaluation.scenario.human.model, expected);
+        }
+    }
 
     /// Paths inside an evaluation file are relative to the file, wherever it is run from;
     /// an error inside it names the file once and the key once.
