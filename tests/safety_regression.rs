@@ -271,10 +271,10 @@ fn the_servo_does_not_outrun_the_filter() {
     .expect("robot loads");
     let m_r = effective_robot_mass_kg(robot.mass_kg(), evaluation.config.safety.payload_kg);
     let limit = BodyRegion::of(HumanPart::Forearm).max_contact_speed_m_s(m_r, true);
-    let forearm = HumanPart::ARM
+    let forearm = workcell::evaluate::PFL_PARTS
         .iter()
         .position(|&p| p == HumanPart::Forearm)
-        .expect("the forearm is an arm part");
+        .expect("the forearm is a guarded part");
     let peak = |evaluation: &Evaluation| {
         run_episode(evaluation, FilterMode::Qp, 0, 790, None, |_| {})
             .expect("episode runs")

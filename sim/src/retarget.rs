@@ -517,14 +517,15 @@ impl Fit<'_> {
                 let mut b = b.clone();
                 for i in 0..dof {
                     a[i][i] += lambda2;
-                    if held[i] {
-                        for j in 0..dof {
-                            a[i][j] = 0.0;
-                            a[j][i] = 0.0;
-                        }
-                        a[i][i] = 1.0;
-                        b[i] = 0.0;
+                }
+                for i in (0..dof).filter(|&i| held[i]) {
+                    // Row and column i zeroed, a unit diagonal: step[i] = 0.
+                    a[i].fill(0.0);
+                    for row in &mut a {
+                        row[i] = 0.0;
                     }
+                    a[i][i] = 1.0;
+                    b[i] = 0.0;
                 }
                 let Some(step) = solve(a, b) else {
                     return Ok(cost);

@@ -20,7 +20,7 @@ use workcell::evaluate::{
     Evaluation, EvaluationConfig, PerceptionConfig, PerceptionKind, record_episode, run_episode,
 };
 use workcell::safety::iso::effective_robot_mass_kg;
-use workcell::safety::{BodyRegion, FilterMode, HumanPart};
+use workcell::safety::{BodyRegion, FilterMode};
 
 /// Files `evaluate` writes into `--out`.
 pub const OUTPUTS: [&str; 14] = [
@@ -333,9 +333,18 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         &workcell::robots::PackageMap::from_env(),
     )?;
     let m_r = effective_robot_mass_kg(robot.mass_kg(), evaluation.config.safety.payload_kg);
+    // The guarded parts the human model has (the arm's; `human` also a head of its own).
+    let human = workcell::robots::RobotModel::load(
+        &workcell::sim::Scenario::resolve_model_path(
+            &evaluation.scenario.human.model,
+            &evaluation.scenario_path,
+        ),
+        &workcell::robots::PackageMap::from_env(),
+    )?;
     let contact_speed_limits: Vec<(String, f64)> = if m_r > 0.0 {
-        HumanPart::ARM
+        workcell::evaluate::PFL_PARTS
             .iter()
+            .filter(|p| human.link_id(p.link_name()).is_some())
             .map(|&p| {
                 (
                     p.to_string(),

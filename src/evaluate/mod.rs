@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use workcell_robots::input::{MAX_CONFIG_BYTES, read_text_file};
-use workcell_safety::FilterConfig;
+use workcell_safety::{FilterConfig, HumanPart};
 use workcell_sim::Scenario;
 
 use crate::error::{Error, Result};
@@ -403,6 +403,17 @@ pub fn apply_overrides(text: &str, overrides: &[String], path: &Path) -> Result<
     })
 }
 
+/// The parts whose approach speeds an evaluation reports, in the order of
+/// [`EpisodeMetrics::peak_approach_by_part_m_s`] and of `metrics.csv`'s columns: the parts
+/// the safety filter guards (`HumanGeometry`), the arm's first (the order of earlier
+/// reports), then the head where the human model has one.
+pub const PFL_PARTS: [HumanPart; 4] = [
+    HumanPart::UpperArm,
+    HumanPart::Forearm,
+    HumanPart::Hand,
+    HumanPart::Head,
+];
+
 /// What happened in one episode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeMetrics {
@@ -444,13 +455,11 @@ pub struct EpisodeMetrics {
     /// `human_acceleration_m_s2`); above it, that bound does not hold.
     #[serde(default, with = "lossless::f64")]
     pub peak_human_acceleration_m_s2: f64,
-    /// Per arm part (upper arm, forearm, hand: [`HumanPart::ARM`]): the robot's fastest
+    /// Per part ([`PFL_PARTS`]: upper arm, forearm, hand, head): the robot's fastest
     /// approach toward it at its closest point while the part's true separation was below
     /// the filter's `pfl_distance_m` (`near_m` when PFL is off), m/s. Compare with the
-    /// part's ISO/TS 15066 transient contact speed.
-    ///
-    /// [`HumanPart::ARM`]: workcell_safety::HumanPart::ARM
-    pub peak_approach_by_part_m_s: [f64; 3],
+    /// part's ISO/TS 15066 transient contact speed (0 for the head: no contact permitted).
+    pub peak_approach_by_part_m_s: [f64; PFL_PARTS.len()],
     /// Contacts (true separation down to 0) that began with the robot's closest point
     /// moving faster than 0.05 m/s: what speed and separation monitoring forbids.
     pub contacts_moving: usize,

@@ -181,9 +181,10 @@ impl RunRecord {
             }
         }
         for (part, v) in &s.contact_speed_limits {
-            if !(v.is_finite() && *v > 0.0) {
+            // 0 where contact is not permitted (the head).
+            if !(v.is_finite() && *v >= 0.0) {
                 return Err(format!(
-                    "settings.contact_speed_limits: {part} = {v}: must be finite and > 0"
+                    "settings.contact_speed_limits: {part} = {v}: must be finite and >= 0"
                 ));
             }
         }

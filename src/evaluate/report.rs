@@ -23,9 +23,9 @@ pub struct Aggregate {
     pub peak_approach_speed_m_s: f64,
     pub peak_human_speed_m_s: f64,
     pub peak_human_acceleration_m_s2: f64,
-    /// Per arm part ([`workcell_safety::HumanPart::ARM`]): the robot's fastest approach
-    /// within the PFL distance, m/s.
-    pub peak_approach_by_part_m_s: [f64; 3],
+    /// Per part ([`crate::evaluate::PFL_PARTS`]): the robot's fastest approach within the PFL
+    /// distance, m/s.
+    pub peak_approach_by_part_m_s: [f64; crate::evaluate::PFL_PARTS.len()],
     pub contacts_moving: usize,
     pub contacts_standing: usize,
     pub ticks_pass: usize,
@@ -127,7 +127,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,simulated_s,wall_s";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,simulated_s,wall_s";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -142,7 +142,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.3},{:.3}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.3},{:.3}",
             e.episode,
             e.seed,
             e.filter,
@@ -162,6 +162,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             e.peak_approach_by_part_m_s[0],
             e.peak_approach_by_part_m_s[1],
             e.peak_approach_by_part_m_s[2],
+            e.peak_approach_by_part_m_s[3],
             e.contacts_moving,
             e.contacts_standing,
             e.ticks_pass,
@@ -188,8 +189,9 @@ pub struct SummaryContext<'a> {
     pub near_m: f64,
     /// Distance within which the peaks per body region are taken, m.
     pub pfl_distance_m: f64,
-    /// ISO/TS 15066 transient contact speed limits per arm part
-    /// ([`workcell_safety::HumanPart::ARM`] order), m/s, for the robot.
+    /// ISO/TS 15066 transient contact speed limits of the human model's guarded parts, by
+    /// part name ([`crate::evaluate::PFL_PARTS`]), m/s, for the robot; 0 where contact is
+    /// not permitted.
     pub contact_speed_limits: &'a [(String, f64)],
     pub command: &'a str,
 }
@@ -273,14 +275,22 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
             "| body region | peak approach (m/s) | limit (m/s) | within |"
         );
         let _ = writeln!(md, "|---|---|---|---|");
-        for ((region, limit), peak) in context
-            .contact_speed_limits
-            .iter()
-            .zip(a.peak_approach_by_part_m_s)
-        {
+        for (region, limit) in context.contact_speed_limits {
+            let Some(i) = crate::evaluate::PFL_PARTS
+                .iter()
+                .position(|p| p.name() == region)
+            else {
+                continue;
+            };
+            let peak = a.peak_approach_by_part_m_s[i];
+            let limit_text = if *limit > 0.0 {
+                format!("{limit:.3}")
+            } else {
+                "0 (no contact)".to_string()
+            };
             let _ = writeln!(
                 md,
-                "| {region} | {peak:.3} | {limit:.3} | {} |",
+                "| {region} | {peak:.3} | {limit_text} | {} |",
                 if peak <= *limit { "yes" } else { "NO" }
             );
         }
@@ -452,7 +462,7 @@ mod tests {
             peak_approach_speed_m_s: 0.1,
             peak_human_speed_m_s: 1.0,
             peak_human_acceleration_m_s2: 5.0,
-            peak_approach_by_part_m_s: [0.0; 3],
+            peak_approach_by_part_m_s: [0.0; crate::evaluate::PFL_PARTS.len()],
             contacts_moving: 1,
             contacts_standing: 2,
             ticks_pass: 10,

@@ -53,7 +53,7 @@ impl Tally {
                 peak_approach_speed_m_s: 0.0,
                 peak_human_speed_m_s: 0.0,
                 peak_human_acceleration_m_s2: 0.0,
-                peak_approach_by_part_m_s: [0.0; 3],
+                peak_approach_by_part_m_s: [0.0; crate::evaluate::PFL_PARTS.len()],
                 contacts_moving: 0,
                 contacts_standing: 0,
                 ticks_pass: 0,
@@ -115,7 +115,7 @@ impl Tally {
     /// The robot's approach speed toward `part` within the power and force limiting
     /// distance, m/s (its body region's contact speed applies there).
     pub fn approach(&mut self, part: HumanPart, approach_m_s: f64) {
-        if let Some(i) = HumanPart::ARM.iter().position(|&p| p == part) {
+        if let Some(i) = crate::evaluate::PFL_PARTS.iter().position(|&p| p == part) {
             let peak = &mut self.metrics.peak_approach_by_part_m_s[i];
             *peak = peak.max(approach_m_s);
         }
