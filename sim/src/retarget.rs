@@ -515,8 +515,8 @@ impl Fit<'_> {
             let step = loop {
                 let mut a = a.clone();
                 let mut b = b.clone();
-                for i in 0..dof {
-                    a[i][i] += lambda2;
+                for (i, row) in a.iter_mut().enumerate() {
+                    row[i] += lambda2;
                 }
                 for i in (0..dof).filter(|&i| held[i]) {
                     // Row and column i zeroed, a unit diagonal: step[i] = 0.
