@@ -878,6 +878,67 @@ mod tests {
     }
 
     /// The trunk's angles are the z-y-x angles of its rotation.
+    /// A recorded arm whose forearm bends backwards (the elbow hyperextended by 40 to 60
+    /// degrees, as the Vicon clips read), swinging forward and back: no configuration reaches
+    /// the elbow's target, but the wrist's is within the model's reach, and the fit puts the
+    /// wrist on it with the elbow at its limit. (Clamping the whole Gauss-Newton step at the
+    /// limits, as the fit did before its active set, left the wrist up to 17 cm off here.)
+    #[test]
+    fn the_wrist_is_followed_where_the_elbow_bends_past_its_limit() {
+        let model = RobotModel::from_catalogue("human").expect("catalogue");
+        let links = arm_links(&model).expect("links");
+        let mut state = KinematicState::new(&model);
+        let mut q = model.neutral_configuration();
+        TrunkJoints::of(&model).set(&mut q, [0.0; 5]);
+        model.forward_kinematics(&q, &mut state).expect("fk");
+        let s = state.link_pose(links[0]).translation;
+        let bones = [
+            (state.link_pose(links[1]).translation - s).length(),
+            (state.link_pose(links[2]).translation - state.link_pose(links[1]).translation)
+                .length(),
+        ];
+        let (rate, frames) = (100.0, 300);
+        let mut positions = Vec::new();
+        for f in 0..frames {
+            let t = f as f64 / rate;
+            // The upper arm 20 to 70 degrees forward of hanging, the forearm 40 to 60 behind it.
+            let upper = 0.35 + 0.45 * (0.8 * t).sin().abs();
+            let fore = upper - 0.7 - 0.17 * (1.3 * t).cos();
+            let dir = |a: f64| Vector::new(a.sin(), 0.0, -a.cos());
+            let e = s + dir(upper) * bones[0];
+            positions.extend([
+                s + Vector::new(0.0, 0.38, 0.0),
+                s,
+                e,
+                e + dir(fore) * bones[1],
+            ]);
+        }
+        let clip = Clip {
+            name: "hyperextended".into(),
+            rate_hz: rate,
+            landmarks: vec![
+                Landmark::LeftShoulder,
+                Landmark::RightShoulder,
+                Landmark::RightElbow,
+                Landmark::RightWrist,
+            ],
+            positions,
+            filled: vec![false; frames],
+        };
+        // On the wrist alone the fit reaches it.
+        let wrist_only = RetargetConfig {
+            elbow_weight: 0.0,
+            ..RetargetConfig::default()
+        };
+        let (_, report) = retarget(&clip, &model, &wrist_only).expect("retarget");
+        assert!(report.wrist_error_m.peak < 1e-3, "{report:?}");
+        // With the elbow weighted (0.05), the wrist gives way a little to an elbow that
+        // cannot follow: its target is off every reachable elbow by the bend.
+        let (_, report) = retarget(&clip, &model, &RetargetConfig::default()).expect("retarget");
+        assert!(report.elbow_error_m.median > 0.05, "{report:?}");
+        assert!(report.wrist_error_m.peak < 0.01, "{report:?}");
+    }
+
     #[test]
     fn trunk_angles_invert_the_turn_lean_side_product() {
         use workcell_robots::math::Rotation;
