@@ -495,14 +495,14 @@ struct Fit<'a> {
 }
 
 impl Fit<'_> {
-    /// Moves `q` (within the limits) toward the targets; returns the weighted squared error
-    /// left.
     /// The model's wrist's distance from `w_t` at `q`.
     fn wrist_error(&mut self, q: &[f64], w_t: Vector) -> workcell_robots::Result<f64> {
         self.model.forward_kinematics(q, &mut self.state)?;
         Ok((self.state.link_pose(self.links[2]).translation - w_t).length())
     }
 
+    /// Moves `q` (within the limits) toward the targets; returns the weighted squared error
+    /// left.
     fn solve(&mut self, q: &mut [f64], e_t: Vector, w_t: Vector) -> workcell_robots::Result<f64> {
         let dof = q.len();
         let lambda2 = 1e-4;
@@ -530,18 +530,18 @@ impl Fit<'_> {
                 let Some(step) = solve(a, b) else {
                     return Ok(cost);
                 };
-                let blocked: Vec<usize> = (0..dof)
-                    .filter(|&j| {
-                        !held[j]
-                            && ((q[j] <= self.limits[j][0] && step[j] < 0.0)
-                                || (q[j] >= self.limits[j][1] && step[j] > 0.0))
-                    })
-                    .collect();
-                if blocked.is_empty() {
-                    break step;
+                let mut newly_held = false;
+                for (j, held) in held.iter_mut().enumerate() {
+                    let [lower, upper] = self.limits[j];
+                    if !*held
+                        && ((q[j] <= lower && step[j] < 0.0) || (q[j] >= upper && step[j] > 0.0))
+                    {
+                        *held = true;
+                        newly_held = true;
+                    }
                 }
-                for j in blocked {
-                    held[j] = true;
+                if !newly_held {
+                    break step;
                 }
             };
             let mut moved: f64 = 0.0;
@@ -877,7 +877,6 @@ mod tests {
         }
     }
 
-    /// The trunk's angles are the z-y-x angles of its rotation.
     /// A recorded arm whose forearm bends backwards (the elbow hyperextended by 40 to 60
     /// degrees, as the Vicon clips read), swinging forward and back: no configuration reaches
     /// the elbow's target, but the wrist's is within the model's reach, and the fit puts the
@@ -939,6 +938,7 @@ mod tests {
         assert!(report.wrist_error_m.peak < 0.01, "{report:?}");
     }
 
+    /// The trunk's angles are the z-y-x angles of its rotation.
     #[test]
     fn trunk_angles_invert_the_turn_lean_side_product() {
         use workcell_robots::math::Rotation;

@@ -325,22 +325,16 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         })
         .collect();
 
-    let robot = workcell::robots::RobotModel::load(
-        &workcell::sim::Scenario::resolve_model_path(
-            &evaluation.scenario.robot.model,
-            &evaluation.scenario_path,
-        ),
-        &workcell::robots::PackageMap::from_env(),
-    )?;
+    let load = |model: &str| {
+        workcell::robots::RobotModel::load(
+            &workcell::sim::Scenario::resolve_model_path(model, &evaluation.scenario_path),
+            &workcell::robots::PackageMap::from_env(),
+        )
+    };
+    let robot = load(&evaluation.scenario.robot.model)?;
     let m_r = effective_robot_mass_kg(robot.mass_kg(), evaluation.config.safety.payload_kg);
     // The guarded parts the human model has (the arm's; `human` also a head of its own).
-    let human = workcell::robots::RobotModel::load(
-        &workcell::sim::Scenario::resolve_model_path(
-            &evaluation.scenario.human.model,
-            &evaluation.scenario_path,
-        ),
-        &workcell::robots::PackageMap::from_env(),
-    )?;
+    let human = load(&evaluation.scenario.human.model)?;
     let contact_speed_limits: Vec<(String, f64)> = if m_r > 0.0 {
         workcell::evaluate::PFL_PARTS
             .iter()
