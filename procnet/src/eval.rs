@@ -536,6 +536,9 @@ pub struct Evaluation {
     /// Keyed by the band of the visible forearm's luma ([`LumaBand`]): whether a dark
     /// forearm (dark skin, a dark sleeve, shade) is found as well as a light one.
     pub by_luma: BTreeMap<LumaBand, Scores>,
+    /// Keyed by where the human's motion came from: `recorded` (a clip of recorded people,
+    /// named in the manifest) or `generator`; empty when every sequence is the generator's.
+    pub by_motion: BTreeMap<&'static str, Scores>,
     /// The frames of highest forearm Dice loss, worst first (as many as asked for).
     pub worst: Vec<ScoredFrame>,
     /// Every scored frame's forearm, in the order scored (empty without a forearm class).
@@ -820,6 +823,14 @@ pub fn evaluate(
                 .entry(t / TIME_SPAN * TIME_SPAN)
                 .or_default()
                 .add(entry.index, &scores);
+            ev.by_motion
+                .entry(if entry.clip.is_some() {
+                    "recorded"
+                } else {
+                    "generator"
+                })
+                .or_default()
+                .add(entry.index, &scores);
             if let Some(luma) = forearm_luma {
                 ev.by_luma
                     .entry(LumaBand::of(luma))
@@ -929,6 +940,15 @@ impl Evaluation {
                 .iter()
                 .map(|(k, s)| (format!("forearm {}", k.name()), s)),
         );
+        if self.by_motion.contains_key("recorded") {
+            // Recorded people first, then the generator's: the gap between them.
+            groups.extend(
+                self.by_motion
+                    .iter()
+                    .rev()
+                    .map(|(k, s)| (format!("{k} motion"), s)),
+            );
+        }
         let coarse = groups.len();
         groups.extend(pairs.iter().map(|((d, o), s)| (format!("{d} / {o}"), *s)));
         let _ = writeln!(
@@ -1203,6 +1223,43 @@ mod tests {
         let mut empty = String::new();
         Evaluation::default().worst_sequences_markdown(&mut empty, 0);
         assert!(empty.is_empty());
+    }
+
+    /// Recorded people and the generator get a row each in the forearm's tables when the
+    /// split has both, recorded first; a split of the generator alone gets none.
+    #[test]
+    fn the_tables_split_recorded_people_from_the_generator() {
+        let group = |frames, dice| Scores {
+            frames,
+            dice: vec![dice],
+            ..Scores::default()
+        };
+        let mut ev = Evaluation {
+            classes: vec![Class::Forearm],
+            overall: group(3, 0.9),
+            ..Evaluation::default()
+        };
+        ev.by_motion.insert("generator", group(2, 0.2));
+        let rows = |ev: &Evaluation| -> Vec<String> {
+            ev.to_markdown()
+                .lines()
+                .filter(|l| l.contains(" motion |"))
+                .map(|l| l.split(" | ").take(4).collect::<Vec<_>>().join(" | "))
+                .collect()
+        };
+        assert!(rows(&ev).is_empty(), "{:?}", rows(&ev));
+        ev.by_motion.insert("recorded", group(1, 0.7));
+        let rows = rows(&ev);
+        // The Dice table's rows (sequences, frames, Dice loss), then the same groups in the
+        // table of where the loss goes.
+        assert_eq!(
+            rows[..2],
+            [
+                "| recorded motion | 0 | 1 | 0.7000",
+                "| generator motion | 0 | 2 | 0.1000"
+            ]
+        );
+        assert_eq!(rows.len(), 4, "{rows:?}");
     }
 
     #[test]

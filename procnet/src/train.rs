@@ -1248,6 +1248,7 @@ mod tests {
                 frames: 0,
                 mean_forearm_occlusion: None,
                 frames_without_forearm: 0,
+                clip: None,
             },
             size: 0,
             frames: 0,

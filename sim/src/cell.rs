@@ -138,7 +138,8 @@ impl CellModel {
                 &scenario.human.motions,
                 scenario.human.shuffle,
                 &human,
-                scenario.human.peak_speed_m_s,
+                scenario.human.peak_speed_range_m_s(),
+                scenario.human.duration_scale_range(),
                 scenario.seed,
             ),
         }

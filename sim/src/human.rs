@@ -11,9 +11,11 @@
 //! unrestrained arm movements (Atkeson and Hollerbach 1985, J. Neurosci. 5(9) 2318-2330).
 //! Durations are drawn first, nearly independent of distance as in natural prehension
 //! (Jeannerod 1984, J. Mot. Behav. 16(3) 235-254); then each movement draws the peak speed its
-//! fastest point may reach from `human.peak_speed_m_s` (default 1.0 to 2.0 m/s, never above
-//! ISO 13855's 2.0 m/s approach speed of hands and arms) and is stretched until it keeps it. A
-//! wave swings less far instead.
+//! fastest point may reach from `human.peak_speed_m_s` and is stretched until it keeps it (a
+//! wave swings less far instead). `human.speeds` chooses both ranges: `iso13855` (1.0 to
+//! 2.0 m/s, never above ISO 13855's approach speed of hands and arms, durations as drawn) or
+//! `recorded` (peaks and accelerations up to those of the shipped recordings of people at
+//! work: faster peaks and transitions shortened by up to half).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -234,13 +236,16 @@ impl HumanMotion {
     /// Generates the motion of `arm` (its joints found by name, see the module's summary;
     /// every joint within its position limits), cycling through `kinds`.
     /// Each movement's fastest point peaks at a speed drawn from `peak_speed_m_s` (m/s, low
-    /// and high end) or slower.
+    /// and high end) or slower; each transition's drawn duration is multiplied by a factor
+    /// drawn from `duration_scale` (`[1, 1]`: as drawn, and no draw, so that a seed moves the
+    /// arm as it did before the factor existed).
     #[must_use]
     pub fn generate(
         kinds: &[HumanMotionKind],
         shuffle: bool,
         arm: &RobotModel,
         peak_speed_m_s: [f64; 2],
+        duration_scale: [f64; 2],
         seed: u64,
     ) -> Self {
         let limits = arm.position_limits();
@@ -327,6 +332,13 @@ impl HumanMotion {
                     (clamp(arm3, extra), 0.8, hold, Some(wave))
                 }
             };
+            // Shorter transitions, and a wave's swings as much quicker (a hammering forearm).
+            let scale = match duration_scale {
+                [lo, hi] if lo < hi => rng.random_range(lo..=hi),
+                [scale, _] => scale,
+            };
+            let transition_s = transition_s * scale;
+            let wave = wave.map(|(amplitude, frequency_hz)| (amplitude, frequency_hz / scale));
             let mut phase = Phase {
                 kind,
                 t0_s: t,
@@ -470,6 +482,7 @@ mod tests {
     }
 
     const ISO_13855: [f64; 2] = [1.0, 2.0];
+    const AS_DRAWN: [f64; 2] = [1.0, 1.0];
 
     #[test]
     fn same_seed_same_motion_other_seed_other_motion() {
@@ -479,9 +492,9 @@ mod tests {
             HumanMotionKind::Withdraw,
         ];
         let arm = arm();
-        let a = HumanMotion::generate(&kinds, true, &arm, ISO_13855, 5);
-        let b = HumanMotion::generate(&kinds, true, &arm, ISO_13855, 5);
-        let c = HumanMotion::generate(&kinds, true, &arm, ISO_13855, 6);
+        let a = HumanMotion::generate(&kinds, true, &arm, ISO_13855, AS_DRAWN, 5);
+        let b = HumanMotion::generate(&kinds, true, &arm, ISO_13855, AS_DRAWN, 5);
+        let c = HumanMotion::generate(&kinds, true, &arm, ISO_13855, AS_DRAWN, 6);
         assert_eq!(a, b);
         assert_ne!(a, c);
     }
@@ -494,7 +507,7 @@ mod tests {
             HumanMotionKind::Withdraw,
         ];
         let arm = arm();
-        let m = HumanMotion::generate(&kinds, true, &arm, ISO_13855, 2);
+        let m = HumanMotion::generate(&kinds, true, &arm, ISO_13855, AS_DRAWN, 2);
         let slow = m.clone().with_speed(0.5);
         assert!((slow.period_s() - 2.0 * m.period_s()).abs() < 1e-9);
         let (mut q, mut qd, mut q2, mut qd2) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
@@ -520,7 +533,7 @@ mod tests {
             HumanMotionKind::Withdraw,
         ];
         let arm = arm();
-        let m = HumanMotion::generate(&kinds, false, &arm, ISO_13855, 1);
+        let m = HumanMotion::generate(&kinds, false, &arm, ISO_13855, AS_DRAWN, 1);
         let (mut q0, mut q1, mut qd, mut scratch) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
         let h = 1e-6;
         let n = 20_000;
@@ -551,8 +564,9 @@ mod tests {
 
     /// No point of the arm moves faster than the top of the drawn range, sampled at 1 kHz
     /// (finer than the generator's own sampling) over whole periods of many seeds; and the
-    /// range is used: some movement comes within 10 % of it, and a slow range gives slow
-    /// motions.
+    /// range is used: some movement comes within 10 % of it, a slow range gives slow
+    /// motions, and shortened transitions let a fast range be reached (the `recorded`
+    /// calibration's ranges).
     #[test]
     fn every_movement_keeps_its_peak_speed() {
         let arm = arm();
@@ -564,10 +578,15 @@ mod tests {
             HumanMotionKind::Wave,
         ];
         let (mut q, mut qd) = ([0.0; 3], [0.0; 3]);
-        for range in [ISO_13855, [0.5, 0.8]] {
+        let recorded = crate::scenario::HumanSpeeds::Recorded;
+        for (range, durations) in [
+            (ISO_13855, AS_DRAWN),
+            ([0.5, 0.8], AS_DRAWN),
+            (recorded.peak_speed_m_s(), recorded.duration_scale()),
+        ] {
             let mut fastest: f64 = 0.0;
             for seed in 0..12 {
-                let m = HumanMotion::generate(&kinds, true, &arm, range, seed);
+                let m = HumanMotion::generate(&kinds, true, &arm, range, durations, seed);
                 let n = (m.period_s() * 1000.0) as usize;
                 for k in 0..n {
                     m.sample(k as f64 * 1e-3, &mut q, &mut qd);

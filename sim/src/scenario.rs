@@ -211,7 +211,8 @@ pub const MAX_HUMAN_PEAK_SPEED_M_S: f64 = 10.0;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct HumanConfig {
-    /// Catalogue name or URDF path of the human arm model. Default `human_arm`.
+    /// Catalogue name or URDF path of the human model. Default `human_arm` (the arm on a
+    /// fixed torso); `human` is the whole body.
     pub model: String,
     /// What the camera sees of it: `flesh` (default) or `skeletal` (the paper's bones).
     /// Collisions and the safety layer use the model's collision envelopes in both.
@@ -223,11 +224,19 @@ pub struct HumanConfig {
     pub motions: Vec<HumanMotionKind>,
     /// Shuffle the order of `motions` with the seed. Default false.
     pub shuffle: bool,
+    /// How fast the generated motions are: `recorded` (calibrated to the shipped recordings
+    /// of people at work) or `iso13855` (at most ISO 13855's 2.0 m/s). Default `iso13855`.
+    /// See [`HumanSpeeds`].
+    pub speeds: HumanSpeeds,
     /// Range of the peak speed of the arm's fastest point in each motion, m/s: each phase
     /// draws its peak from it, and a phase whose drawn duration would move faster is
-    /// stretched (a wave swings less far). Default `[1.0, 2.0]`: at most ISO 13855's 2.0 m/s
-    /// approach speed of hands and arms.
-    pub peak_speed_m_s: [f64; 2],
+    /// stretched (a wave swings less far). Default: the range of `speeds`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak_speed_m_s: Option<[f64; 2]>,
+    /// Range of the factor each generated transition's drawn duration is multiplied by
+    /// (within (0, 1]: shorter, so faster and harder). Default: that of `speeds`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub duration_scale: Option<[f64; 2]>,
     /// Playback speed of the motions: 1 as generated, 0.5 half as fast, 1.5 a deliberately
     /// fast intrusion (peaks up to 1.5 times `peak_speed_m_s`); a recorded clip's too. Default
     /// 1.
@@ -308,12 +317,83 @@ impl Default for HumanConfig {
                 HumanMotionKind::Wave,
             ],
             shuffle: false,
-            peak_speed_m_s: [1.0, 2.0],
+            speeds: HumanSpeeds::default(),
+            peak_speed_m_s: None,
+            duration_scale: None,
             speed_scale: 1.0,
             recorded: None,
         }
     }
 }
+
+impl HumanConfig {
+    /// The range each generated movement draws its fastest point's peak speed from, m/s:
+    /// `peak_speed_m_s` where given, else that of `speeds`.
+    #[must_use]
+    pub fn peak_speed_range_m_s(&self) -> [f64; 2] {
+        self.peak_speed_m_s
+            .unwrap_or_else(|| self.speeds.peak_speed_m_s())
+    }
+
+    /// The range of the factor each generated transition's duration is multiplied by:
+    /// `duration_scale` where given, else that of `speeds`.
+    #[must_use]
+    pub fn duration_scale_range(&self) -> [f64; 2] {
+        self.duration_scale
+            .unwrap_or_else(|| self.speeds.duration_scale())
+    }
+}
+
+/// How fast the generated human moves: two calibrations of the same movements.
+///
+/// Both draw each movement's duration as before and its fastest point's peak speed from a
+/// range; `recorded` also shortens each transition by a factor drawn from
+/// [`HumanSpeeds::duration_scale`], so that its accelerations reach the recorded ones too.
+/// `workcell human stats --split tuning --speeds iso13855,recorded` shows both beside the clips.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HumanSpeeds {
+    /// Peaks from 1.0 to 2.0 m/s: ISO 13855's approach speed of hands and arms (2.0 m/s,
+    /// its clause 6.2) is never exceeded. The assumption the safety filter was tuned under.
+    #[default]
+    Iso13855,
+    /// Faster peaks and shorter transitions, chosen so that the generated wrist's peak speed
+    /// reaches the 99.9th percentile of the wrists in the tuning clips of the shipped
+    /// recordings (docs/human.md, "The generator beside the recordings").
+    Recorded,
+}
+
+impl HumanSpeeds {
+    /// The top of [`HumanSpeeds::Recorded`]'s peak-speed range, m/s. The range caps the
+    /// arm's fastest point, the hand's tip; 7.2 m/s there lets the generated wrist peak at
+    /// 4.9 m/s, the Vicon tuning clips' wrist 99.9th percentile (5.0 m/s, `workcell human
+    /// stats --split tuning --speeds recorded`).
+    pub const RECORDED_PEAK_M_S: f64 = RECORDED_PEAK_M_S;
+
+    /// Range of each movement's peak speed, m/s.
+    #[must_use]
+    pub fn peak_speed_m_s(self) -> [f64; 2] {
+        match self {
+            Self::Iso13855 => [1.0, 2.0],
+            Self::Recorded => [1.0, RECORDED_PEAK_M_S],
+        }
+    }
+
+    /// Range of the factor each transition's drawn duration is multiplied by.
+    #[must_use]
+    pub fn duration_scale(self) -> [f64; 2] {
+        match self {
+            Self::Iso13855 => [1.0, 1.0],
+            Self::Recorded => [RECORDED_SHORTEST_DURATION_SCALE, 1.0],
+        }
+    }
+}
+
+/// See [`HumanSpeeds::RECORDED_PEAK_M_S`].
+const RECORDED_PEAK_M_S: f64 = 7.2;
+/// The shortest transition of [`HumanSpeeds::Recorded`], as a fraction of the drawn one:
+/// shorter than this, the peaks stop rising (the speed cap stretches the transition back).
+const RECORDED_SHORTEST_DURATION_SCALE: f64 = 0.3;
 
 /// A primitive of human arm motion.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -489,11 +569,18 @@ impl Scenario {
         if !(s > 0.0 && s <= 4.0) {
             return Err(bad("human.speed_scale", format!("{s} must be in (0, 4]")));
         }
-        let [lo, hi] = self.human.peak_speed_m_s;
+        let [lo, hi] = self.human.peak_speed_range_m_s();
         if !(lo > 0.0 && lo <= hi && hi <= MAX_HUMAN_PEAK_SPEED_M_S) {
             return Err(bad(
                 "human.peak_speed_m_s",
                 format!("[{lo}, {hi}] must be a range within (0, {MAX_HUMAN_PEAK_SPEED_M_S}] m/s"),
+            ));
+        }
+        let [lo, hi] = self.human.duration_scale_range();
+        if !(lo > 0.0 && lo <= hi && hi <= 1.0) {
+            return Err(bad(
+                "human.duration_scale",
+                format!("[{lo}, {hi}] must be a range within (0, 1]"),
             ));
         }
         if let Some(r) = &self.human.recorded {

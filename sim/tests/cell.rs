@@ -511,6 +511,22 @@ fn unbounded_scenario_settings_are_refused() {
             "shuffle = true\npeak_speed_m_s = [1.0, 1e9]",
             "human.peak_speed_m_s",
         ),
+        // Transition duration factors: a range within (0, 1].
+        (
+            "shuffle = true",
+            "shuffle = true\nduration_scale = [0.0, 1.0]",
+            "human.duration_scale",
+        ),
+        (
+            "shuffle = true",
+            "shuffle = true\nduration_scale = [0.5, 2.0]",
+            "human.duration_scale",
+        ),
+        (
+            "shuffle = true",
+            "shuffle = true\nspeeds = \"iso13855\"\nduration_scale = [0.8, 0.5]",
+            "human.duration_scale",
+        ),
     ] {
         assert!(text.contains(from), "{from}");
         let err = Scenario::from_toml(&text.replacen(from, to, 1), &default_path())

@@ -555,3 +555,132 @@ fn format_2_depth_is_read_with_the_occluder_in_front(root: &Path) {
         assert_eq!(*d, if *covered { OCCLUDER_DEPTH_M } else { 2.0 });
     }
 }
+
+/// `[recorded]`: with every episode recorded, each sequence's human plays a clip of the
+/// shipped library's tuning split, named in the manifest's entry, and the generator's
+/// sequences name none. While the dataset has training or validation sequences, a held-out
+/// clip or split is refused, naming the key; a dataset that is all test split may show them.
+#[test]
+fn recorded_people_in_a_dataset_come_from_the_tuning_clips() {
+    use workcell_mocap::library::{Library, Split as ClipSplitOf};
+    use workcell_sim::scenario::{ClipSplit, RecordedConfig};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let library = Library::from_file(&root.join("data/mocap/library.toml")).unwrap();
+    let tuning: Vec<&str> = library
+        .clips(Some(ClipSplitOf::Tuning))
+        .map(|c| c.id.as_str())
+        .collect();
+    let held_out = library
+        .clips(Some(ClipSplitOf::Test))
+        .map(|c| c.id.clone())
+        .next()
+        .unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("dataset.toml");
+    let recorded = RecordedConfig {
+        // Relative to the configuration's folder.
+        library: root.join("data/mocap/library.toml"),
+        clips: Vec::new(),
+        split: ClipSplit::Tuning,
+        start_s: 0.0,
+        end: workcell_sim::human::ClipEnd::Reverse,
+        retarget: workcell_sim::retarget::RetargetConfig::default(),
+    };
+    let config = DatasetConfig {
+        scenario: scenario(),
+        sequences_per_pair: 1,
+        sequences_per_episode: 1,
+        frames: 1,
+        width_px: 160,
+        height_px: 120,
+        input_px: 64,
+        start_s: [0.5, 1.5],
+        recorded: Some(recorded.clone()),
+        recorded_fraction: Some(1.0),
+        ..DatasetConfig::default()
+    };
+    let generator = Generator::new(config.clone(), &path).unwrap();
+    let mut renderer = CpuRenderer::new();
+    let mut timing = Timing::default();
+    let mut clips = Vec::new();
+    for index in 0..3 {
+        let sequence = generator
+            .sequence(index, &mut renderer, &mut timing)
+            .unwrap();
+        let clip = sequence.entry.clip.expect("a recorded clip");
+        assert!(
+            tuning.contains(&clip.as_str()),
+            "{clip} is not a tuning clip"
+        );
+        clips.push(clip);
+    }
+    // Episodes draw their clips by seed: three episodes do not all play one.
+    clips.dedup();
+    assert!(clips.len() > 1, "{clips:?}");
+    let generated = Generator::new(
+        DatasetConfig {
+            recorded_fraction: Some(0.0),
+            ..config.clone()
+        },
+        &path,
+    )
+    .unwrap()
+    .sequence(0, &mut renderer, &mut timing)
+    .unwrap();
+    assert_eq!(generated.entry.clip, None);
+
+    let with = |recorded: RecordedConfig, splits: [f64; 3]| {
+        Generator::new(
+            DatasetConfig {
+                recorded: Some(recorded),
+                splits,
+                ..config.clone()
+            },
+            &path,
+        )
+    };
+    let trains = [0.8, 0.1, 0.1];
+    for (bad, key) in [
+        (
+            RecordedConfig {
+                split: ClipSplit::Test,
+                ..recorded.clone()
+            },
+            "recorded.split",
+        ),
+        (
+            RecordedConfig {
+                split: ClipSplit::All,
+                ..recorded.clone()
+            },
+            "recorded.split",
+        ),
+        (
+            RecordedConfig {
+                clips: vec![tuning[0].to_string(), held_out.clone()],
+                ..recorded.clone()
+            },
+            "recorded.clips",
+        ),
+    ] {
+        let Err(err) = with(bad.clone(), trains) else {
+            panic!("{key}: held-out clips accepted in a dataset that trains");
+        };
+        assert!(err.to_string().contains(key), "{err}");
+        assert!(
+            with(bad, [0.0, 0.0, 1.0]).is_ok(),
+            "{key}: a test-only dataset"
+        );
+    }
+    // A share without clips, or out of [0, 1], names its key.
+    for text in [
+        "recorded_fraction = 0.5",
+        "recorded_fraction = 1.5\n[recorded]\nlibrary = \"l.toml\"",
+    ] {
+        let err = DatasetConfig::from_toml(text, Path::new("bad.toml")).unwrap_err();
+        assert!(
+            err.to_string().contains("recorded_fraction"),
+            "{text}: {err}"
+        );
+    }
+}

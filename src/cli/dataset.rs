@@ -222,8 +222,20 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
         out.display()
     );
     for split in Split::ALL {
-        let k = m.sequences.iter().filter(|s| s.split == split).count();
-        say!("  {:<10} {k} sequences", split.name());
+        let of: Vec<_> = m.sequences.iter().filter(|s| s.split == split).collect();
+        let recorded: Vec<&str> = of.iter().filter_map(|s| s.clip.as_deref()).collect();
+        if recorded.is_empty() {
+            say!("  {:<10} {} sequences", split.name(), of.len());
+        } else {
+            let clips: std::collections::BTreeSet<&str> = recorded.iter().copied().collect();
+            say!(
+                "  {:<10} {} sequences, {} of recorded people ({} clips)",
+                split.name(),
+                of.len(),
+                recorded.len(),
+                clips.len()
+            );
+        }
     }
     let t = report.timing;
     let total = t.total().as_secs_f64().max(1e-9);

@@ -15,6 +15,7 @@ use workcell::mocap::{Axes, ClipFormat, ColumnsSpec, Landmark};
 use workcell::robots::KinematicState;
 use workcell::robots::math::Vector;
 use workcell::sim::retarget::RetargetReport;
+use workcell::sim::scenario::HumanSpeeds;
 use workcell::sim::{CellModel, Scenario};
 
 /// The most seeds of generated motion measured.
@@ -25,6 +26,22 @@ pub enum SplitArg {
     Tuning,
     Test,
     All,
+}
+
+/// A calibration of the motion generator (`human.speeds`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SpeedsArg {
+    Iso13855,
+    Recorded,
+}
+
+impl SpeedsArg {
+    fn speeds(self) -> HumanSpeeds {
+        match self {
+            Self::Iso13855 => HumanSpeeds::Iso13855,
+            Self::Recorded => HumanSpeeds::Recorded,
+        }
+    }
 }
 
 /// Which clips: libraries or files, and how files that are tables are read.
@@ -63,6 +80,10 @@ pub struct StatsArgs {
     /// The cell whose human the generator moves.
     #[arg(long, default_value = "configs/default.toml")]
     pub cell: PathBuf,
+    /// The generator's calibrations measured (`iso13855`, `recorded`; comma-separated), each
+    /// beside the clips. Default: the cell's `human.speeds`.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub speeds: Vec<SpeedsArg>,
     /// Seconds of generated motion per seed.
     #[arg(long, default_value_t = 60.0)]
     pub seconds: f64,
@@ -241,6 +262,7 @@ fn sources(args: &ClipArgs) -> Result<Vec<Source>> {
 /// 100 Hz.
 fn generated(
     cell: &Path,
+    speeds: Option<HumanSpeeds>,
     seeds: usize,
     seconds: f64,
     group: &mut Group,
@@ -254,6 +276,9 @@ fn generated(
     for seed in 1..=seeds as u64 {
         let mut scenario = Scenario::from_file(cell)?;
         scenario.seed = seed;
+        if let Some(speeds) = speeds {
+            scenario.human.speeds = speeds;
+        }
         let model = CellModel::new(&scenario, cell)?;
         let human = &model.human;
         let links: Vec<(Landmark, workcell::robots::LinkId)> = [
@@ -380,21 +405,32 @@ pub fn stats(args: &StatsArgs) -> Result<ExitCode> {
         rows.extend(group.rows(name));
         note_still(name, group);
     }
-    if args.generated > 0 {
+    let calibrations: Vec<Option<HumanSpeeds>> = if args.speeds.is_empty() {
+        vec![None]
+    } else {
+        args.speeds.iter().map(|s| Some(s.speeds())).collect()
+    };
+    for speeds in calibrations.into_iter().filter(|_| args.generated > 0) {
         let mut group = Group::default();
         let filter = Butterworth2::low_pass(args.cutoff_hz, 100.0)
             .with_context(|| format!("--cutoff-hz {}: below 50 Hz", args.cutoff_hz))?;
         generated(
             &args.cell,
+            speeds,
             args.generated,
             args.seconds,
             &mut group,
             &filter,
         )?;
         let name = format!(
-            "generator ({} seeds of {})",
+            "generator ({} seeds of {}{})",
             args.generated,
-            args.cell.display()
+            args.cell.display(),
+            match speeds {
+                Some(HumanSpeeds::Iso13855) => ", speeds iso13855",
+                Some(HumanSpeeds::Recorded) => ", speeds recorded",
+                None => "",
+            }
         );
         rows.extend(group.rows(&name));
         note_still(&name, &group);

@@ -55,6 +55,10 @@ pub struct EvaluationConfig {
     /// `human.speed_scale` (the generated motions peak at `human.peak_speed_m_s`; ISO 13855
     /// assumes 1.6 to 2.0 m/s). Default: the cell's.
     pub human_speed_scale: Option<f64>,
+    /// The generator's calibration instead of the cell's `human.speeds`: `iso13855` (peaks
+    /// up to 2.0 m/s) or `recorded` (up to the recorded people's). Default: the cell's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub human_speeds: Option<workcell_sim::scenario::HumanSpeeds>,
     /// The human model instead of the cell's `human.model` (a catalogue name such as `human`
     /// or `human_arm`, an added robot, or a URDF path relative to this file). Default: the
     /// cell's.
@@ -85,6 +89,7 @@ impl Default for EvaluationConfig {
             cell: "default.toml".into(),
             task_s: 12.0,
             human_speed_scale: None,
+            human_speeds: None,
             human_model: None,
             human_recorded: None,
             timeout_factor: 3.0,
@@ -254,6 +259,9 @@ impl Evaluation {
                 )
                 .in_file(path));
             }
+        }
+        if let Some(speeds) = config.human_speeds {
+            scenario.human.speeds = speeds;
         }
         if let Some(speed) = config.human_speed_scale {
             scenario.human.speed_scale = speed;

@@ -10,7 +10,9 @@ use crate::error::{Result, SimError};
 pub const MAX_SEQUENCES_PER_PAIR: usize = 100_000;
 /// The most distance classes, and the most occlusion levels.
 pub const MAX_CLASSES: usize = 64;
-use crate::scenario::{parse_toml, read_text};
+/// The share of episodes that play a recorded clip when `[recorded]` is given.
+pub const DEFAULT_RECORDED_FRACTION: f64 = 0.5;
+use crate::scenario::{RecordedConfig, parse_toml, read_text};
 use workcell_render::occlusion::OccluderKind;
 use workcell_render::roi;
 use workcell_robots::HumanLook;
@@ -146,6 +148,16 @@ pub struct DatasetConfig {
     pub attempts: usize,
     /// Fractions of the sequences of each pair in train / validation / test.
     pub splits: [f64; 3],
+    /// Recorded people in the frames (`[recorded]`, keys as a scenario's `[human.recorded]`,
+    /// the library relative to this file): a share of the episodes play a clip of it instead
+    /// of the generator, each episode the clip its seed draws. A dataset with training or
+    /// validation sequences draws only clips of the library's tuning split. Left out: the
+    /// scenario's motion in every episode.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recorded: Option<RecordedConfig>,
+    /// The share of episodes that play a clip of `recorded`. Default 0.5.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recorded_fraction: Option<f64>,
 }
 
 impl Default for DatasetConfig {
@@ -193,6 +205,8 @@ impl Default for DatasetConfig {
             max_natural_occlusion: 0.5,
             attempts: 20,
             splits: [0.8, 0.1, 0.1],
+            recorded: None,
+            recorded_fraction: None,
         }
     }
 }
@@ -227,6 +241,23 @@ impl DatasetConfig {
     #[must_use]
     pub fn sequence_count(&self, cameras: usize) -> usize {
         self.sequences_per_pair * self.camera_classes(cameras) * self.occlusion_levels.len()
+    }
+
+    /// The share of episodes that play a recorded clip: 0 without `recorded`.
+    #[must_use]
+    pub fn recorded_share(&self) -> f64 {
+        if self.recorded.is_some() {
+            self.recorded_fraction.unwrap_or(DEFAULT_RECORDED_FRACTION)
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether any sequence lands in the training or validation split (and so any clip it
+    /// shows may be learnt).
+    #[must_use]
+    pub fn trains(&self) -> bool {
+        self.splits[0] > 0.0 || self.splits[1] > 0.0
     }
 
     /// Distance classes plus the cell's cameras when they are a source.
@@ -378,6 +409,14 @@ impl DatasetConfig {
                 "splits",
                 format!("{:?} are not fractions summing to 1", self.splits),
             );
+        }
+        if let Some(f) = self.recorded_fraction {
+            if self.recorded.is_none() {
+                return invalid("recorded_fraction", "needs a [recorded] section".into());
+            }
+            if !(0.0..=1.0).contains(&f) {
+                return invalid("recorded_fraction", format!("{f} is not in [0, 1]"));
+            }
         }
         Ok(())
     }

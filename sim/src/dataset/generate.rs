@@ -24,7 +24,7 @@ use workcell_render::{Backend, Camera, Class, Frame, MaskBatch, RenderError, Ren
 use crate::cell::{CellModel, CellState, RobotCommand, step};
 use crate::dataset::config::DatasetConfig;
 use crate::error::{Result, SimError};
-use crate::scenario::Scenario;
+use crate::scenario::{ClipSplit, RecordedConfig, Scenario};
 use crate::scene::{Appearance, CellScene};
 
 /// The classes stored per frame, in the order of [`FrameLabels::parts`].
@@ -110,6 +110,9 @@ pub struct Generator {
     crop: Option<CropSource>,
     /// The splits made; every split when empty ([`Generator::with_splits`]).
     splits: Vec<Split>,
+    /// The configuration's `[recorded]`, its library resolved against the configuration's
+    /// folder.
+    recorded: Option<RecordedConfig>,
 }
 
 /// Chooses each frame's region of interest while a sequence is rendered, having seen the
@@ -220,6 +223,53 @@ struct Draw {
     frames: Vec<Shot>,
 }
 
+/// Refuses `recorded` (named `key` in `path`) when it could play a held-out clip: a dataset
+/// that trains sees only the library's tuning clips, so that the test clips stay unseen.
+fn refuse_held_out_clips(recorded: &RecordedConfig, key: &str, path: &Path) -> Result<()> {
+    use workcell_mocap::library::{Library, Split};
+    let refuse = |key: String, message: String| SimError::Invalid {
+        path: Some(path.to_path_buf()),
+        key,
+        message,
+    };
+    if recorded.clips.is_empty() {
+        return match recorded.split {
+            ClipSplit::Tuning => Ok(()),
+            other => Err(refuse(
+                format!("{key}.split"),
+                format!(
+                    "{other:?} plays held-out clips, and this dataset has training or validation \
+                     sequences (splits): use \"tuning\", or splits = [0.0, 0.0, 1.0] for a \
+                     dataset to measure on"
+                ),
+            )),
+        };
+    }
+    let library = Library::from_file(&recorded.library)?;
+    for id in &recorded.clips {
+        match library.clips.iter().find(|c| &c.id == id) {
+            Some(clip) if clip.split == Split::Tuning => {}
+            Some(_) => {
+                return Err(refuse(
+                    format!("{key}.clips"),
+                    format!(
+                        "{id:?} is a held-out (test) clip of {}, and this dataset has training or \
+                         validation sequences (splits)",
+                        library.path.display()
+                    ),
+                ));
+            }
+            None => {
+                return Err(refuse(
+                    format!("{key}.clips"),
+                    format!("{id:?} is not a clip of {}", library.path.display()),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A 64-bit mix (splitmix64's finaliser) to derive seeds.
 fn mix(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
@@ -243,6 +293,26 @@ impl Generator {
         if let Some(look) = config.look {
             scenario.human.look = look;
         }
+        let recorded = config.recorded.clone().map(|mut r| {
+            r.library = config_path
+                .parent()
+                .unwrap_or(Path::new("."))
+                .join(&r.library);
+            r
+        });
+        if config.trains() {
+            if let Some(r) = &recorded {
+                refuse_held_out_clips(r, "recorded", config_path)?;
+            }
+            if let Some(r) = &scenario.human.recorded {
+                let mut r = r.clone();
+                r.library = scenario_path
+                    .parent()
+                    .unwrap_or(Path::new("."))
+                    .join(&r.library);
+                refuse_held_out_clips(&r, "human.recorded", &scenario_path)?;
+            }
+        }
         Ok(Self {
             config,
             backend: Backend::Cpu,
@@ -250,6 +320,7 @@ impl Generator {
             scenario_path,
             crop: None,
             splits: Vec::new(),
+            recorded,
         })
     }
 
@@ -358,10 +429,16 @@ impl Generator {
 
     /// Simulates the episode of `seed` and keeps the camera ticks up to the latest frame.
     fn episode(&self, seed: u64) -> Result<Episode> {
-        let scenario = Scenario {
+        let mut scenario = Scenario {
             seed,
             ..self.scenario.clone()
         };
+        if let Some(recorded) = &self.recorded {
+            let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0x2ec0_7de5));
+            if rng.random::<f64>() < self.config.recorded_share() {
+                scenario.human.recorded = Some(recorded.clone());
+            }
+        }
         let model = CellModel::new(&scenario, &self.scenario_path)?;
         let mut state = CellState::new(&model)?;
         let c = &self.config;
@@ -490,6 +567,7 @@ impl Generator {
             mean_forearm_occlusion: (!forearm_occlusion.is_empty())
                 .then(|| forearm_occlusion.iter().sum::<f64>() / forearm_occlusion.len() as f64),
             frames_without_forearm: c.frames - forearm_occlusion.len(),
+            clip: episode.model.human_motion.clip().map(str::to_string),
         };
         Ok(GeneratedSequence { entry, frames: out })
     }

@@ -332,6 +332,9 @@ pub struct SequenceEntry {
     pub mean_forearm_occlusion: Option<f64>,
     /// Frames where the forearm is out of view.
     pub frames_without_forearm: usize,
+    /// The recorded clip its human plays (a library id); none for the motion generator.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clip: Option<String>,
 }
 
 impl SequenceEntry {

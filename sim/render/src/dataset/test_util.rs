@@ -17,5 +17,6 @@ pub fn one_frame_entry(occlusion_level: &str, mean_forearm_occlusion: f64) -> Se
         frames: 1,
         mean_forearm_occlusion: Some(mean_forearm_occlusion),
         frames_without_forearm: 0,
+        clip: None,
     }
 }
