@@ -575,11 +575,13 @@ fn recorded_people_in_a_dataset_come_from_the_tuning_clips() {
         .map(|c| c.id.clone())
         .next()
         .unwrap();
-    let tmp = tempfile::tempdir().unwrap();
-    let path = tmp.path().join("dataset.toml");
+    // A configuration in another folder than the cell's (the tests run in the crate's
+    // folder), its paths relative to its own: the library is found from there, not from the
+    // scenario's folder with the configuration's path joined to it (`tests/../../configs/
+    // tests/..`, a folder that does not exist).
+    let path = Path::new("tests/dataset-test.toml");
     let recorded = RecordedConfig {
-        // Relative to the configuration's folder.
-        library: root.join("data/mocap/library.toml"),
+        library: "../../data/mocap/library.toml".into(),
         clips: Vec::new(),
         split: ClipSplit::Tuning,
         start_s: 0.0,
@@ -587,7 +589,7 @@ fn recorded_people_in_a_dataset_come_from_the_tuning_clips() {
         retarget: workcell_sim::retarget::RetargetConfig::default(),
     };
     let config = DatasetConfig {
-        scenario: scenario(),
+        scenario: "../../configs/default.toml".into(),
         sequences_per_pair: 1,
         sequences_per_episode: 1,
         frames: 1,
@@ -599,7 +601,7 @@ fn recorded_people_in_a_dataset_come_from_the_tuning_clips() {
         recorded_fraction: Some(1.0),
         ..DatasetConfig::default()
     };
-    let generator = Generator::new(config.clone(), &path).unwrap();
+    let generator = Generator::new(config.clone(), path).unwrap();
     let mut renderer = CpuRenderer::new();
     let mut timing = Timing::default();
     let mut clips = Vec::new();

@@ -293,13 +293,22 @@ impl Generator {
         if let Some(look) = config.look {
             scenario.human.look = look;
         }
-        let recorded = config.recorded.clone().map(|mut r| {
-            r.library = config_path
-                .parent()
-                .unwrap_or(Path::new("."))
-                .join(&r.library);
-            r
-        });
+        // The library relative to this file, made absolute: the cell reads it relative to
+        // the scenario's folder, which a relative path would be joined to again.
+        let recorded = match config.recorded.clone() {
+            Some(mut r) => {
+                let library = config_path
+                    .parent()
+                    .unwrap_or(Path::new("."))
+                    .join(&r.library);
+                r.library = std::path::absolute(&library).map_err(|source| SimError::Io {
+                    path: library,
+                    source,
+                })?;
+                Some(r)
+            }
+            None => None,
+        };
         if config.trains() {
             if let Some(r) = &recorded {
                 refuse_held_out_clips(r, "recorded", config_path)?;
