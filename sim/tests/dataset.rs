@@ -624,7 +624,7 @@ fn recorded_people_in_a_dataset_come_from_the_tuning_clips() {
             recorded_fraction: Some(0.0),
             ..config.clone()
         },
-        &path,
+        path,
     )
     .unwrap()
     .sequence(0, &mut renderer, &mut timing)
@@ -638,7 +638,7 @@ fn recorded_people_in_a_dataset_come_from_the_tuning_clips() {
                 splits,
                 ..config.clone()
             },
-            &path,
+            path,
         )
     };
     let trains = [0.8, 0.1, 0.1];
