@@ -348,7 +348,8 @@ impl HumanConfig {
 ///
 /// Both draw each movement's duration as before and its fastest point's peak speed from a
 /// range; `recorded` also shortens each transition by a factor drawn from
-/// [`HumanSpeeds::duration_scale`], so that its accelerations reach the recorded ones too.
+/// [`HumanSpeeds::duration_scale`], which brings its accelerations nearer the recorded ones
+/// (to their 99th percentile, not their 99.9th: docs/human.md).
 /// `workcell human stats --split tuning --speeds iso13855,recorded` shows both beside the clips.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
