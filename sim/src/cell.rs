@@ -499,24 +499,29 @@ pub fn step(model: &CellModel, state: &mut CellState, command: &RobotCommand<'_>
     Ok(())
 }
 
-/// The clip the episode of `seed` plays (`[human.recorded]`), retargeted onto `human`.
-fn recorded_motion(
+/// The library of `recorded` (relative to the folder of `path`, the file that names it as
+/// `key`) and the clips it plays, in order: `clips` by id, else every clip of `split`.
+///
+/// # Errors
+/// The library's, or [`SimError::Invalid`] naming `{key}.clips` for an id it lacks.
+pub(crate) fn chosen_clips(
     recorded: &crate::scenario::RecordedConfig,
-    seed: u64,
-    scenario_path: &Path,
-    human: &RobotModel,
-) -> Result<HumanMotion> {
+    key: &str,
+    path: &Path,
+) -> Result<(workcell_mocap::library::Library, Vec<usize>)> {
     use crate::scenario::ClipSplit;
     use workcell_mocap::library::{Library, Split};
-    let dir = scenario_path.parent().unwrap_or(Path::new("."));
+    let dir = path.parent().unwrap_or(Path::new("."));
     let library = Library::from_file(&dir.join(&recorded.library))?;
-    let chosen: Vec<&workcell_mocap::library::LibraryClip> = if recorded.clips.is_empty() {
+    let chosen = if recorded.clips.is_empty() {
         let split = match recorded.split {
             ClipSplit::Tuning => Some(Split::Tuning),
             ClipSplit::Test => Some(Split::Test),
             ClipSplit::All => None,
         };
-        library.clips(split).collect()
+        (0..library.clips.len())
+            .filter(|&k| split.is_none_or(|s| library.clips[k].split == s))
+            .collect()
     } else {
         recorded
             .clips
@@ -525,17 +530,31 @@ fn recorded_motion(
                 library
                     .clips
                     .iter()
-                    .find(|c| &c.id == id)
+                    .position(|c| &c.id == id)
                     .ok_or_else(|| SimError::Invalid {
-                        path: Some(scenario_path.to_path_buf()),
-                        key: "human.recorded.clips".into(),
+                        path: Some(path.to_path_buf()),
+                        key: format!("{key}.clips"),
                         message: format!("{id:?} is not a clip of {}", library.path.display()),
                     })
             })
             .collect::<Result<_>>()?
     };
+    Ok((library, chosen))
+}
+
+/// The clip the episode of `seed` plays (`[human.recorded]`), retargeted onto `human`.
+fn recorded_motion(
+    recorded: &crate::scenario::RecordedConfig,
+    seed: u64,
+    scenario_path: &Path,
+    human: &RobotModel,
+) -> Result<HumanMotion> {
+    let (library, chosen) = chosen_clips(recorded, "human.recorded", scenario_path)?;
     let n = chosen.len().max(1) as u64;
-    let Some(clip) = chosen.get((seed.wrapping_sub(1) % n) as usize) else {
+    let Some(clip) = chosen
+        .get((seed.wrapping_sub(1) % n) as usize)
+        .map(|&k| &library.clips[k])
+    else {
         return Err(SimError::Invalid {
             path: Some(scenario_path.to_path_buf()),
             key: "human.recorded".into(),

@@ -369,14 +369,17 @@ impl HumanSpeeds {
     /// arm's fastest point, the hand's tip; 7.2 m/s there lets the generated wrist peak at
     /// 4.9 m/s, the Vicon tuning clips' wrist 99.9th percentile (5.0 m/s, `workcell human
     /// stats --split tuning --speeds recorded`).
-    pub const RECORDED_PEAK_M_S: f64 = RECORDED_PEAK_M_S;
+    pub const RECORDED_PEAK_M_S: f64 = 7.2;
+    /// The shortest transition of [`HumanSpeeds::Recorded`], as a fraction of the drawn one:
+    /// shorter than this, the peaks stop rising (the speed cap stretches the transition back).
+    pub const RECORDED_SHORTEST_DURATION_SCALE: f64 = 0.3;
 
     /// Range of each movement's peak speed, m/s.
     #[must_use]
     pub fn peak_speed_m_s(self) -> [f64; 2] {
         match self {
             Self::Iso13855 => [1.0, 2.0],
-            Self::Recorded => [1.0, RECORDED_PEAK_M_S],
+            Self::Recorded => [1.0, Self::RECORDED_PEAK_M_S],
         }
     }
 
@@ -385,16 +388,10 @@ impl HumanSpeeds {
     pub fn duration_scale(self) -> [f64; 2] {
         match self {
             Self::Iso13855 => [1.0, 1.0],
-            Self::Recorded => [RECORDED_SHORTEST_DURATION_SCALE, 1.0],
+            Self::Recorded => [Self::RECORDED_SHORTEST_DURATION_SCALE, 1.0],
         }
     }
 }
-
-/// See [`HumanSpeeds::RECORDED_PEAK_M_S`].
-const RECORDED_PEAK_M_S: f64 = 7.2;
-/// The shortest transition of [`HumanSpeeds::Recorded`], as a fraction of the drawn one:
-/// shorter than this, the peaks stop rising (the speed cap stretches the transition back).
-const RECORDED_SHORTEST_DURATION_SCALE: f64 = 0.3;
 
 /// A primitive of human arm motion.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -24,7 +24,7 @@ use workcell_render::{Backend, Camera, Class, Frame, MaskBatch, RenderError, Ren
 use crate::cell::{CellModel, CellState, RobotCommand, step};
 use crate::dataset::config::DatasetConfig;
 use crate::error::{Result, SimError};
-use crate::scenario::{ClipSplit, RecordedConfig, Scenario};
+use crate::scenario::{RecordedConfig, Scenario};
 use crate::scene::{Appearance, CellScene};
 
 /// The classes stored per frame, in the order of [`FrameLabels::parts`].
@@ -223,51 +223,45 @@ struct Draw {
     frames: Vec<Shot>,
 }
 
-/// Refuses `recorded` (named `key` in `path`) when it could play a held-out clip: a dataset
-/// that trains sees only the library's tuning clips, so that the test clips stay unseen.
+/// Refuses `recorded` (named `key` in `path`, its library relative to that file) when it
+/// plays a held-out clip: a dataset that trains sees only the library's tuning clips, so that
+/// the test clips stay unseen.
 fn refuse_held_out_clips(recorded: &RecordedConfig, key: &str, path: &Path) -> Result<()> {
-    use workcell_mocap::library::{Library, Split};
-    let refuse = |key: String, message: String| SimError::Invalid {
+    use workcell_mocap::library::Split;
+    let (library, chosen) = crate::cell::chosen_clips(recorded, key, path)?;
+    let Some(clip) = chosen
+        .iter()
+        .map(|&k| &library.clips[k])
+        .find(|c| c.split == Split::Test)
+    else {
+        return Ok(());
+    };
+    let (key, message) = if recorded.clips.is_empty() {
+        (
+            format!("{key}.split"),
+            format!(
+                "{:?} plays held-out clips ({} first), and this dataset has training or \
+                 validation sequences (splits): use \"tuning\", or splits = [0.0, 0.0, 1.0] \
+                 for a dataset to measure on",
+                recorded.split, clip.id
+            ),
+        )
+    } else {
+        (
+            format!("{key}.clips"),
+            format!(
+                "{:?} is a held-out (test) clip of {}, and this dataset has training or \
+                 validation sequences (splits)",
+                clip.id,
+                library.path.display()
+            ),
+        )
+    };
+    Err(SimError::Invalid {
         path: Some(path.to_path_buf()),
         key,
         message,
-    };
-    if recorded.clips.is_empty() {
-        return match recorded.split {
-            ClipSplit::Tuning => Ok(()),
-            other => Err(refuse(
-                format!("{key}.split"),
-                format!(
-                    "{other:?} plays held-out clips, and this dataset has training or validation \
-                     sequences (splits): use \"tuning\", or splits = [0.0, 0.0, 1.0] for a \
-                     dataset to measure on"
-                ),
-            )),
-        };
-    }
-    let library = Library::from_file(&recorded.library)?;
-    for id in &recorded.clips {
-        match library.clips.iter().find(|c| &c.id == id) {
-            Some(clip) if clip.split == Split::Tuning => {}
-            Some(_) => {
-                return Err(refuse(
-                    format!("{key}.clips"),
-                    format!(
-                        "{id:?} is a held-out (test) clip of {}, and this dataset has training or \
-                         validation sequences (splits)",
-                        library.path.display()
-                    ),
-                ));
-            }
-            None => {
-                return Err(refuse(
-                    format!("{key}.clips"),
-                    format!("{id:?} is not a clip of {}", library.path.display()),
-                ));
-            }
-        }
-    }
-    Ok(())
+    })
 }
 
 /// A 64-bit mix (splitmix64's finaliser) to derive seeds.
@@ -314,12 +308,7 @@ impl Generator {
                 refuse_held_out_clips(r, "recorded", config_path)?;
             }
             if let Some(r) = &scenario.human.recorded {
-                let mut r = r.clone();
-                r.library = scenario_path
-                    .parent()
-                    .unwrap_or(Path::new("."))
-                    .join(&r.library);
-                refuse_held_out_clips(&r, "human.recorded", &scenario_path)?;
+                refuse_held_out_clips(r, "human.recorded", &scenario_path)?;
             }
         }
         Ok(Self {
