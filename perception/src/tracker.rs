@@ -381,6 +381,11 @@ impl ArmTracker {
                 crop(&masks.parts[2])?,
             ],
             background: crop(&masks.background)?,
+            torso: if masks.torso.is_empty() {
+                Vec::new()
+            } else {
+                crop(&masks.torso)?
+            },
             depth_m: match masks.depth_m.as_deref() {
                 Some(d) => {
                     check_len("a depth image", d.len(), w * h, camera)?;

@@ -66,7 +66,8 @@ pub use arm::{ArmModel, POSE_MESH_SEGMENTS, PartCapsule};
 pub use articulated::{
     ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmGain, ArmMasks, ArticulatedArm, BoundSource,
     Calibration, CalibrationFile, FITTED_PARTS, HIDDEN_BANDS, HIDDEN_MARGIN_M,
-    MAX_CALIBRATION_BYTES, MAX_GRID_JOINTS, NetworkCalibration, calibration_path, file_sha256,
+    MAX_CALIBRATION_BYTES, MAX_GRID_JOINTS, NetworkCalibration, TrunkModel, calibration_path,
+    file_sha256,
 };
 pub use config::PoseConfig;
 pub use image::f_m;

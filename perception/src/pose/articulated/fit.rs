@@ -138,6 +138,8 @@ pub struct ArmFitter<R: Renderer> {
     pub(super) poses: Vec<Pose>,
     pub(super) renders: usize,
     pub(super) rng: ChaCha8Rng,
+    /// The trunk stage's depth renders.
+    pub(super) trunk_frame: workcell_render::Frame,
 }
 
 impl<R: Renderer> ArmFitter<R> {
@@ -154,6 +156,7 @@ impl<R: Renderer> ArmFitter<R> {
             poses: Vec::new(),
             renders: 0,
             rng: ChaCha8Rng::seed_from_u64(0),
+            trunk_frame: workcell_render::Frame::new(),
         }
     }
 
@@ -162,10 +165,14 @@ impl<R: Renderer> ArmFitter<R> {
         &self.arm
     }
 
-    /// Forgets the track: the next frame searches globally.
+    /// Forgets the track: the next frame searches globally, from an upright trunk.
     pub fn reset(&mut self) {
         self.tracks.clear();
         self.last_points = None;
+        if let Some(trunk) = self.arm.trunk.clone() {
+            // Finite values within the limits: the kinematics cannot fail.
+            let _ = self.arm.hold_trunk(&trunk, &trunk.upright);
+        }
     }
 
     /// Tracks from the model's configuration `q` on the next frame (as if it had been the
@@ -196,6 +203,8 @@ impl<R: Renderer> ArmFitter<R> {
         }
         self.renders = 0;
         self.rng = ChaCha8Rng::seed_from_u64(0x4152_4d46); // "ARMF"
+        // The trunk first, from the torso's mask: the arm is then fitted on it.
+        self.fit_trunk(camera, masks)?;
         let last_points = self.last_points.take();
         let outcome = self.fit_inner(camera, masks, last_points);
         // A frame without a pose ends the track, unless it left a candidate to confirm.

@@ -31,6 +31,8 @@ pub struct ArticulatedArm {
     /// that holds every point of the three parts whatever the joints, m.
     pub(super) shoulder_W: Vector,
     pub(super) reach_m: f64,
+    /// The trunk's stage, where revolute joints move the torso ([`TrunkModel`]).
+    pub(super) trunk: Option<TrunkModel>,
 }
 
 impl ArticulatedArm {
@@ -131,7 +133,9 @@ impl ArticulatedArm {
                 reach_m = reach_m.max(chain + far);
             }
         }
+        let trunk = TrunkModel::of(human, &held, &all_limits)?;
         Ok(Self {
+            trunk,
             human: human.clone(),
             X_WH: *X_WH,
             links,
@@ -152,6 +156,26 @@ impl ArticulatedArm {
     #[must_use]
     pub fn nearest_depth_m(&self, X_WC: &Pose) -> f64 {
         X_WC.inverse().transform_point(self.shoulder_W).z - self.reach_m
+    }
+
+    /// The trunk's stage: `None` where no revolute joint moves the torso.
+    #[must_use]
+    pub fn trunk(&self) -> Option<&TrunkModel> {
+        self.trunk.as_ref()
+    }
+
+    /// Holds the trunk's joints at `values` ([`TrunkModel::joints`] order) for the arm's fit,
+    /// the shoulder where they put it.
+    ///
+    /// # Errors
+    /// A forward kinematics failure (a value that is not finite).
+    pub(super) fn hold_trunk(&mut self, trunk: &TrunkModel, values: &[f64]) -> Result<()> {
+        for (&i, v) in trunk.joints.iter().zip(values) {
+            self.held[i] = *v;
+        }
+        let k = self.human.fk(self.X_WH, &self.held)?;
+        self.shoulder_W = k.link_pose(self.links[0]).translation;
+        Ok(())
     }
 
     /// Joints fitted: the arm's, below the torso.
@@ -179,7 +203,8 @@ impl ArticulatedArm {
     }
 
     /// The model's whole configuration for fitted joints `q_fit`: the trunk's joints at
-    /// their held values (0, the trunk upright at the human's base, within their limits).
+    /// their held values (0, the trunk upright at the human's base, within their limits,
+    /// until the trunk's stage fits them: [`ArmFitter::fit_trunk`]).
     #[must_use]
     pub fn configuration(&self, q_fit: &[f64]) -> Vec<f64> {
         let mut q = self.held.clone();

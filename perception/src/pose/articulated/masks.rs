@@ -15,6 +15,9 @@ pub struct ArmMasks {
     pub parts: [Vec<f32>; 3],
     /// That a pixel shows nothing that could hide the arm.
     pub background: Vec<f32>,
+    /// The torso's plane (and the head's, which share its class): what the trunk's stage
+    /// fits ([`ArmFitter::fit_trunk`]); empty where the masks have none.
+    pub torso: Vec<f32>,
     /// A depth camera's image: the camera-frame z of the surface each pixel shows, m (0 or
     /// not finite where it has none). With it the depth agreement joins the score.
     pub depth_m: Option<Vec<f32>>,
@@ -38,13 +41,14 @@ impl ArmMasks {
             height,
             parts: FITTED_PARTS.map(|p| plane(Class::of_part(p))),
             background: plane(Class::Background),
+            torso: plane(Class::Torso),
             depth_m: None,
         })
     }
 
     /// From a network's per-class probabilities (independent sigmoids): the background is
     /// one less the largest class's probability. A part the network has no class for is
-    /// empty.
+    /// empty, as is the torso's plane without a torso class.
     ///
     /// # Errors
     /// [`PerceptionError::Input`] when a plane is not `width x height`.
@@ -65,11 +69,16 @@ impl ArmMasks {
                 .find(|(c, _)| c.human_part() == Some(part))
                 .map_or_else(|| vec![0.0; n], |(_, p)| p.to_vec())
         };
+        let torso = planes
+            .iter()
+            .find(|(c, _)| *c == Class::Torso)
+            .map_or_else(Vec::new, |(_, p)| p.to_vec());
         Ok(Self {
             width,
             height,
             parts: FITTED_PARTS.map(part),
             background,
+            torso,
             depth_m: None,
         })
     }

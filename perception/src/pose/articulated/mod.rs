@@ -4,9 +4,10 @@
 //! from the shoulder, a two-fold mirror ([`crate::pose`]). The arm shows more than its
 //! forearm: this fit moves the human model's joints (both shoulder angles and the elbow, and
 //! whatever else the model has) and compares every arm part's render with that part's mask
-//! at once. The shoulder stays where the human model and its base pose put it, the upper
-//! arm's mask fixes where the elbow is, the hand's mask which end of the forearm is the
-//! wrist.
+//! at once. The shoulder stays where the human model and its base pose put it (on a model
+//! whose trunk turns and leans, where the trunk's stage put it first, from the torso's mask:
+//! [`TrunkModel`], [`ArmFitter::fit_trunk`]), the upper arm's mask fixes where the elbow is,
+//! the hand's mask which end of the forearm is the wrist.
 //!
 //! **The score** of a configuration `q` is, summed over the parts `p` (upper arm, forearm,
 //! hand) and the pixels their renders cover (the covered fraction `c` of each pixel, from
@@ -89,6 +90,7 @@ mod masks;
 mod numerics;
 #[cfg(test)]
 mod tests;
+mod trunk;
 
 use workcell_robots::HumanPart;
 
@@ -102,6 +104,7 @@ pub use kinematics::ArticulatedArm;
 pub use masks::ArmMasks;
 use masks::*;
 use numerics::*;
+pub use trunk::TrunkModel;
 
 /// The parts fitted, in the order of [`ArmMasks::parts`] and [`ArmFit::X_CL`].
 pub const FITTED_PARTS: [HumanPart; 3] = HumanPart::ARM;

@@ -1,0 +1,328 @@
+//! The trunk's pose from the torso's mask ([`TrunkModel`], [`ArmFitter::fit_trunk`]): the
+//! stage before the arm's fit on a model whose torso turns, leans and bends.
+//!
+//! The arm hangs from the shoulder, and the trunk carries the shoulder: a lean of 0.3 rad
+//! moves it 15 cm. Fitted with the trunk held upright, the arm's joints bend to make up for a
+//! shoulder in the wrong place (with true masks, the forearm's error on the whole body was
+//! 17-40 mm a frame where the arm on a fixed torso has 8-10 mm). The arm's masks say little of
+//! where the shoulder is; the torso's say it directly: the torso is large, rarely hidden
+//! whole, and its outline turns and leans with the trunk. So the trunk's revolute joints
+//! (turn, lean, side bend) are fitted first, to the torso's mask alone, and the arm is then
+//! fitted on that trunk as on a fixed one.
+//!
+//! **The score** of trunk joints `t` is the torso's gain in its mask, as the arm parts' is:
+//! `sum_px r (m_torso - m_background) / sum_px m_torso`, `r` the torso's render (the torso
+//! link with everything rigidly attached to it, the head), 1 for a perfect fit; pixels of
+//! something that may hide the torso (the robot, an arm part) count 0. With a depth image,
+//! less a depth term: the torso rendered at `t` against the measured depth where both show
+//! it, `depth_weight mean(min((dz / depth_sigma_m)^2, 9))` ([`ArmFitConfig`]'s, as the arm's
+//! parts' term). The outline alone leaves the turn and the side bend to a few hundredths
+//! of a radian, which the shoulder and the head carry 0.2 and 0.6 m out; the depth image
+//! shows one shoulder nearer.
+//!
+//! **The search.** A grid over [`TRUNK_GRID`] (the trunk's working range), the previous
+//! frame's trunk beside it, then a compass climb from the best down to [`TRUNK_MIN_STEP_RAD`].
+//! A step's outlines render in one batch, its depth images one by one.
+
+use std::sync::Arc;
+
+use workcell_render::{Camera, RenderMesh, Renderer};
+use workcell_robots::math::Pose;
+use workcell_robots::{JointKind, LinkId, RobotModel, Shape};
+
+use super::*;
+use crate::error::Result;
+use crate::pose::POSE_MESH_SEGMENTS;
+
+/// The trunk's working range the search's grid spans, per revolute trunk joint in the chain's
+/// order (turn, lean, side bend), rad, and the grid's points in it: a person at a work-cell
+/// turns and leans far less than a trunk can. The climb may leave the grid for the joint's
+/// limits.
+pub(super) const TRUNK_GRID: [([f64; 2], usize); 3] =
+    [([-0.6, 0.6], 7), ([-0.2, 0.6], 5), ([-0.2, 0.2], 3)];
+
+/// The climb's first step and the step it stops below, rad.
+pub(super) const TRUNK_FIRST_STEP_RAD: f64 = 0.1;
+pub(super) const TRUNK_MIN_STEP_RAD: f64 = 0.01;
+
+/// Torso mask pixels below which the trunk is not fitted (it keeps its last pose).
+pub(super) const TRUNK_MIN_PIXELS: f64 = 64.0;
+
+/// The trunk as its stage fits it: the joints that carry the torso and the torso's mesh.
+#[derive(Debug, Clone)]
+pub struct TrunkModel {
+    /// The trunk's revolute joints, by index in the model's joint order, root first.
+    pub(super) joints: Vec<usize>,
+    /// Their ranges, rad (clamped to +-pi).
+    pub(super) limits: Vec<[f64; 2]>,
+    /// Upright: each joint's 0 within its limits, where a new track starts.
+    pub(super) upright: Vec<f64>,
+    pub(super) torso: LinkId,
+    /// The torso link's visuals and those of the links fixed to it, in the torso's frame
+    /// (their outer surface).
+    pub(super) mesh: Arc<RenderMesh>,
+}
+
+impl TrunkModel {
+    /// The trunk of `human`: `None` when no revolute joint moves its torso (the arm on a
+    /// fixed torso, `human_arm`) or the torso shows nothing.
+    ///
+    /// # Errors
+    /// A forward kinematics failure at the held configuration `held`.
+    pub(super) fn of(
+        human: &RobotModel,
+        held: &[f64],
+        limits: &[[f64; 2]],
+    ) -> Result<Option<Self>> {
+        let Some(torso) = human.link_id(HumanPart::Torso.link_name()) else {
+            return Ok(None);
+        };
+        let actuated = human.actuated_joints();
+        let mut chain = Vec::new();
+        let mut link = torso;
+        while let Some(j) = human.links()[link].parent_joint {
+            chain.push(j);
+            link = human.joints()[j].parent;
+        }
+        let joints: Vec<usize> = (0..actuated.len())
+            .filter(|&i| {
+                chain.contains(&actuated[i])
+                    && !matches!(human.joints()[actuated[i]].kind, JointKind::Prismatic)
+            })
+            .collect();
+        if joints.is_empty() {
+            return Ok(None);
+        }
+        // The torso and every link fixed to it (the head, through the neck).
+        let k = human.fk(Pose::IDENTITY, held)?;
+        let X_TW = k.link_pose(torso).inverse();
+        let mut rigid = vec![torso];
+        let mut grew = true;
+        while grew {
+            grew = false;
+            for joint in human.joints() {
+                if matches!(joint.kind, JointKind::Fixed)
+                    && rigid.contains(&joint.parent)
+                    && !rigid.contains(&joint.child)
+                {
+                    rigid.push(joint.child);
+                    grew = true;
+                }
+            }
+        }
+        // Their outer surface only (`RenderMesh::outer_union`): the same silhouettes, and the
+        // depth term sees no face that lies inside another piece.
+        let mut pieces = Vec::new();
+        for &l in &rigid {
+            let X_TL = X_TW * *k.link_pose(l);
+            for g in &human.links()[l].visuals {
+                let piece = RenderMesh::from_geometry_with(g, [0.5, 0.5, 0.5], POSE_MESH_SEGMENTS);
+                let mut placed = RenderMesh::default();
+                placed.append(&piece, &X_TL);
+                pieces.push((placed, !matches!(g.shape, Shape::Mesh { .. })));
+            }
+        }
+        let mesh = RenderMesh::outer_union(&pieces);
+        if mesh.is_empty() {
+            return Ok(None);
+        }
+        let limits: Vec<[f64; 2]> = joints.iter().map(|&i| limits[i]).collect();
+        let upright = limits
+            .iter()
+            .map(|[lo, hi]| 0.0_f64.clamp(*lo, *hi))
+            .collect();
+        Ok(Some(Self {
+            joints,
+            limits,
+            upright,
+            torso,
+            mesh: Arc::new(mesh),
+        }))
+    }
+
+    /// The trunk joints fitted, by index in the model's joint order.
+    #[must_use]
+    pub fn joints(&self) -> &[usize] {
+        &self.joints
+    }
+}
+
+impl<R: Renderer> ArmFitter<R> {
+    /// Fits the trunk's joints to the torso's mask in `masks` (seen by `camera`) and holds
+    /// them there for the arm's fit. Returns the torso's gain at the fit, or `None` where
+    /// the model's torso does not move or its mask is too small to fit (the trunk then
+    /// stays where the last frame put it).
+    ///
+    /// # Errors
+    /// A renderer failure.
+    pub fn fit_trunk(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<Option<f64>> {
+        let Some(trunk) = self.arm.trunk.clone() else {
+            return Ok(None);
+        };
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        if masks.torso.len() != w * h {
+            return Ok(None);
+        }
+        let mass: f64 = masks.torso.iter().map(|&v| f64::from(v)).sum();
+        if mass < TRUNK_MIN_PIXELS {
+            return Ok(None);
+        }
+        let s: Vec<f32> = masks
+            .torso
+            .iter()
+            .zip(&masks.background)
+            .map(|(t, b)| t - b)
+            .collect();
+        let depth = masks.depth_m.as_deref().filter(|d| d.len() == w * h);
+        let previous: Vec<f64> = trunk.joints.iter().map(|&i| self.arm.held[i]).collect();
+        let mut candidates: Vec<Vec<f64>> = vec![Vec::new()];
+        for (j, [lo, hi]) in trunk.limits.iter().enumerate() {
+            let ([a, b], n) = TRUNK_GRID.get(j).copied().unwrap_or(([0.0, 0.0], 1));
+            let values: Vec<f64> = (0..n)
+                .map(|k| {
+                    let x = if n > 1 {
+                        a + (b - a) * k as f64 / (n - 1) as f64
+                    } else {
+                        0.5 * (a + b)
+                    };
+                    x.clamp(*lo, *hi)
+                })
+                .collect();
+            candidates = candidates
+                .into_iter()
+                .flat_map(|q| {
+                    values.iter().map(move |x| {
+                        let mut v = q.clone();
+                        v.push(*x);
+                        v
+                    })
+                })
+                .collect();
+        }
+        candidates.push(previous);
+        let scores =
+            self.trunk_scores(&trunk, camera, &s, mass, &masks.torso, depth, &candidates)?;
+        let (mut best, mut here) = scores
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, g)| (candidates[i].clone(), *g))
+            .unwrap_or((candidates[0].clone(), f64::NEG_INFINITY));
+        let mut step = TRUNK_FIRST_STEP_RAD;
+        while step >= TRUNK_MIN_STEP_RAD {
+            let mut around = Vec::with_capacity(2 * best.len());
+            for j in 0..best.len() {
+                for sign in [1.0, -1.0] {
+                    let mut v = best.clone();
+                    let [lo, hi] = trunk.limits[j];
+                    v[j] = (v[j] + sign * step).clamp(lo, hi);
+                    around.push(v);
+                }
+            }
+            let scores =
+                self.trunk_scores(&trunk, camera, &s, mass, &masks.torso, depth, &around)?;
+            match scores.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) {
+                Some((i, g)) if *g > here + 1e-9 => {
+                    best.clone_from(&around[i]);
+                    here = *g;
+                }
+                _ => step *= 0.5,
+            }
+        }
+        self.arm.hold_trunk(&trunk, &best)?;
+        Ok(Some(here))
+    }
+
+    /// The torso's gain at each of `candidates` (trunk joint values).
+    #[allow(clippy::too_many_arguments)]
+    fn trunk_scores(
+        &mut self,
+        trunk: &TrunkModel,
+        camera: &Camera,
+        s: &[f32],
+        mass: f64,
+        torso: &[f32],
+        depth: Option<&[f32]>,
+        candidates: &[Vec<f64>],
+    ) -> Result<Vec<f64>> {
+        let X_CW = camera.X_WC.inverse();
+        let mut q = self.arm.held.clone();
+        self.poses.clear();
+        for c in candidates {
+            for (&i, v) in trunk.joints.iter().zip(c) {
+                q[i] = *v;
+            }
+            let k = self.arm.human.fk(self.arm.X_WH, &q)?;
+            self.poses.push(X_CW * *k.link_pose(trunk.torso));
+        }
+        let poses = std::mem::take(&mut self.poses);
+        let rendered = self
+            .renderer
+            .render_masks(&trunk.mesh, camera, &poses, &mut self.batch);
+        rendered?;
+        self.renders += candidates.len();
+        let mut scores: Vec<f64> = (0..candidates.len())
+            .map(|k| {
+                let mask = self.batch.mask(k);
+                let sum: f64 = mask
+                    .iter()
+                    .zip(s)
+                    .filter(|(m, _)| **m > 0)
+                    .map(|(_, v)| f64::from(*v))
+                    .sum();
+                sum / mass
+            })
+            .collect();
+        if let Some(depth) = depth {
+            for (score, X_CT) in scores.iter_mut().zip(&poses) {
+                *score -= self.trunk_depth_cost(trunk, camera, torso, depth, X_CT)?;
+            }
+        }
+        self.poses = poses;
+        Ok(scores)
+    }
+
+    /// The depth term of the trunk's score: the torso rendered at the candidate against the
+    /// depth image where both show the torso: `min((dz / sigma)^2, 9)`, the mean over those
+    /// pixels, times [`ArmFitConfig::depth_weight`], as the arm's parts' depth term. The
+    /// silhouette alone leaves the trunk's turn and side bend to a few hundredths of a
+    /// radian, which the head and the shoulder carry 0.6 m and 0.2 m out; the depth image
+    /// shows one shoulder nearer.
+    ///
+    /// # Errors
+    /// A renderer failure.
+    pub(super) fn trunk_depth_cost(
+        &mut self,
+        trunk: &TrunkModel,
+        camera: &Camera,
+        torso: &[f32],
+        depth: &[f32],
+        X_CT: &Pose,
+    ) -> Result<f64> {
+        let sigma = self.config.depth_sigma_m.max(1e-4);
+        let scene = workcell_render::Scene {
+            objects: vec![workcell_render::SceneObject {
+                name: "torso".into(),
+                class: workcell_render::Class::Torso,
+                mesh: trunk.mesh.clone(),
+                texture: 0.0,
+                X_WO: camera.X_WC * *X_CT,
+            }],
+            ..Default::default()
+        };
+        self.renderer
+            .render(&scene, camera, &mut self.trunk_frame)?;
+        let (mut sum, mut n) = (0.0, 0usize);
+        for ((&rendered, &measured), &t) in self.trunk_frame.depth_m.iter().zip(depth).zip(torso) {
+            if t > 0.5 && rendered > 0.0 && measured.is_finite() && measured > 0.0 {
+                sum += (f64::from(measured - rendered) / sigma).powi(2).min(9.0);
+                n += 1;
+            }
+        }
+        Ok(if n == 0 {
+            0.0
+        } else {
+            self.config.depth_weight * sum / n as f64
+        })
+    }
+}
