@@ -89,6 +89,10 @@ pub struct ProcNetConfig {
     /// paper's artificial occluders, in the loop; 0.66 and above is its heavy occlusion).
     /// Default 0.
     pub occlusion: f64,
+    /// On a human whose trunk turns and leans (`human`), fit the trunk to the torso's mask
+    /// and depth before the arm (`ArmFitConfig::fit_trunk`). Default false: it needs masks
+    /// of a torso that moves, which the shipped network was not trained on.
+    pub fit_trunk: bool,
     /// The factor on the fit's curvature uncertainty (`ArmFitConfig::uncertainty_scale`),
     /// in place of the one calibrated for the masks and depth chosen (the calibration file
     /// beside the weights, `workcell_perception::pose::Calibration::of_weights`), which is
@@ -162,6 +166,7 @@ impl PerceptionKind {
                 "masks",
                 "depth",
                 "occlusion",
+                "fit_trunk",
                 "uncertainty_scale",
                 "uncertainty_floor_m",
                 "latency_s",
@@ -214,6 +219,7 @@ impl Default for ProcNetConfig {
             masks: MaskKind::Network,
             depth: false,
             occlusion: 0.0,
+            fit_trunk: false,
             uncertainty_scale: None,
             uncertainty_floor_m: None,
             latency_s: 0.05,

@@ -132,7 +132,10 @@ impl ProcNetCamera {
             floor_m: config.uncertainty_floor_m.unwrap_or(measured.floor_m),
             ..measured
         }
-        .apply(ArmFitConfig::default());
+        .apply(ArmFitConfig {
+            fit_trunk: config.fit_trunk,
+            ..ArmFitConfig::default()
+        });
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
         if let Some(net) = net {
             tracker = tracker.with_network(net)?;

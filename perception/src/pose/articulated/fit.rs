@@ -204,7 +204,9 @@ impl<R: Renderer> ArmFitter<R> {
         self.renders = 0;
         self.rng = ChaCha8Rng::seed_from_u64(0x4152_4d46); // "ARMF"
         // The trunk first, from the torso's mask: the arm is then fitted on it.
-        self.fit_trunk(camera, masks)?;
+        if self.config.fit_trunk {
+            self.fit_trunk(camera, masks)?;
+        }
         let last_points = self.last_points.take();
         let outcome = self.fit_inner(camera, masks, last_points);
         // A frame without a pose ends the track, unless it left a candidate to confirm.

@@ -346,7 +346,7 @@ fn observe_body(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> (Vec<u8>, V
     render_classes(arm, camera, q, scene)
 }
 
-/// The trunk's stage: on the whole body, whose trunk a generated reach turns by up to 0.25
+/// The trunk's stage (`fit_trunk`): on the whole body, whose trunk a generated reach turns by up to 0.25
 /// rad and leans by up to 0.3, the trunk's joints come from the torso's mask, and the arm's
 /// fit on that trunk finds the forearm, globally and then tracking, from the outline alone
 /// and with the depth image: the shoulder within 1 cm, the forearm's centre within 2.5 cm
@@ -381,9 +381,13 @@ fn the_trunk_from_the_torsos_mask_carries_the_arms_fit() {
         }
         q
     };
+    let trunk_on = ArmFitConfig {
+        fit_trunk: true,
+        ..ArmFitConfig::default()
+    };
     // The outline alone (an RGB camera) and with the depth image (RGB-D).
     for with_depth in [false, true] {
-        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), trunk_on.clone());
         for k in 0..3 {
             let truth = truth_at(f64::from(k) * 0.3);
             let (classes, depth) = observe_body(&arm, &camera, &truth);
@@ -407,20 +411,24 @@ fn the_trunk_from_the_torsos_mask_carries_the_arms_fit() {
             assert!(fit.gain > 0.9, "frame {k}: gain {}", fit.gain);
         }
     }
-    // The control: no torso plane, the trunk held upright.
+    // The control: the trunk held upright, by the default settings or for want of a torso
+    // plane.
     let truth = truth_at(0.0);
-    let mut masks =
+    let masks =
         ArmMasks::from_classes(&observe_body(&arm, &camera, &truth).0, 128, 128).expect("masks");
-    masks.torso.clear();
-    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
-    let err = match fitter.fit(&camera, &masks).expect("fit") {
-        Ok(fit) => {
-            assert!(trunk.joints().iter().all(|&i| fit.q[i] == 0.0));
-            distance_cm(&arm, &camera, &fit.q, &truth)
-        }
-        Err(_) => f64::INFINITY,
-    };
-    assert!(err > 10.0, "upright: {err:.2} cm");
+    let mut no_torso = masks.clone();
+    no_torso.torso.clear();
+    for (config, masks) in [(ArmFitConfig::default(), &masks), (trunk_on, &no_torso)] {
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
+        let err = match fitter.fit(&camera, masks).expect("fit") {
+            Ok(fit) => {
+                assert!(trunk.joints().iter().all(|&i| fit.q[i] == 0.0));
+                distance_cm(&arm, &camera, &fit.q, &truth)
+            }
+            Err(_) => f64::INFINITY,
+        };
+        assert!(err > 10.0, "upright: {err:.2} cm");
+    }
 }
 
 /// A track that explains the masks poorly (a gain between `min_gain` and

@@ -22,7 +22,8 @@
 //!
 //! **The search.** A grid over [`TRUNK_GRID`] (the trunk's working range), the previous
 //! frame's trunk beside it, then a compass climb from the best down to [`TRUNK_MIN_STEP_RAD`].
-//! A step's outlines render in one batch, its depth images one by one.
+//! The grid's outlines render in one batch and the best [`TRUNK_DEPTH_FINALISTS`] with their
+//! depth; each climb step's candidates with their depth.
 
 use std::sync::Arc;
 
@@ -44,6 +45,11 @@ pub(super) const TRUNK_GRID: [([f64; 2], usize); 3] =
 /// The climb's first step and the step it stops below, rad.
 pub(super) const TRUNK_FIRST_STEP_RAD: f64 = 0.1;
 pub(super) const TRUNK_MIN_STEP_RAD: f64 = 0.01;
+
+/// Grid points whose outline scores best that the search then scores with the depth image
+/// too (rendering a depth image per candidate costs more than the grid's outlines in one
+/// batch).
+pub(super) const TRUNK_DEPTH_FINALISTS: usize = 8;
 
 /// Torso mask pixels below which the trunk is not fitted (it keeps its last pose).
 pub(super) const TRUNK_MIN_PIXELS: f64 = 64.0;
@@ -200,14 +206,31 @@ impl<R: Renderer> ArmFitter<R> {
                 .collect();
         }
         candidates.push(previous);
-        let scores =
-            self.trunk_scores(&trunk, camera, &s, mass, &masks.torso, depth, &candidates)?;
+        // The grid by outline alone; the best few outlines with their depth.
+        let outline =
+            self.trunk_scores(&trunk, camera, &s, mass, &masks.torso, None, &candidates)?;
+        let mut order: Vec<usize> = (0..candidates.len()).collect();
+        order.sort_by(|&a, &b| outline[b].total_cmp(&outline[a]));
+        let finalists: Vec<Vec<f64>> = order
+            .iter()
+            .take(if depth.is_some() {
+                TRUNK_DEPTH_FINALISTS
+            } else {
+                1
+            })
+            .map(|&i| candidates[i].clone())
+            .collect();
+        let scores = if depth.is_some() {
+            self.trunk_scores(&trunk, camera, &s, mass, &masks.torso, depth, &finalists)?
+        } else {
+            vec![outline[order[0]]]
+        };
         let (mut best, mut here) = scores
             .iter()
             .enumerate()
             .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(i, g)| (candidates[i].clone(), *g))
-            .unwrap_or((candidates[0].clone(), f64::NEG_INFINITY));
+            .map(|(i, g)| (finalists[i].clone(), *g))
+            .unwrap_or((finalists[0].clone(), f64::NEG_INFINITY));
         let mut step = TRUNK_FIRST_STEP_RAD;
         while step >= TRUNK_MIN_STEP_RAD {
             let mut around = Vec::with_capacity(2 * best.len());
