@@ -881,20 +881,17 @@ impl<R: Renderer> ArmFitter<R> {
         let limits = self.arm.limits().to_vec();
         let spanned = limits.len().min(MAX_GRID_JOINTS);
         let n = grid_points(c.grid, spanned);
-        let mut grid: Vec<Vec<f64>> = vec![Vec::new()];
-        for (j, [lo, hi]) in limits.iter().enumerate() {
-            let points = if j < spanned { n } else { 1 };
-            grid = grid
-                .into_iter()
-                .flat_map(|q| {
-                    (0..points).map(move |k| {
-                        let mut v = q.clone();
-                        v.push(lo + (k as f64 + 0.5) * (hi - lo) / points as f64);
-                        v
-                    })
-                })
-                .collect();
-        }
+        let axes: Vec<Vec<f64>> = limits
+            .iter()
+            .enumerate()
+            .map(|(j, [lo, hi])| {
+                let points = if j < spanned { n } else { 1 };
+                (0..points)
+                    .map(|k| lo + (k as f64 + 0.5) * (hi - lo) / points as f64)
+                    .collect()
+            })
+            .collect();
+        let grid = grid_product(&axes);
         let scores = self.score(target, &grid, None)?;
         let mut order: Vec<usize> = (0..grid.len()).collect();
         order.sort_by(|&a, &b| scores[b].objective.total_cmp(&scores[a].objective));

@@ -32,7 +32,8 @@ pub struct ArticulatedArm {
     pub(super) shoulder_W: Vector,
     pub(super) reach_m: f64,
     /// The trunk's stage, where revolute joints move the torso ([`TrunkModel`]).
-    pub(super) trunk: Option<TrunkModel>,
+    /// Shared: the fitter holds it across a frame's stage while it moves the arm.
+    pub(super) trunk: Option<Arc<TrunkModel>>,
 }
 
 impl ArticulatedArm {
@@ -133,7 +134,7 @@ impl ArticulatedArm {
                 reach_m = reach_m.max(chain + far);
             }
         }
-        let trunk = TrunkModel::of(human, &held, &all_limits)?;
+        let trunk = TrunkModel::of(human, &held, &all_limits)?.map(Arc::new);
         Ok(Self {
             trunk,
             human: human.clone(),
@@ -161,7 +162,7 @@ impl ArticulatedArm {
     /// The trunk's stage: `None` where no revolute joint moves the torso.
     #[must_use]
     pub fn trunk(&self) -> Option<&TrunkModel> {
-        self.trunk.as_ref()
+        self.trunk.as_deref()
     }
 
     /// Holds the trunk's joints at `values` ([`TrunkModel::joints`] order) for the arm's fit,

@@ -1,5 +1,24 @@
 //! Numerics of the search: row sums of the masks, a symmetric eigensolver, a distance
-//! transform.
+//! transform, grids.
+
+/// The grid over joints whose values are `axes` (one list per joint, in order): every
+/// combination, the last joint varying fastest.
+pub(super) fn grid_product(axes: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut grid: Vec<Vec<f64>> = vec![Vec::new()];
+    for values in axes {
+        grid = grid
+            .into_iter()
+            .flat_map(|q| {
+                values.iter().map(move |x| {
+                    let mut v = q.clone();
+                    v.push(*x);
+                    v
+                })
+            })
+            .collect();
+    }
+    grid
+}
 
 /// Prefix sums of two planes along each row, for sums over row spans of supersampled
 /// renders in two lookups a row.
