@@ -740,6 +740,18 @@ impl Scenario {
         }
         model.to_string()
     }
+
+    /// Puts `model` in the human's place: a catalogue name as it is, a URDF relative to
+    /// `file` (the configuration that names it) made absolute, since the cell resolves its
+    /// own model against the scenario's folder.
+    pub fn set_human_model(&mut self, model: &str, file: &Path) {
+        let resolved = Self::resolve_model_path(model, file);
+        self.human.model = if resolved.ends_with(".urdf") {
+            std::path::absolute(&resolved).map_or(resolved, |p| p.to_string_lossy().into_owned())
+        } else {
+            resolved
+        };
+    }
 }
 
 fn check_speed(speed_scale: f64, acceleration: f64) -> Result<(), String> {

@@ -57,6 +57,31 @@ fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     out
 }
 
+/// A dataset file's `human_model` replaces its scenario's human: a catalogue name as it is,
+/// a URDF relative to the dataset file (not the scenario's folder), made absolute; without
+/// the key the scenario's own.
+#[test]
+fn a_datasets_human_model_replaces_the_scenarios() {
+    let tmp = tempfile::tempdir().unwrap();
+    let write = |name: &str, model: Option<&str>| {
+        let config = DatasetConfig {
+            scenario: scenario(),
+            human_model: model.map(str::to_string),
+            ..DatasetConfig::default()
+        };
+        let path = tmp.path().join(name);
+        std::fs::write(&path, config.to_toml()).unwrap();
+        Generator::from_file(&path).unwrap().human().model
+    };
+    assert_eq!(write("own.toml", None), "human_arm");
+    assert_eq!(write("body.toml", Some("human")), "human");
+    let urdf = write("urdf.toml", Some("people/me.urdf"));
+    assert_eq!(
+        std::path::Path::new(&urdf),
+        std::path::absolute(tmp.path().join("people/me.urdf")).unwrap()
+    );
+}
+
 #[test]
 fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
     let tmp = tempfile::tempdir().unwrap();

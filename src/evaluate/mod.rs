@@ -219,15 +219,7 @@ impl Evaluation {
         }
         let mut scenario = Scenario::from_file(&scenario_path)?;
         if let Some(model) = &config.human_model {
-            // A catalogue name as it is; a URDF path relative to this file, made absolute
-            // (the cell resolves its own against its folder).
-            let resolved = Scenario::resolve_model_path(model, path);
-            scenario.human.model = if resolved.ends_with(".urdf") {
-                std::path::absolute(&resolved)
-                    .map_or(resolved, |p| p.to_string_lossy().into_owned())
-            } else {
-                resolved
-            };
+            scenario.set_human_model(model, path);
         }
         if let Some(recorded) = &mut config.human_recorded {
             // Relative to this file, wherever the cell's file is.

@@ -121,6 +121,10 @@ pub struct DatasetConfig {
     /// The human's look in the frames, `flesh` or `skeletal` (default: the scenario's).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub look: Option<HumanLook>,
+    /// The human's model (a catalogue name, or a URDF relative to this file) instead of the
+    /// scenario's: `human_arm` for the paper's protocol in the whole-body cell.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub human_model: Option<String>,
     pub cell_cameras: CellCameras,
     pub roi: RoiConfig,
     /// Frames per second.
@@ -182,6 +186,7 @@ impl Default for DatasetConfig {
             input_px: 128,
             vary_appearance: true,
             look: None,
+            human_model: None,
             cell_cameras: CellCameras::default(),
             roi: RoiConfig::default(),
             rate_hz: 30.0,

@@ -287,6 +287,9 @@ impl Generator {
         if let Some(look) = config.look {
             scenario.human.look = look;
         }
+        if let Some(model) = &config.human_model {
+            scenario.set_human_model(model, config_path);
+        }
         // The library relative to this file, made absolute: the cell reads it relative to
         // the scenario's folder, which a relative path would be joined to again.
         let recorded = match config.recorded.clone() {
