@@ -122,7 +122,7 @@ pub struct DatasetConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub look: Option<HumanLook>,
     /// The human's model (a catalogue name, or a URDF relative to this file) instead of the
-    /// scenario's: `human_arm` for the paper's protocol in the whole-body cell.
+    /// scenario's (`experiments/configs/dataset-human.toml` sets the whole body, `human`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub human_model: Option<String>,
     pub cell_cameras: CellCameras,

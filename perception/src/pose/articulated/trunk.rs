@@ -240,7 +240,12 @@ impl<R: Renderer> ArmFitter<R> {
             .take(if with_depth { TRUNK_DEPTH_FINALISTS } else { 1 })
             .map(|&i| candidates[i].clone())
             .collect();
-        let scores = self.trunk_scores(&trunk, camera, &mut target, true, &finalists)?;
+        // Without depth the one finalist's score is its outline's, already measured.
+        let scores = if with_depth {
+            self.trunk_scores(&trunk, camera, &mut target, true, &finalists)?
+        } else {
+            vec![outline[order[0]]]
+        };
         let (mut best, mut here) = scores
             .iter()
             .enumerate()
