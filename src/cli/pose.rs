@@ -71,6 +71,11 @@ pub struct EvalPoseArgs {
     /// others; --min-gain's value turns it off).
     #[arg(long)]
     pub confirm_min_gain: Option<f64>,
+    /// With --method articulated, on a model whose trunk turns and leans (`human`): `fit`
+    /// fits the trunk to the torso's mask and depth before the arm, `upright` holds it
+XX
+    #[arg(long, value_parser = ["fit", "upright"])]
+    pub trunk: Option<String>,
     /// With --method paper: search over the whole image instead of a region of interest
     /// around the mask.
     #[arg(long)]
@@ -186,6 +191,9 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 config.min_gain = g;
             }
+            if let Some(t) = &args.trunk {
+                config.fit_trunk = t == "fit";
+            }
             // Set after the masks' calibration (below), which carries its own.
             if let Some(g) = args.confirm_min_gain
                 && !(0.0..=1.0).contains(&g)
@@ -200,10 +208,12 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         "paper"
             if args.search_starts.is_some()
                 || args.min_gain.is_some()
-                || args.confirm_min_gain.is_some() =>
+                || args.confirm_min_gain.is_some()
+                || args.trunk.is_some() =>
         {
             anyhow::bail!(
-                "--search-starts, --min-gain and --confirm-min-gain are settings of --method articulated"
+                "--search-starts, --min-gain, --confirm-min-gain and --trunk are settings of \
+                 --method articulated"
             )
         }
         "paper" if args.depth => {

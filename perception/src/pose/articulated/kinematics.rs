@@ -165,13 +165,13 @@ impl ArticulatedArm {
         self.trunk.as_deref()
     }
 
-    /// Holds the trunk's joints at `values` ([`TrunkModel::joints`] order) for the arm's fit,
-    /// the shoulder where they put it.
+    /// Holds the trunk's joints at `values` ([`TrunkModel::all`]'s order: the revolute
+    /// joints, then the slides) for the arm's fit, the shoulder where they put it.
     ///
     /// # Errors
     /// A forward kinematics failure (a value that is not finite).
     pub(super) fn hold_trunk(&mut self, trunk: &TrunkModel, values: &[f64]) -> Result<()> {
-        for (&i, v) in trunk.joints.iter().zip(values) {
+        for (&i, v) in trunk.all.iter().zip(values) {
             self.held[i] = *v;
         }
         let k = self.human.fk(self.X_WH, &self.held)?;

@@ -21,15 +21,27 @@
 //! of a radian, which the shoulder and the head carry 0.2 and 0.6 m out; the depth image
 //! shows one shoulder nearer.
 //!
-//! **The search.** A grid over [`TRUNK_GRID`] (the trunk's working range), the previous
-//! frame's trunk beside it, then a compass climb from the best down to [`TRUNK_MIN_STEP_RAD`].
-//! The grid's outlines render in one batch and the best [`TRUNK_DEPTH_FINALISTS`] with their
-//! depth; each climb step's candidates with their depth.
+//! **Where the person stands.** Recorded people walk: their pelvis travels up to the
+//! model's slide limits (0.6 m) from where the cell puts them, and on the recorded test clips
+//! of `experiments/configs/dataset-human.toml` the fit with the pelvis held found no pose in
+//! 798 of the 826 frames whose pelvis was more than 0.4 m away. The trunk's prismatic joints
+//! (`pelvis_x`, `pelvis_y`) are therefore fitted too. With a depth image they start where
+//! the torso's pixels put them: the measured torso's points (each pixel back-projected at its
+//! depth) against the rendered torso's, the difference along each slide's axis, twice
+//! ([`TRUNK_CENTRE_PASSES`]), and the climb refines them. Without depth they stay where the
+//! last frame left them: the outline tells a person nearer the camera from one leaning
+//! toward it poorly.
+//!
+//! **The search.** A grid over [`TRUNK_GRID`] (the trunk's working range) at those slides,
+//! the previous frame's trunk beside it, then a compass climb over every trunk joint from the
+//! best down to [`TRUNK_MIN_STEP_RAD`] (the slides' steps [`TRUNK_SLIDE_M_PER_RAD`] times
+//! that). The grid's outlines render in one batch and the best [`TRUNK_DEPTH_FINALISTS`]
+//! with their depth; each climb step's candidates with their depth.
 
 use std::sync::Arc;
 
 use workcell_render::{Camera, RenderMesh, Renderer};
-use workcell_robots::math::Pose;
+use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{JointKind, LinkId, RobotModel, Shape};
 
 use super::*;
@@ -55,18 +67,41 @@ pub(super) const TRUNK_DEPTH_FINALISTS: usize = 8;
 /// Torso mask pixels below which the trunk is not fitted (it keeps its last pose).
 pub(super) const TRUNK_MIN_PIXELS: f64 = 64.0;
 
+/// The climb's step on a slide (m) per radian of its step on a revolute joint: 5 cm first,
+/// 5 mm last.
+pub(super) const TRUNK_SLIDE_M_PER_RAD: f64 = 0.5;
+
+/// Passes of centring the slides on the torso's measured points before the grid: the
+/// first from wherever the last frame left the pelvis, the second with the rendered torso
+/// where the first put it.
+pub(super) const TRUNK_CENTRE_PASSES: usize = 2;
+
+/// The least shift the centring applies, m: below it the torso's points moved as much with
+/// a turn or lean of a tenth of a radian, which the grid and the climb fit.
+pub(super) const TRUNK_CENTRE_MIN_M: f64 = 0.1;
+
 /// The trunk as its stage fits it: the joints that carry the torso and the torso's mesh.
 #[derive(Debug, Clone)]
 pub struct TrunkModel {
     /// The trunk's revolute joints, by index in the model's joint order, root first.
     pub(super) joints: Vec<usize>,
-    /// Their ranges, rad (clamped to +-pi).
+    /// The trunk's prismatic joints (where the person stands), by index in the model's
+    /// joint order, root first.
+    pub(super) slides: Vec<usize>,
+    /// Every fitted trunk joint: [`Self::joints`] then [`Self::slides`]; the order of the
+    /// values the stage searches.
+    pub(super) all: Vec<usize>,
+    /// Their ranges, rad or m (clamped to +-pi), in [`Self::all`]'s order.
     pub(super) limits: Vec<[f64; 2]>,
-    /// Upright: each joint's 0 within its limits, where a new track starts.
+    /// Upright where the cell puts the person: each joint's 0 within its limits, where a
+    /// new track starts ([`Self::all`]'s order).
     pub(super) upright: Vec<f64>,
-    /// The search's grid over [`TRUNK_GRID`], within the limits.
+    /// The search's grid over [`TRUNK_GRID`], within the limits (revolute joints only).
     pub(super) grid: Vec<Vec<f64>>,
     pub(super) torso: LinkId,
+    /// The mean of the torso mesh's vertices in the torso's frame: where the slides' centring
+    /// puts the torso when its render shows too little of it.
+    pub(super) centre_T: Vector,
     /// The torso link's visuals and those of the links fixed to it, in the torso's frame
     /// (their outer surface).
     pub(super) mesh: Arc<RenderMesh>,
@@ -93,15 +128,21 @@ impl TrunkModel {
             chain.push(j);
             link = human.joints()[j].parent;
         }
-        let joints: Vec<usize> = (0..actuated.len())
-            .filter(|&i| {
-                chain.contains(&actuated[i])
-                    && !matches!(human.joints()[actuated[i]].kind, JointKind::Prismatic)
-            })
-            .collect();
+        let in_chain = |prismatic: bool| -> Vec<usize> {
+            (0..actuated.len())
+                .filter(|&i| {
+                    chain.contains(&actuated[i])
+                        && matches!(human.joints()[actuated[i]].kind, JointKind::Prismatic)
+                            == prismatic
+                })
+                .collect()
+        };
+        let joints = in_chain(false);
         if joints.is_empty() {
             return Ok(None);
         }
+        let slides = in_chain(true);
+        let all: Vec<usize> = joints.iter().chain(&slides).copied().collect();
         // The torso and every link fixed to it (the head, through the neck).
         let k = human.fk(Pose::IDENTITY, held)?;
         let X_TW = k.link_pose(torso).inverse();
@@ -135,12 +176,16 @@ impl TrunkModel {
         if mesh.is_empty() {
             return Ok(None);
         }
-        let limits: Vec<[f64; 2]> = joints.iter().map(|&i| limits[i]).collect();
+        let limits: Vec<[f64; 2]> = all.iter().map(|&i| limits[i]).collect();
         let upright = limits
             .iter()
             .map(|[lo, hi]| 0.0_f64.clamp(*lo, *hi))
             .collect();
-        let axes: Vec<Vec<f64>> = limits
+        let n = mesh.positions.len().max(1) as f64;
+        let centre_T = mesh.positions.iter().fold(Vector::ZERO, |c, p| {
+            c + Vector::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])) / n
+        });
+        let axes: Vec<Vec<f64>> = limits[..joints.len()]
             .iter()
             .enumerate()
             .map(|(j, [lo, hi])| {
@@ -159,18 +204,29 @@ impl TrunkModel {
             .collect();
         Ok(Some(Self {
             joints,
+            slides,
+            all,
             limits,
             upright,
             grid: grid_product(&axes),
             torso,
+            centre_T,
             mesh: Arc::new(mesh),
         }))
     }
 
-    /// The trunk joints fitted, by index in the model's joint order.
+    /// The trunk's revolute joints fitted (turn, lean, side bend), by index in the model's
+    /// joint order.
     #[must_use]
     pub fn joints(&self) -> &[usize] {
         &self.joints
+    }
+
+    /// The trunk's prismatic joints fitted (where the person stands), by index in the
+    /// model's joint order.
+    #[must_use]
+    pub fn slides(&self) -> &[usize] {
+        &self.slides
     }
 }
 
@@ -181,6 +237,7 @@ struct TorsoTarget<'a> {
     /// The torso mask's pixels.
     mass: f64,
     torso: &'a [f32],
+    background: &'a [f32],
     depth: Option<&'a [f32]>,
     /// The torso alone, posed per candidate for its depth render.
     scene: workcell_render::Scene,
@@ -215,6 +272,7 @@ impl<R: Renderer> ArmFitter<R> {
                 .collect(),
             mass,
             torso: &masks.torso,
+            background: &masks.background,
             depth: masks.depth_m.as_deref().filter(|d| d.len() == w * h),
             scene: workcell_render::Scene {
                 objects: vec![workcell_render::SceneObject {
@@ -228,8 +286,38 @@ impl<R: Renderer> ArmFitter<R> {
             },
         };
         let with_depth = target.depth.is_some();
-        let previous: Vec<f64> = trunk.joints.iter().map(|&i| self.arm.held[i]).collect();
-        let mut candidates = trunk.grid.clone();
+        let n_rev = trunk.joints.len();
+        let previous: Vec<f64> = trunk.all.iter().map(|&i| self.arm.held[i]).collect();
+        // Where the person stands, from the torso's points.
+        let mut slides = previous[n_rev..].to_vec();
+        if with_depth && !slides.is_empty() {
+            for _ in 0..TRUNK_CENTRE_PASSES {
+                let at: Vec<f64> = previous[..n_rev].iter().chain(&slides).copied().collect();
+                match self.centred_slides(&trunk, camera, &mut target, &at)? {
+                    // A small shift is as likely the turn and lean the trunk has not been
+                    // fitted to yet: the climb takes it.
+                    Some(s)
+                        if s.iter()
+                            .zip(&slides)
+                            .map(|(a, b)| (a - b).powi(2))
+                            .sum::<f64>()
+                            .sqrt()
+                            > TRUNK_CENTRE_MIN_M =>
+                    {
+                        slides = s;
+                    }
+                    _ => break,
+                }
+            }
+        }
+        let mut candidates: Vec<Vec<f64>> = trunk
+            .grid
+            .iter()
+            .map(|g| g.iter().chain(&slides).copied().collect())
+            .collect();
+        if slides != previous[n_rev..] {
+            candidates.push(previous[..n_rev].iter().chain(&slides).copied().collect());
+        }
         candidates.push(previous);
         // The grid by outline alone; the best few outlines with their depth.
         let outline = self.trunk_scores(&trunk, camera, &mut target, false, &candidates)?;
@@ -255,13 +343,27 @@ impl<R: Renderer> ArmFitter<R> {
         let mut step = TRUNK_FIRST_STEP_RAD;
         while step >= TRUNK_MIN_STEP_RAD {
             let mut around = Vec::with_capacity(2 * best.len());
-            for j in 0..best.len() {
+            // The slides with a depth image only: the outline alone tells a person nearer
+            // from one leaning toward the camera poorly (on the outline test's frame the
+            // slides drifted and the forearm went from 2.2 to 3.4 cm).
+            let climbed = if with_depth { best.len() } else { n_rev };
+            for j in 0..climbed {
+                let dj = if j < n_rev {
+                    step
+                } else {
+                    step * TRUNK_SLIDE_M_PER_RAD
+                };
                 for sign in [1.0, -1.0] {
                     let mut v = best.clone();
                     let [lo, hi] = trunk.limits[j];
-                    v[j] = (v[j] + sign * step).clamp(lo, hi);
-                    around.push(v);
+                    v[j] = (v[j] + sign * dj).clamp(lo, hi);
+                    if v[j] != best[j] {
+                        around.push(v);
+                    }
                 }
+            }
+            if around.is_empty() {
+                break;
             }
             let scores = self.trunk_scores(&trunk, camera, &mut target, true, &around)?;
             match scores.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) {
@@ -274,6 +376,86 @@ impl<R: Renderer> ArmFitter<R> {
         }
         self.arm.hold_trunk(&trunk, &best)?;
         Ok(Some(here))
+    }
+
+    /// The slides (where the person stands) that put the torso's points where the depth
+    /// image shows them, from the trunk at `at` ([`TrunkModel::all`]'s order): the mean of
+    /// the measured torso's pixels back-projected at their depth, against the same mean of
+    /// the torso rendered at `at` (its pixels that nothing else in the masks covers; the mesh's
+    /// centre where it shows fewer than [`TRUNK_MIN_PIXELS`]), the difference along each
+    /// slide's axis. `None` where the depth image shows too little of the torso.
+    ///
+    /// # Errors
+    /// A renderer or forward kinematics failure.
+    fn centred_slides(
+        &mut self,
+        trunk: &TrunkModel,
+        camera: &Camera,
+        target: &mut TorsoTarget<'_>,
+        at: &[f64],
+    ) -> Result<Option<Vec<f64>>> {
+        let Some(depth) = target.depth else {
+            return Ok(None);
+        };
+        let w = camera.width as usize;
+        let point = |p: usize, z: f32| {
+            let z = f64::from(z);
+            let (u, v) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
+            Vector::new(
+                (u - camera.cx) / camera.fx * z,
+                (v - camera.cy) / camera.fy * z,
+                z,
+            )
+        };
+        let mean = |points: &mut dyn Iterator<Item = Vector>| {
+            let (sum, n) = points.fold((Vector::ZERO, 0usize), |(s, n), p| (s + p, n + 1));
+            (n as f64 >= TRUNK_MIN_PIXELS).then(|| sum / n as f64)
+        };
+        let measured = mean(
+            &mut depth
+                .iter()
+                .zip(target.torso)
+                .enumerate()
+                .filter(|(_, (z, t))| **t > 0.5 && z.is_finite() && **z > 0.0)
+                .map(|(p, (z, _))| point(p, *z)),
+        );
+        let Some(measured_C) = measured else {
+            return Ok(None);
+        };
+        let mut q = self.arm.held.clone();
+        for (&i, v) in trunk.all.iter().zip(at) {
+            q[i] = *v;
+        }
+        let k = self.arm.human.fk(self.arm.X_WH, &q)?;
+        let X_WT = *k.link_pose(trunk.torso);
+        target.scene.objects[0].X_WO = X_WT;
+        self.renderer
+            .render(&target.scene, camera, &mut self.trunk_frame)?;
+        self.renders += 1;
+        let rendered = mean(
+            &mut self
+                .trunk_frame
+                .depth_m
+                .iter()
+                .enumerate()
+                .filter(|(p, z)| {
+                    **z > 0.0 && (target.torso[*p] > 0.5 || target.background[*p] > 0.5)
+                })
+                .map(|(p, z)| point(p, *z)),
+        );
+        let X_CW = camera.X_WC.inverse();
+        let rendered_C =
+            rendered.unwrap_or_else(|| X_CW.transform_point(X_WT.transform_point(trunk.centre_T)));
+        let shift_W = camera.X_WC.rotation * (measured_C - rendered_C);
+        let n_rev = trunk.joints.len();
+        let mut slides = at[n_rev..].to_vec();
+        for (j, &i) in trunk.slides.iter().enumerate() {
+            let joint = &self.arm.human.joints()[self.arm.human.actuated_joints()[i]];
+            let axis_W = k.link_pose(joint.parent).rotation * (joint.X_PJ.rotation * joint.axis);
+            let [lo, hi] = trunk.limits[n_rev + j];
+            slides[j] = (slides[j] + shift_W.dot(axis_W)).clamp(lo, hi);
+        }
+        Ok(Some(slides))
     }
 
     /// The torso's score at each of `candidates` (trunk joint values): its gain, less the
@@ -290,7 +472,7 @@ impl<R: Renderer> ArmFitter<R> {
         let mut q = self.arm.held.clone();
         self.poses.clear();
         for c in candidates {
-            for (&i, v) in trunk.joints.iter().zip(c) {
+            for (&i, v) in trunk.all.iter().zip(c) {
                 q[i] = *v;
             }
             let k = self.arm.human.fk(self.arm.X_WH, &q)?;
