@@ -73,7 +73,7 @@ pub struct EvalPoseArgs {
     pub confirm_min_gain: Option<f64>,
     /// With --method articulated, on a model whose trunk turns and leans (`human`): `fit`
     /// fits the trunk to the torso's mask and depth before the arm, `upright` holds it
-XX
+    /// upright (default: ArmFitConfig's). `human_arm`'s torso does not move.
     #[arg(long, value_parser = ["fit", "upright"])]
     pub trunk: Option<String>,
     /// With --method paper: search over the whole image instead of a region of interest
