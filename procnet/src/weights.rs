@@ -18,18 +18,51 @@ pub const SHIPPED_RGB: &str = "procnet/weights/procnet-cpu.safetensors";
 /// plane), relative to the source tree's root.
 pub const SHIPPED_DEPTH: &str = "procnet/weights/procnet-depth.safetensors";
 
+/// The shipped ProcNet for a camera that measures depth and a human with a trunk that turns,
+/// leans and walks (the catalogue's `human`, the cell's default): [`SHIPPED_DEPTH`] trained
+/// on for the whole body's frames, half of them recorded people.
+pub const SHIPPED_DEPTH_BODY: &str = "procnet/weights/procnet-depth-human.safetensors";
+
+/// The catalogue's arm on a fixed torso (the paper's human), which the other shipped
+/// networks' frames show.
+pub const PAPER_ARM: &str = "human_arm";
+
 /// The shipped weights for a camera with (`depth`) or without a depth channel, relative to
-/// the source tree's root.
+/// the source tree's root: the networks trained on the paper's arm ([`PAPER_ARM`]).
 #[must_use]
 pub fn shipped(depth: bool) -> &'static str {
     if depth { SHIPPED_DEPTH } else { SHIPPED_RGB }
 }
 
+/// The shipped weights for a camera with or without depth that sees `human_model` (a
+/// catalogue name or a URDF path): [`SHIPPED_DEPTH_BODY`] for a depth camera and any human
+/// but the paper's arm, else [`shipped`]'s (the RGB network has seen the paper's arm only).
+#[must_use]
+pub fn shipped_for(depth: bool, human_model: &str) -> &'static str {
+    if depth && human_model != PAPER_ARM {
+        SHIPPED_DEPTH_BODY
+    } else {
+        shipped(depth)
+    }
+}
+
+/// `relative` (a path relative to the source tree's root) in this crate's source tree,
+/// wherever the program runs from.
+fn in_source_tree(relative: &str) -> std::path::PathBuf {
+    let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    crate_dir.parent().unwrap_or(crate_dir).join(relative)
+}
+
 /// [`shipped`] as a path in this crate's source tree, wherever the program runs from.
 #[must_use]
 pub fn shipped_path(depth: bool) -> std::path::PathBuf {
-    let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
-    crate_dir.parent().unwrap_or(crate_dir).join(shipped(depth))
+    in_source_tree(shipped(depth))
+}
+
+/// [`shipped_for`] as a path in this crate's source tree, wherever the program runs from.
+#[must_use]
+pub fn shipped_path_for(depth: bool, human_model: &str) -> std::path::PathBuf {
+    in_source_tree(shipped_for(depth, human_model))
 }
 
 /// The `format` entry of a weight file's metadata.

@@ -38,7 +38,9 @@ pub struct GenerateArgs {
     #[arg(long, default_value = "dataset")]
     pub crop: String,
     /// With `--crop tracker`: the tracker's ProcNet weights [default: the shipped network
-    /// for a camera with depth, procnet/weights/procnet-depth.safetensors].
+    /// for a camera with depth and the dataset's human, procnet/weights/
+    /// procnet-depth-human.safetensors for the whole body, procnet-depth.safetensors for
+    /// `human_arm`].
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Make only the sequences of these splits (comma-separated: train, validation, test)
@@ -188,10 +190,12 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
                      configuration stores {stored}x{stored} (input_px)"
                 );
             }
-            let weights = args
-                .weights
-                .clone()
-                .unwrap_or_else(|| PathBuf::from(workcell::procnet::weights::SHIPPED_DEPTH));
+            let weights = args.weights.clone().unwrap_or_else(|| {
+                PathBuf::from(workcell::procnet::weights::shipped_for(
+                    true,
+                    &generator.human().model,
+                ))
+            });
             let factory = TrackerCrop::factory(&generator.human(), &weights, counts.clone())
                 .with_context(|| format!("the tracker's network, {}", weights.display()))?;
             let name = format!(

@@ -73,7 +73,7 @@ pub struct EvalPoseArgs {
     pub confirm_min_gain: Option<f64>,
     /// With --method articulated, on a model whose trunk turns and leans (`human`): `fit`
     /// fits the trunk to the torso's mask and depth before the arm, `upright` holds it
-    /// upright (default: ArmFitConfig's). `human_arm`'s torso does not move.
+    /// upright (default: ArmFitConfig's, `upright`). `human_arm`'s torso does not move.
     #[arg(long, value_parser = ["fit", "upright"])]
     pub trunk: Option<String>,
     /// With --method paper: search over the whole image instead of a region of interest
@@ -91,12 +91,13 @@ pub struct EvalPoseArgs {
 }
 
 /// The weights of `--masks procnet` or `baseline`: `--weights`, else the shipped ProcNet
-/// (the one that reads depth with `--depth`) or the shipped baseline, both 64x64 networks of
-/// the cpu preset.
-fn network_weights(kind: &str, args: &EvalPoseArgs) -> PathBuf {
+/// for the dataset's human (`human_model`; with `--depth`, the one that reads depth and, for
+/// the whole body, was trained on it) or the shipped baseline, both 64x64 networks of the
+/// cpu preset.
+fn network_weights(kind: &str, args: &EvalPoseArgs, human_model: &str) -> PathBuf {
     args.weights.clone().unwrap_or_else(|| {
         PathBuf::from(if kind == "procnet" {
-            workcell::procnet::weights::shipped(args.depth)
+            workcell::procnet::weights::shipped_for(args.depth, human_model)
         } else {
             "procnet/weights/baseline-cpu-64.safetensors"
         })
@@ -104,7 +105,7 @@ fn network_weights(kind: &str, args: &EvalPoseArgs) -> PathBuf {
 }
 
 /// The mask source of one `--masks` entry.
-fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
+fn mask_source(kind: &str, args: &EvalPoseArgs, human_model: &str) -> Result<Box<dyn MaskSource>> {
     Ok(match kind {
         "gt" => Box::new(GroundTruthMasks),
         "visible" => Box::new(VisibleMasks),
@@ -119,7 +120,7 @@ fn mask_source(kind: &str, args: &EvalPoseArgs) -> Result<Box<dyn MaskSource>> {
             Box::new(GroundTruthAtSize { size })
         }
         "procnet" | "baseline" => {
-            let weights = network_weights(kind, args);
+            let weights = network_weights(kind, args, human_model);
             // The error names the file already.
             let net = ProcNet::load(&weights, Backend::parse(&args.backend)?)?;
             if net.config().is_feed_forward() != (kind == "baseline") {
@@ -164,11 +165,17 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
     {
         anyhow::bail!("--masks names {k:?} twice (entry {})", i + 1);
     }
+    let dataset = Dataset::open(&args.dataset)?;
+    let human_model = dataset
+        .manifest
+        .human
+        .as_ref()
+        .map_or(workcell::procnet::weights::PAPER_ARM, |h| h.model.as_str())
+        .to_string();
     let mut sources = kinds
         .iter()
-        .map(|k| mask_source(k, args))
+        .map(|k| mask_source(k, args, &human_model))
         .collect::<Result<Vec<_>>>()?;
-    let dataset = Dataset::open(&args.dataset)?;
     let n = dataset.entries(Some(split)).count();
     let method = match args.method.as_str() {
         "articulated" => {
@@ -246,7 +253,10 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         let (calibration, uncalibrated) = match *kind {
             "gt" => (Some(Calibration::true_masks(args.depth)), None),
             "procnet" | "baseline" => {
-                let found = Calibration::of_weights(&network_weights(kind, args), args.depth)?;
+                let found = Calibration::of_weights(
+                    &network_weights(kind, args, &human_model),
+                    args.depth,
+                )?;
                 if let Some(w) = found.warning() {
                     eprintln!("warning: {w}");
                 }

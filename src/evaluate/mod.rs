@@ -221,6 +221,15 @@ impl Evaluation {
         if let Some(model) = &config.human_model {
             scenario.set_human_model(model, path);
         }
+        // No weights named: the shipped network for this camera and this human.
+        if let PerceptionConfig::Procnet(p) = &mut config.perception
+            && p.weights.is_none()
+        {
+            p.weights = Some(crate::procnet::weights::shipped_path_for(
+                p.depth,
+                &scenario.human.model,
+            ));
+        }
         if let Some(recorded) = &mut config.human_recorded {
             // Relative to this file, wherever the cell's file is.
             if recorded.library.is_relative() {
@@ -530,6 +539,37 @@ mod tests {
             std::fs::write(&path, text).expect("write");
             let evaluation = Evaluation::from_file(&path).expect("evaluation");
             assert_eq!(evaluation.scenario.human.model, expected);
+        }
+    }
+
+    /// Without weights named, the closed loop reads the shipped network for its camera and
+    /// its human: the one trained on the whole body's frames for an RGB-D camera that sees
+    /// `human`, the paper's arm's for `human_arm`, the RGB network without depth.
+    #[test]
+    fn the_default_weights_follow_the_camera_and_the_human() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let cell = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/default.toml");
+        let path = dir.path().join("eval.toml");
+        for (model, depth, expected) in [
+            ("human", true, "procnet-depth-human.safetensors"),
+            ("human_arm", true, "procnet-depth.safetensors"),
+            ("human", false, "procnet-cpu.safetensors"),
+        ] {
+            let text = format!(
+                "cell = {cell:?}\nhuman_model = {model:?}\n[perception]\nkind = \"procnet\"\n\
+                 depth = {depth}\n"
+            );
+            std::fs::write(&path, text).expect("write");
+            let evaluation = Evaluation::from_file(&path).expect("evaluation");
+            let PerceptionConfig::Procnet(p) = &evaluation.config.perception else {
+                panic!("procnet perception")
+            };
+            let weights = p.weights_path();
+            assert!(
+                weights.ends_with(format!("procnet/weights/{expected}")),
+                "{weights:?}"
+            );
+            assert!(weights.is_file(), "{weights:?}");
         }
     }
 

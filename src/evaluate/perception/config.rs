@@ -73,9 +73,11 @@ pub struct NoisyConfig {
 #[serde(default, deny_unknown_fields)]
 pub struct ProcNetConfig {
     /// The network's weights, relative to the evaluation file. Default (none given): the
-    /// shipped ones of this source tree for the camera,
-    /// `procnet/weights/procnet-depth.safetensors` (the network that reads the depth image
-    /// too) where `depth`, else `procnet-cpu.safetensors` ([`Self::weights_path`]).
+    /// shipped ones of this source tree for the camera and the cell's human
+    /// (`procnet::weights::shipped_for`): where `depth`,
+    /// `procnet/weights/procnet-depth-human.safetensors` for the whole body and
+    /// `procnet-depth.safetensors` for the paper's arm (`human_arm`); else
+    /// `procnet-cpu.safetensors`. The evaluation file fills it in when it is read.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub weights: Option<std::path::PathBuf>,
     /// The cell's camera by name; empty for the first. Default empty.
@@ -89,9 +91,9 @@ pub struct ProcNetConfig {
     /// paper's artificial occluders, in the loop; 0.66 and above is its heavy occlusion).
     /// Default 0.
     pub occlusion: f64,
-    /// On a human whose trunk turns and leans (`human`), fit the trunk to the torso's mask
-    /// and depth before the arm (`ArmFitConfig::fit_trunk`). Default false: it needs masks
-    /// of a torso that moves, which the shipped network was not trained on.
+    /// On a human whose trunk turns, leans and walks (`human`), fit the trunk to the torso's
+    /// mask and depth before the arm (`ArmFitConfig::fit_trunk`). Default false (the trunk
+    /// upright where the cell puts the person): the shipped calibrations were fitted so.
     pub fit_trunk: bool,
     /// The factor on the fit's curvature uncertainty (`ArmFitConfig::uncertainty_scale`),
     /// in place of the one calibrated for the masks and depth chosen (the calibration file
