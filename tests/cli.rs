@@ -876,7 +876,25 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "--dataset",
             data_s,
         ],
-        "--search-starts, --min-gain and --confirm-min-gain are settings of --method articulated",
+        "--search-starts, --min-gain, --confirm-min-gain and --trunk are settings of --method \
+         articulated",
+    );
+    refused(
+        &[
+            "eval",
+            "pose",
+            "--method",
+            "paper",
+            "--trunk",
+            "fit",
+            "--dataset",
+            data_s,
+        ],
+        "are settings of --method articulated",
+    );
+    refused(
+        &["eval", "pose", "--trunk", "bent", "--dataset", data_s],
+        "possible values: fit, upright",
     );
     refused(
         &[
