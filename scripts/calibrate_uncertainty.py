@@ -60,8 +60,9 @@ def hidden_of(row):
     return h if h == h else 0.0
 
 
-def load(path):
-    """(error m, sigma m, spread m, hidden share) of every frame with a pose."""
+def load(path, min_gain=None):
+    """(error m, sigma m, spread m, hidden share) of every frame with a pose (and, given
+    `min_gain`, a gain of at least that)."""
     try:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))
@@ -82,6 +83,7 @@ def load(path):
         )
         for r in rows
         if r["no_pose"] == "" and r["ends_cm"] != ""
+        and (min_gain is None or float(r["gain"]) >= min_gain)
     ]
 
 
@@ -156,7 +158,7 @@ def toml_float(x):
 
 
 def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain=math.inf,
-                      confirmed_floor_m=0.0):
+                      confirmed_floor_m=0.0, min_gain=None):
     """Writes `calibration` ((scale, floor, hidden floors)) as `section` (`with_depth` or
     `without_depth`) of the calibration file beside `weights`; returns its path."""
     with open(weights, "rb") as f:
@@ -179,6 +181,8 @@ def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain
         "confirm_min_gain": confirm_min_gain,
         "confirmed_floor_m": confirmed_floor_m,
     }
+    if min_gain is not None:
+        doc[section]["min_gain"] = min_gain
     lines = [
         f"# The pose bound's calibration for {os.path.basename(weights)}: "
         "scripts/calibrate_uncertainty.py --write.",
@@ -197,6 +201,8 @@ def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain
                 f"confirm_min_gain = {toml_float(c['confirm_min_gain'])}",
                 f"confirmed_floor_m = {toml_float(c['confirmed_floor_m'])}",
             ]
+            if "min_gain" in c:
+                lines.append(f"min_gain = {toml_float(c['min_gain'])}")
     with open(path + ".tmp", "w") as f:
         f.write("\n".join(lines) + "\n")
     os.replace(path + ".tmp", path)
@@ -226,6 +232,10 @@ def main():
                         help="with --write: the gain from which a confirmed fit is a pose")
     parser.add_argument("--confirmed-floor-m", type=float, default=0.0,
                         help="with --write: the least bound of a confirmed pose, m")
+    parser.add_argument("--min-gain", type=float, default=None,
+                        help="the fit's gain threshold the bound is for: frames below it "
+                        "count as no pose, and --write writes it (make the CSVs with "
+                        "`eval pose --min-gain` too: a frame turned down changes the track)")
     args = parser.parse_args()
     if args.write and args.depth is None:
         sys.exit("--write needs --depth or --no-depth: which fit the calibration is for")
@@ -234,7 +244,11 @@ def main():
     if args.pool and not args.test:
         sys.exit("--pool needs the first source's TEST.csv too")
     sources = [(args.validation, args.test)] + [tuple(p) for p in args.pool]
-    loaded = [(load(v), load(t) if t else None) for v, t in sources]
+    if args.min_gain is not None and not 0.0 <= args.min_gain <= 1.0:
+        sys.exit("--min-gain is a gain from 0 to 1")
+    loaded = [
+        (load(v, args.min_gain), load(t, args.min_gain) if t else None) for v, t in sources
+    ]
     for (v_path, _), (v, _) in zip(sources, loaded):
         if not v:
             sys.exit(f"{v_path}: no frame with a pose")
@@ -287,6 +301,7 @@ def main():
             fitted_on,
             args.confirm_min_gain,
             args.confirmed_floor_m,
+            args.min_gain,
         )
         print(f"\nwrote {path}")
     if len(sources) > 1:

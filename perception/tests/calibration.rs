@@ -35,6 +35,7 @@ fn the_shipped_networks_carry_their_measured_calibration() {
             hidden_floors_m: [0.0634, 0.0634, 0.2850],
             confirm_min_gain: 0.2,
             confirmed_floor_m: 0.65,
+            min_gain: None,
         }
     );
     // The network that reads depth was never measured without it.
@@ -100,6 +101,7 @@ fn a_malformed_calibration_is_refused_by_key() {
         (section("nan"), "with_depth.floor_m"),
         (section("inf"), "with_depth.floor_m"),
         (section("0.1") + "extra = 1\n", "extra"),
+        (section("0.1") + "min_gain = 1.5\n", "with_depth.min_gain"),
         ("weights_sha256 = 3\n".to_string(), "weights_sha256"),
     ] {
         std::fs::write(calibration_path(&mine), &text).expect("write");
@@ -107,5 +109,33 @@ fn a_malformed_calibration_is_refused_by_key() {
         let message = err.to_string();
         assert!(message.contains("mine.calibration.toml"), "{message}");
         assert!(message.contains(expected), "{expected}: {message}");
+    }
+}
+
+/// A calibration that chose the fit's gain threshold carries it: the bound holds for fits
+/// above it only, so applying the calibration sets it; one without keeps the fit's own.
+#[test]
+fn a_calibrations_gain_threshold_is_the_fits() {
+    use workcell_perception::pose::ArmFitConfig;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mine = dir.path().join("mine.safetensors");
+    std::fs::write(&mine, b"not really weights").expect("write");
+    let hash = file_sha256(&mine, 1 << 20).expect("hash");
+    let text = |extra: &str| {
+        format!(
+            "weights_sha256 = \"{hash}\"\nfitted_on = \"nothing\"\n[with_depth]\nscale = 0.5\n\
+             floor_m = 0.05\nhidden_floors_m = [0.05, 0.05, 0.08]\nconfirm_min_gain = inf\n\
+             confirmed_floor_m = 0.0\n{extra}"
+        )
+    };
+    for (extra, expected) in [
+        ("min_gain = 0.65\n", 0.65),
+        ("", ArmFitConfig::default().min_gain),
+    ] {
+        std::fs::write(calibration_path(&mine), text(extra)).expect("write");
+        let found = Calibration::of_weights(&mine, true).expect("calibration");
+        let config = found.calibration.apply(ArmFitConfig::default());
+        assert_eq!(config.min_gain, expected, "{extra:?}");
+        assert_eq!(config.uncertainty_floor_m, 0.05);
     }
 }

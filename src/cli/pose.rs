@@ -275,6 +275,9 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 if let Some(g) = args.confirm_min_gain {
                     config.confirm_min_gain = g;
                 }
+                if let Some(g) = args.min_gain {
+                    config.min_gain = g;
+                }
                 PoseMethod::Articulated {
                     config,
                     depth: *depth,

@@ -32,6 +32,11 @@ pub struct Calibration {
     /// The least bound of a confirmed pose, m: such fits are right or far off (the masks'
     /// faint arm, or a consistent wrong one), and the curvature tells neither.
     pub confirmed_floor_m: f64,
+    /// [`ArmFitConfig::min_gain`] the bound was measured with, where the calibration chose
+    /// one (`scripts/calibrate_uncertainty.py --min-gain`): fits below it are no pose, and
+    /// the bound holds for the fits above it only. Absent: the fit's own (0.3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_gain: Option<f64>,
 }
 
 /// Where [`ArmFit::hidden_share`] starts each band of [`Calibration::hidden_floors_m`].
@@ -123,6 +128,7 @@ impl Calibration {
         hidden_floors_m: [0.45; 3],
         confirm_min_gain: f64::INFINITY,
         confirmed_floor_m: 0.0,
+        min_gain: None,
     };
 
     /// The calibration measured for the fit of true masks (each part's pixels in the
@@ -146,6 +152,7 @@ impl Calibration {
             hidden_floors_m,
             confirm_min_gain: f64::INFINITY,
             confirmed_floor_m: 0.0,
+            min_gain: None,
         }
     }
 
@@ -232,6 +239,11 @@ impl Calibration {
                 return Err(format!("{key}: {v} is not a finite value >= 0"));
             }
         }
+        if let Some(g) = self.min_gain
+            && !(0.0..=1.0).contains(&g)
+        {
+            return Err(format!("min_gain: {g} is not a gain from 0 to 1"));
+        }
         if self.confirm_min_gain.is_nan() || self.confirm_min_gain < 0.0 {
             return Err(format!(
                 "confirm_min_gain: {} is not a value >= 0",
@@ -250,6 +262,7 @@ impl Calibration {
             uncertainty_hidden_floors_m: self.hidden_floors_m,
             confirm_min_gain: self.confirm_min_gain,
             uncertainty_confirmed_floor_m: self.confirmed_floor_m,
+            min_gain: self.min_gain.unwrap_or(config.min_gain),
             ..config
         }
     }
@@ -288,6 +301,7 @@ impl Calibration {
             hidden_floors_m: config.uncertainty_hidden_floors_m,
             confirm_min_gain: config.confirm_min_gain,
             confirmed_floor_m: config.uncertainty_confirmed_floor_m,
+            min_gain: Some(config.min_gain),
         }
     }
 }

@@ -717,6 +717,7 @@ fn an_occluder_in_front_is_measured_and_widens_the_bound() {
         hidden_floors_m: [0.1, 0.2, 0.3],
         confirm_min_gain: f64::INFINITY,
         confirmed_floor_m: 0.0,
+        min_gain: None,
     };
     let config = calibration.apply(ArmFitConfig::default());
     let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
@@ -747,6 +748,7 @@ fn the_floor_follows_the_hidden_share() {
         hidden_floors_m: [0.04, 0.2, 0.1],
         confirm_min_gain: 0.2,
         confirmed_floor_m: 0.6,
+        min_gain: None,
     };
     let floors: Vec<f64> = [0.0, 0.24, 0.25, 0.5, 0.74, 0.75, 1.0]
         .iter()
