@@ -739,7 +739,8 @@ fn an_occluder_in_front_is_measured_and_widens_the_bound() {
 }
 
 /// The floor grows band by band with the hidden share, and never falls below a less
-/// hidden band's; a confirmed pose's bound is at least its own floor.
+/// hidden band's; a confirmed pose's bound is at least its own floor; the calibration
+/// round-trips through the fit's settings, its gain threshold with it.
 #[test]
 fn the_floor_follows_the_hidden_share() {
     let c = Calibration {
@@ -748,7 +749,7 @@ fn the_floor_follows_the_hidden_share() {
         hidden_floors_m: [0.04, 0.2, 0.1],
         confirm_min_gain: 0.2,
         confirmed_floor_m: 0.6,
-        min_gain: None,
+        min_gain: Some(0.45),
     };
     let floors: Vec<f64> = [0.0, 0.24, 0.25, 0.5, 0.74, 0.75, 1.0]
         .iter()
