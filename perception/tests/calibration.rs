@@ -86,16 +86,8 @@ fn other_weights_get_no_borrowed_calibration() {
 #[test]
 fn a_malformed_calibration_is_refused_by_key() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mine = dir.path().join("mine.safetensors");
-    std::fs::write(&mine, b"not really weights").expect("write");
-    let hash = file_sha256(&mine, 1 << 20).expect("hash");
-    let section = |floor: &str| {
-        format!(
-            "weights_sha256 = \"{hash}\"\nfitted_on = \"nothing\"\n[with_depth]\nscale = 0.0\n\
-             floor_m = {floor}\nhidden_floors_m = [0.0, 0.0, 0.0]\nconfirm_min_gain = inf\n\
-             confirmed_floor_m = 0.0\n"
-        )
-    };
+    let mine = stand_in_weights(dir.path());
+    let section = |floor: &str| calibration_file(&mine, floor, "");
     for (text, expected) in [
         (section("-0.1"), "with_depth.floor_m"),
         (section("nan"), "with_depth.floor_m"),
@@ -118,24 +110,37 @@ fn a_malformed_calibration_is_refused_by_key() {
 fn a_calibrations_gain_threshold_is_the_fits() {
     use workcell_perception::pose::ArmFitConfig;
     let dir = tempfile::tempdir().expect("tempdir");
-    let mine = dir.path().join("mine.safetensors");
-    std::fs::write(&mine, b"not really weights").expect("write");
-    let hash = file_sha256(&mine, 1 << 20).expect("hash");
-    let text = |extra: &str| {
-        format!(
-            "weights_sha256 = \"{hash}\"\nfitted_on = \"nothing\"\n[with_depth]\nscale = 0.5\n\
-             floor_m = 0.05\nhidden_floors_m = [0.05, 0.05, 0.08]\nconfirm_min_gain = inf\n\
-             confirmed_floor_m = 0.0\n{extra}"
-        )
-    };
+    let mine = stand_in_weights(dir.path());
     for (extra, expected) in [
         ("min_gain = 0.65\n", 0.65),
         ("", ArmFitConfig::default().min_gain),
     ] {
-        std::fs::write(calibration_path(&mine), text(extra)).expect("write");
+        std::fs::write(
+            calibration_path(&mine),
+            calibration_file(&mine, "0.05", extra),
+        )
+        .expect("write");
         let found = Calibration::of_weights(&mine, true).expect("calibration");
         let config = found.calibration.apply(ArmFitConfig::default());
         assert_eq!(config.min_gain, expected, "{extra:?}");
         assert_eq!(config.uncertainty_floor_m, 0.05);
     }
+}
+
+/// A file that stands in for weights in `dir` (the calibration reads only its hash).
+fn stand_in_weights(dir: &Path) -> PathBuf {
+    let mine = dir.join("mine.safetensors");
+    std::fs::write(&mine, b"not really weights").expect("write");
+    mine
+}
+
+/// A calibration file of `weights` whose fit with depth has the floor `floor` (a TOML
+/// value, written as it is) and the lines `extra` at the end of its section.
+fn calibration_file(weights: &Path, floor: &str, extra: &str) -> String {
+    let hash = file_sha256(weights, 1 << 20).expect("hash");
+    format!(
+        "weights_sha256 = \"{hash}\"\nfitted_on = \"nothing\"\n[with_depth]\nscale = 0.0\n\
+         floor_m = {floor}\nhidden_floors_m = [0.0, 0.0, 0.0]\nconfirm_min_gain = inf\n\
+         confirmed_floor_m = 0.0\n{extra}"
+    )
 }

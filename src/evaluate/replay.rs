@@ -231,13 +231,7 @@ pub fn episode_glb(
         children.push(glb.node(&format!("camera/{camera_name}"), props, false));
         // The frustum in the camera frame C: the image's corners at FRUSTUM_DEPTH_M.
         let d = FRUSTUM_DEPTH_M;
-        let corner = |u: f64, v: f64| {
-            [
-                ((u - camera.cx) / camera.fx * d) as f32,
-                ((v - camera.cy) / camera.fy * d) as f32,
-                d as f32,
-            ]
-        };
+        let corner = |u: f64, v: f64| camera.point_at(u, v, d).to_array().map(|x| x as f32);
         let (w, h) = (f64::from(camera.width), f64::from(camera.height));
         let points = [
             [0.0, 0.0, 0.0],

@@ -557,7 +557,7 @@ impl<R: Renderer> PoseEstimator<R> {
         let (L, n) = (self.model.length_m, self.config.directions.max(1));
         // A fixed reference: of each axis and its opposite, the one on its side.
         let k_ref = Vector::new(0.31, 0.53, 0.79).normalize();
-        let ray = Vector::new((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0);
+        let ray = cam.point_at(u, v, 1.0);
         let mut out = Vec::new();
         for i in 0..2 * n {
             // Fibonacci sphere of 2n points; without an anchor, the hemisphere facing k_ref

@@ -107,6 +107,18 @@ impl Camera {
         })
     }
 
+    /// The point in the camera frame that pixel coordinates `(u, v)` (pixel centres at
+    /// half-integers) show at depth `depth_m` along the optical axis: [`Camera::project`]'s
+    /// inverse.
+    #[must_use]
+    pub fn point_at(&self, u: f64, v: f64, depth_m: f64) -> Vector {
+        Vector::new(
+            (u - self.cx) / self.fx * depth_m,
+            (v - self.cy) / self.fy * depth_m,
+            depth_m,
+        )
+    }
+
     /// The same camera with its image scaled to `width x height` (intrinsics scaled).
     ///
     /// # Errors

@@ -463,3 +463,23 @@ fn bad_cameras_and_poses_are_errors() {
         .unwrap_err();
     assert!(err.to_string().contains("mask pose 1"), "{err}");
 }
+
+/// A pixel's point at a depth projects back onto that pixel; the principal point's lies on
+/// the optical axis; and a pixel a focal length off the centre sees a point as far off the
+/// axis as it is deep (a 45-degree ray).
+#[test]
+fn a_pixels_point_at_a_depth_projects_back_onto_the_pixel() {
+    let cam = camera(64, 48, 60.0);
+    for (u, v, z) in [(0.5, 0.5, 0.3), (31.5, 20.5, 2.0), (63.5, 47.5, 7.5)] {
+        let p = cam.point_at(u, v, z);
+        assert_relative_eq!(p.z, z);
+        let [pu, pv] = cam.project(p).expect("in front of the camera");
+        assert_relative_eq!(pu, u, epsilon = 1e-12);
+        assert_relative_eq!(pv, v, epsilon = 1e-12);
+    }
+    let axis = cam.point_at(cam.cx, cam.cy, 1.5);
+    assert_relative_eq!(axis.x, 0.0);
+    assert_relative_eq!(axis.y, 0.0);
+    let side = cam.point_at(cam.cx + cam.fx, cam.cy, 2.0);
+    assert_relative_eq!(side.x, 2.0, epsilon = 1e-12);
+}

@@ -28,14 +28,15 @@
 //! (`pelvis_x`, `pelvis_y`) are therefore fitted too. With a depth image they start where
 //! the torso's pixels put them: the measured torso's points (each pixel back-projected at its
 //! depth) against the rendered torso's, the difference along each slide's axis, twice
-//! ([`TRUNK_CENTRE_PASSES`]), and the climb refines them. Without depth they stay where the
+//! ([`TRUNK_CENTRE_PASSES`]) and only where it moves the pelvis [`TRUNK_CENTRE_MIN_M`] or
+//! more (a smaller shift is as likely a turn or lean not yet fitted); the climb refines them. Without depth they stay where the
 //! last frame left them: the outline tells a person nearer the camera from one leaning
 //! toward it poorly.
 //!
 //! **The search.** A grid over [`TRUNK_GRID`] (the trunk's working range) at those slides,
-//! the previous frame's trunk beside it, then a compass climb over every trunk joint from the
-//! best down to [`TRUNK_MIN_STEP_RAD`] (the slides' steps [`TRUNK_SLIDE_M_PER_RAD`] times
-//! that). The grid's outlines render in one batch and the best [`TRUNK_DEPTH_FINALISTS`]
+//! the previous frame's trunk beside it, then a compass climb over the trunk's joints (the
+//! slides with a depth image only) from the best down to [`TRUNK_MIN_STEP_RAD`] (the slides'
+//! steps [`TRUNK_SLIDE_M_PER_RAD`] times that). The grid's outlines render in one batch and the best [`TRUNK_DEPTH_FINALISTS`]
 //! with their depth; each climb step's candidates with their depth.
 
 use std::sync::Arc;
@@ -399,13 +400,7 @@ impl<R: Renderer> ArmFitter<R> {
         };
         let w = camera.width as usize;
         let point = |p: usize, z: f32| {
-            let z = f64::from(z);
-            let (u, v) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
-            Vector::new(
-                (u - camera.cx) / camera.fx * z,
-                (v - camera.cy) / camera.fy * z,
-                z,
-            )
+            camera.point_at((p % w) as f64 + 0.5, (p / w) as f64 + 0.5, f64::from(z))
         };
         let mean = |points: &mut dyn Iterator<Item = Vector>| {
             let (sum, n) = points.fold((Vector::ZERO, 0usize), |(s, n), p| (s + p, n + 1));
