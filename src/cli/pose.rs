@@ -61,6 +61,18 @@ pub struct EvalPoseArgs {
     /// ones first (1 to 1000; default ArmFitConfig's 10).
     #[arg(long)]
     pub search_starts: Option<usize>,
+    /// With --method articulated: the global search runs beside the tracked hypotheses when
+    /// their best gain is below this (0 to 1; default ArmFitConfig's 0.55).
+    #[arg(long)]
+    pub search_below_gain: Option<f64>,
+    /// With --method articulated: climb from the best fit's forearm turned end for end as
+    /// well, kept as a hypothesis where it scores as well (ArmFitConfig::reversed_start).
+    #[arg(long)]
+    pub reversed_start: bool,
+    /// With --method articulated and --depth: climb from the forearm where its mask's depth
+    /// points put it as well, both ways round (ArmFitConfig::depth_start).
+    #[arg(long)]
+    pub depth_start: bool,
     /// With --method articulated: a fit whose gain is below this is no pose (0 to 1; default
     /// ArmFitConfig's 0.3).
     #[arg(long)]
@@ -73,8 +85,10 @@ pub struct EvalPoseArgs {
     pub confirm_min_gain: Option<f64>,
     /// With --method articulated, on a model whose trunk turns and leans (`human`): `fit`
     /// fits the trunk to the torso's mask and depth before the arm, `upright` holds it
-    /// upright (default: ArmFitConfig's, `upright`). `human_arm`'s torso does not move.
-    #[arg(long, value_parser = ["fit", "upright"])]
+    /// upright, `truth` holds it where the labels put it (the arm's fit given a perfect
+    /// trunk: a bound, not a method) (default: ArmFitConfig's, `upright`). `human_arm`'s
+    /// torso does not move.
+    #[arg(long, value_parser = ["fit", "upright", "truth"])]
     pub trunk: Option<String>,
     /// With --method paper: search over the whole image instead of a region of interest
     /// around the mask.
@@ -192,12 +206,23 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 config.refine = n;
             }
+            if let Some(g) = args.search_below_gain {
+                if !(0.0..=1.0).contains(&g) {
+                    anyhow::bail!("--search-below-gain {g}: a gain from 0 to 1");
+                }
+                config.search_below_gain = g;
+            }
             if let Some(g) = args.min_gain {
                 if !(0.0..=1.0).contains(&g) {
                     anyhow::bail!("--min-gain {g}: a gain from 0 to 1");
                 }
                 config.min_gain = g;
             }
+            config.reversed_start = args.reversed_start;
+            if args.depth_start && !args.depth {
+                anyhow::bail!("--depth-start starts from the depth image: add --depth");
+            }
+            config.depth_start = args.depth_start;
             if let Some(t) = &args.trunk {
                 config.fit_trunk = t == "fit";
             }
@@ -210,17 +235,22 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             PoseMethod::Articulated {
                 config,
                 depth: args.depth,
+                true_trunk: args.trunk.as_deref() == Some("truth"),
             }
         }
         "paper"
             if args.search_starts.is_some()
+                || args.search_below_gain.is_some()
+                || args.reversed_start
+                || args.depth_start
                 || args.min_gain.is_some()
                 || args.confirm_min_gain.is_some()
                 || args.trunk.is_some() =>
         {
             anyhow::bail!(
-                "--search-starts, --min-gain, --confirm-min-gain and --trunk are settings of \
-                 --method articulated"
+                "--search-starts, --search-below-gain, --reversed-start, --depth-start, \
+                 --min-gain, --confirm-min-gain and --trunk are settings of --method \
+                 articulated"
             )
         }
         "paper" if args.depth => {
@@ -269,7 +299,11 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             _ => (None, None),
         };
         let method = match &method {
-            PoseMethod::Articulated { config, depth } => {
+            PoseMethod::Articulated {
+                config,
+                depth,
+                true_trunk,
+            } => {
                 let mut config =
                     calibration.map_or_else(|| config.clone(), |c| c.apply(config.clone()));
                 if let Some(g) = args.confirm_min_gain {
@@ -281,6 +315,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 PoseMethod::Articulated {
                     config,
                     depth: *depth,
+                    true_trunk: *true_trunk,
                 }
             }
             paper => paper.clone(),

@@ -40,8 +40,14 @@ pub enum PoseMethod {
     /// elbow anchored to the shoulder when `anchored`.
     Paper { anchored: bool, config: PoseConfig },
     /// The human model's joints fitted to every arm part's mask ([`ArmFitter`]); with
-    /// `depth`, the dataset's depth images join the score (RGB-D).
-    Articulated { config: ArmFitConfig, depth: bool },
+    /// `depth`, the dataset's depth images join the score (RGB-D). With `true_trunk`, the
+    /// trunk is held where the labels put it ([`ArmFitter::hold_trunk_at`]) instead of
+    /// fitted or upright: what the arm's fit scores given a perfect trunk.
+    Articulated {
+        config: ArmFitConfig,
+        depth: bool,
+        true_trunk: bool,
+    },
 }
 
 impl PoseMethod {
@@ -62,10 +68,17 @@ impl PoseMethod {
                     "no anchor"
                 }
             ),
-            PoseMethod::Articulated { depth, .. } => format!(
-                "articulated: the arm's joints fitted to the upper arm, forearm and hand masks{}",
+            PoseMethod::Articulated {
+                depth, true_trunk, ..
+            } => format!(
+                "articulated: the arm's joints fitted to the upper arm, forearm and hand masks{}{}",
                 if *depth {
                     " and the depth image (RGB-D)"
+                } else {
+                    ""
+                },
+                if *true_trunk {
+                    ", the trunk held at the labels' (a perfect trunk)"
                 } else {
                     ""
                 }
@@ -236,6 +249,15 @@ pub fn evaluate_pose(
                         masks.depth_m = Some(dataset.depth(entry, t)?);
                     }
                     let mask_ms = t0.elapsed().as_secs_f64() * 1e3;
+                    if matches!(
+                        method,
+                        PoseMethod::Articulated {
+                            true_trunk: true,
+                            ..
+                        }
+                    ) {
+                        fitter.hold_trunk_at(&labels.human_q)?;
+                    }
                     let t1 = Instant::now();
                     let outcome = fitter.fit(&camera, &masks)?;
                     let pose_ms = t1.elapsed().as_secs_f64() * 1e3;

@@ -93,6 +93,13 @@ pub struct ArmFitConfig {
     /// ones, and a bound that covers 99 % of them needs floors of 60 cm (docs/perception.md,
     /// "A network for the whole body").
     pub fit_trunk: bool,
+    /// Climb from the best fit's forearm turned end for end as well
+    /// ([`ArticulatedArm::reversed_forearm`]) and keep it as a hypothesis where it scores as
+    /// well. Default false.
+    pub reversed_start: bool,
+    /// With a depth image, climb from the forearm where its measured points put it (their
+    /// principal axis, both ways round: [`ArmFitter`]'s depth start) as well. Default false.
+    pub depth_start: bool,
 }
 
 impl Default for ArmFitConfig {
@@ -127,6 +134,8 @@ impl Default for ArmFitConfig {
             depth_sigma_m: 0.03,
             depth_weight: 0.05,
             fit_trunk: false,
+            reversed_start: false,
+            depth_start: false,
         }
     }
 }

@@ -10,7 +10,7 @@ use workcell_robots::math::{Pose, Vector};
 use super::*;
 use crate::error::{PerceptionError, Result};
 use crate::pose::image::crop_camera;
-use crate::pose::{NoPose, f_m};
+use crate::pose::{NoPose, RigidModel, f_m};
 
 /// The arm found in one frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -175,6 +175,36 @@ impl<R: Renderer> ArmFitter<R> {
         }
     }
 
+    /// Holds the trunk where the model's configuration `q` puts it (each trunk joint
+    /// clamped to its limits) for the next fits, until the trunk's stage or [`Self::reset`]
+    /// moves it: a trunk known from elsewhere (the labels, for the bound of a perfect
+    /// trunk). Returns whether the model has a trunk to hold.
+    ///
+    /// # Errors
+    /// [`PerceptionError::Input`] when `q` is not the model's length or not finite.
+    pub fn hold_trunk_at(&mut self, q: &[f64]) -> Result<bool> {
+        if q.len() != self.arm.model_dof() || q.iter().any(|v| !v.is_finite()) {
+            return Err(PerceptionError::Input {
+                message: format!(
+                    "a trunk from {} joint values (finite) for {} joints",
+                    q.len(),
+                    self.arm.model_dof()
+                ),
+            });
+        }
+        let Some(trunk) = self.arm.trunk.clone() else {
+            return Ok(false);
+        };
+        let values: Vec<f64> = trunk
+            .all
+            .iter()
+            .zip(&trunk.limits)
+            .map(|(&i, [lo, hi])| q[i].clamp(*lo, *hi))
+            .collect();
+        self.arm.hold_trunk(&trunk, &values)?;
+        Ok(true)
+    }
+
     /// Tracks from the model's configuration `q` on the next frame (as if it had been the
     /// last fit).
     pub fn set_prior(&mut self, q: &[f64]) {
@@ -269,6 +299,53 @@ impl<R: Renderer> ArmFitter<R> {
                 } else if climb.score.gain >= c.confirm_min_gain {
                     faint.push((climb, Vec::new()));
                 }
+            }
+        }
+        // Starts that neither the track nor the grid gives: the best fit's forearm end for
+        // end (the masks and the depth of a forearm read the same both ways, and a climb
+        // rarely crosses over), and the forearm where its measured points put it.
+        let mut starts = Vec::new();
+        let best = climbs
+            .iter()
+            .chain(&faint)
+            .max_by(|a, b| a.0.score.objective.total_cmp(&b.0.score.objective))
+            .map(|(climb, _)| climb.q.clone());
+        if c.reversed_start
+            && let Some(best) = &best
+        {
+            starts.push(self.arm.reversed_forearm(best)?);
+        }
+        if c.depth_start
+            && let Some([a, b]) = measured_forearm(camera, masks, self.arm.forearm())
+        {
+            // Where the best fit already has the forearm there, that end order needs no
+            // climb of its own.
+            let best_ends = best
+                .as_deref()
+                .map(|q| self.arm.forearm_ends(q))
+                .transpose()?;
+            for goal in [[a, b], [b, a]] {
+                let agrees = best_ends.is_some_and(|ends| {
+                    ends.iter()
+                        .zip(&goal)
+                        .all(|(e, g)| (*e - *g).length() < DEPTH_START_AGREES_M)
+                });
+                if !agrees {
+                    starts.push(
+                        self.arm.forearm_to(
+                            goal,
+                            &best.iter().map(Vec::as_slice).collect::<Vec<_>>(),
+                        )?,
+                    );
+                }
+            }
+        }
+        for start in starts {
+            let climb = self.climb(coarse, start, None)?;
+            if climb.score.gain >= c.min_gain {
+                climbs.push((climb, Vec::new()));
+            } else if climb.score.gain >= c.confirm_min_gain {
+                faint.push((climb, Vec::new()));
             }
         }
         // Nothing reaches `min_gain`: the best fainter fit is a pose only where the frame
@@ -922,6 +999,66 @@ impl<R: Renderer> ArmFitter<R> {
             .map(|s| self.climb(target, s, None))
             .collect()
     }
+}
+
+/// How near the best fit's forearm ends must lie to the measured ones
+/// ([`measured_forearm`], one order) for the depth start of that order to be skipped, m.
+pub(super) const DEPTH_START_AGREES_M: f64 = 0.05;
+
+/// Forearm mask pixels with depth below which [`measured_forearm`] gives no axis.
+pub(super) const MEASURED_FOREARM_MIN_PIXELS: usize = 24;
+
+/// The forearm's two ends (world, either order) where the depth image puts it: the points
+/// its mask's pixels show (probability at least a half, a depth), pushed back along their
+/// rays by the `forearm` model's half width from its surface to its axis; their mean and
+/// principal axis, the ends half the forearm's length either way. `None` without a depth image,
+/// with fewer than [`MEASURED_FOREARM_MIN_PIXELS`] such pixels, or where the points show no
+/// axis (as long across as along).
+pub(super) fn measured_forearm(
+    camera: &Camera,
+    masks: &ArmMasks,
+    forearm: &RigidModel,
+) -> Option<[Vector; 2]> {
+    let depth = masks.depth_m.as_ref()?;
+    let w = masks.width;
+    let points: Vec<Vector> = masks.parts[1]
+        .iter()
+        .zip(depth)
+        .enumerate()
+        .filter(|(_, (m, z))| **m >= 0.5 && z.is_finite() && **z > 0.0)
+        .map(|(p, (_, &z))| {
+            let surface = camera.point_at((p % w) as f64 + 0.5, (p / w) as f64 + 0.5, f64::from(z));
+            camera.X_WC.transform_point(surface)
+        })
+        .collect();
+    if points.len() < MEASURED_FOREARM_MIN_PIXELS {
+        return None;
+    }
+    let n = points.len() as f64;
+    let mean = points.iter().fold(Vector::ZERO, |s, p| s + *p) / n;
+    let mut covariance = vec![vec![0.0; 3]; 3];
+    for p in &points {
+        let d = *p - mean;
+        let d = [d.x, d.y, d.z];
+        for (i, row) in covariance.iter_mut().enumerate() {
+            for (j, c) in row.iter_mut().enumerate() {
+                *c += d[i] * d[j] / n;
+            }
+        }
+    }
+    let (values, vectors) = symmetric_eigen(covariance);
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    // A forearm seen end on, or a blob: no axis to start from.
+    if values[order[0]].is_nan() || values[order[0]] <= 4.0 * values[order[1]].max(0.0) {
+        return None;
+    }
+    let v = &vectors[order[0]];
+    let axis = Vector::new(v[0], v[1], v[2]).normalize();
+    let eye = camera.X_WC.translation;
+    let centre = mean + forearm.half_width_m * (mean - eye).normalize();
+    let half = 0.5 * forearm.length_m * axis;
+    Some([centre - half, centre + half])
 }
 
 /// Joints the global search's grid spans at most.

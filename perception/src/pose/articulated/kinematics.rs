@@ -10,6 +10,13 @@ use super::*;
 use crate::error::{PerceptionError, Result};
 use crate::pose::{POSE_MESH_SEGMENTS, RigidModel};
 
+/// Starts beyond the middle of the ranges and the given ones that
+/// [`ArticulatedArm::forearm_to`] climbs from, until one is within [`IK_DONE_M`].
+const IK_SPREAD_STARTS: usize = 8;
+
+/// Root of the summed squared end distances at which [`ArticulatedArm::forearm_to`] stops, m.
+const IK_DONE_M: f64 = 1e-3;
+
 /// The human model as the fit moves it: its joints, its arm parts' meshes, its base pose.
 #[derive(Debug, Clone)]
 pub struct ArticulatedArm {
@@ -259,6 +266,142 @@ impl ArticulatedArm {
             });
         }
         self.part_poses(&self.configuration(q_fit), X_WC)
+    }
+
+    /// The forearm's ends in the world at fitted joints `q_fit`: the elbow's (the end nearer
+    /// the forearm link's origin) and the wrist's.
+    pub(super) fn forearm_ends(&self, q_fit: &[f64]) -> Result<[Vector; 2]> {
+        let X = self.fitted_part_poses(q_fit, &Pose::IDENTITY)?[1];
+        let m = &self.forearm;
+        let a = m.centre_O + 0.5 * m.length_m * m.axis_O;
+        let b = m.centre_O - 0.5 * m.length_m * m.axis_O;
+        let (elbow, wrist) = if a.length() <= b.length() {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        Ok([X.transform_point(elbow), X.transform_point(wrist)])
+    }
+
+    /// Fitted joints that put the forearm end for end from where `q_fit` puts it (the elbow
+    /// where its wrist was and the wrist where its elbow was), as nearly as the arm's
+    /// lengths and limits allow ([`Self::forearm_to`]). The outline of a forearm, and its
+    /// depth, read the same both ways; only the hand and the upper arm tell them apart, and
+    /// those are often hidden.
+    pub(super) fn reversed_forearm(&self, q_fit: &[f64]) -> Result<Vec<f64>> {
+        let [elbow, wrist] = self.forearm_ends(q_fit)?;
+        self.forearm_to([wrist, elbow], &[q_fit])
+    }
+
+    /// Fitted joints that put the forearm's elbow and wrist ([`Self::forearm_ends`]) at
+    /// `goal` (world), as nearly as the arm's lengths and limits allow: damped Gauss-Newton
+    /// on the ends' squared distances from the middle of each joint's range and from each of
+    /// `starts`, the nearest of them.
+    pub(super) fn forearm_to(&self, goal: [Vector; 2], starts: &[&[f64]]) -> Result<Vec<f64>> {
+        let residual = |q: &[f64]| -> Result<[f64; 6]> {
+            let ends = self.forearm_ends(q)?;
+            let mut r = [0.0; 6];
+            for (k, (e, g)) in ends.iter().zip(&goal).enumerate() {
+                let d = *e - *g;
+                r[3 * k..3 * k + 3].copy_from_slice(&[d.x, d.y, d.z]);
+            }
+            Ok(r)
+        };
+        // The middle of every range, the given starts, then points a quarter in from either
+        // end of each range in a few patterns: a damped Gauss-Newton climb from one start
+        // stops in a local minimum for about a quarter of reachable ends.
+        let at = |pattern: usize| -> Vec<f64> {
+            self.limits
+                .iter()
+                .enumerate()
+                .map(|(j, [lo, hi])| {
+                    let f = match pattern {
+                        0 => 0.5,
+                        p => [0.25, 0.75][((p - 1) >> j) & 1],
+                    };
+                    lo + f * (hi - lo)
+                })
+                .collect()
+        };
+        let middle = at(0);
+        let mut best: Option<(f64, Vec<f64>)> = None;
+        let given = starts.iter().map(|s| s.to_vec());
+        let spread = (1..=IK_SPREAD_STARTS).map(|p| at(p * 5 % 31 + 1));
+        for start in std::iter::once(middle.clone()).chain(given).chain(spread) {
+            let (r, q) = self.gauss_newton(&residual, &start)?;
+            if best.as_ref().is_none_or(|(b, _)| r < *b) {
+                best = Some((r, q));
+            }
+            if best
+                .as_ref()
+                .is_some_and(|(b, _)| *b < IK_DONE_M * IK_DONE_M)
+            {
+                break;
+            }
+        }
+        Ok(best.map_or(middle, |(_, q)| q))
+    }
+
+    /// Levenberg-Marquardt on `residual` from `start` (its Jacobian by forward
+    /// differences), each step clamped to half a radian per joint and to the limits: the
+    /// joints and their summed squared residual.
+    fn gauss_newton(
+        &self,
+        residual: &dyn Fn(&[f64]) -> Result<[f64; 6]>,
+        start: &[f64],
+    ) -> Result<(f64, Vec<f64>)> {
+        const ITERATIONS: usize = 40;
+        const STEP_RAD: f64 = 1e-4;
+        let n = self.limits.len();
+        let mut q = start.to_vec();
+        self.clamp(&mut q);
+        let mut r = residual(&q)?;
+        let mut cost: f64 = r.iter().map(|v| v * v).sum();
+        let mut damping = 1e-3;
+        for _ in 0..ITERATIONS {
+            if cost < IK_DONE_M * IK_DONE_M {
+                break;
+            }
+            let mut jacobian = vec![[0.0; 6]; n];
+            for (i, column) in jacobian.iter_mut().enumerate() {
+                let mut v = q.clone();
+                v[i] += STEP_RAD;
+                let rv = residual(&v)?;
+                for (c, (a, b)) in column.iter_mut().zip(rv.iter().zip(&r)) {
+                    *c = (a - b) / STEP_RAD;
+                }
+            }
+            // (J^T J + damping I) dq = -J^T r
+            let mut normal = vec![vec![0.0; n]; n];
+            let mut rhs = vec![0.0; n];
+            for i in 0..n {
+                for j in 0..n {
+                    normal[i][j] = (0..6).map(|k| jacobian[i][k] * jacobian[j][k]).sum();
+                }
+                normal[i][i] += damping;
+                rhs[i] = -(0..6).map(|k| jacobian[i][k] * r[k]).sum::<f64>();
+            }
+            let Some(dq) = super::numerics::solve(normal, rhs) else {
+                break;
+            };
+            let mut next = q.clone();
+            for (x, d) in next.iter_mut().zip(&dq) {
+                *x += d.clamp(-0.5, 0.5);
+            }
+            self.clamp(&mut next);
+            let r_next = residual(&next)?;
+            let cost_next: f64 = r_next.iter().map(|v| v * v).sum();
+            if cost_next < cost {
+                (q, r, cost) = (next, r_next, cost_next);
+                damping = (damping / 3.0).max(1e-9);
+            } else {
+                damping *= 10.0;
+                if damping > 1e6 {
+                    break;
+                }
+            }
+        }
+        Ok((cost, q))
     }
 
     pub(super) fn clamp(&self, q: &mut [f64]) {

@@ -176,3 +176,37 @@ pub(super) fn distance_transform(inside: &[bool], w: usize, h: usize, cap: f32) 
     }
     d
 }
+
+/// The solution of the small square system `a x = b` (Gaussian elimination with partial
+/// pivoting); `None` where `a` is singular to working precision or not square.
+pub(super) fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let n = b.len();
+    if a.len() != n || a.iter().any(|row| row.len() != n) {
+        return None;
+    }
+    let scale = a.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+    for k in 0..n {
+        let pivot = (k..n).max_by(|&i, &j| a[i][k].abs().total_cmp(&a[j][k].abs()))?;
+        let magnitude = a[pivot][k].abs();
+        if magnitude.is_nan() || magnitude <= 1e-12 * scale {
+            return None;
+        }
+        a.swap(k, pivot);
+        b.swap(k, pivot);
+        let (above, below) = a.split_at_mut(k + 1);
+        let pivot_row = &above[k];
+        for (i, row) in below.iter_mut().enumerate() {
+            let f = row[k] / pivot_row[k];
+            for (x, p) in row[k..].iter_mut().zip(&pivot_row[k..]) {
+                *x -= f * p;
+            }
+            b[k + 1 + i] -= f * b[k];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for k in (0..n).rev() {
+        let s: f64 = (k + 1..n).map(|j| a[k][j] * x[j]).sum();
+        x[k] = (b[k] - s) / a[k][k];
+    }
+    Some(x)
+}

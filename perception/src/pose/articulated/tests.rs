@@ -6,7 +6,7 @@ use workcell_render::{Camera, Class, MaskBatch, RenderMesh, Renderer, SpanBatch}
 use workcell_robots::RobotModel;
 use workcell_robots::math::{Pose, Vector};
 
-use super::fit::grid_points;
+use super::fit::{grid_points, measured_forearm};
 use super::*;
 use crate::pose::{NoPose, POSE_MESH_SEGMENTS};
 use workcell_render::CpuRenderer;
@@ -220,6 +220,153 @@ fn eigenpairs_of_a_symmetric_matrix() {
         }
         assert!((v.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-12);
     }
+}
+
+#[test]
+fn the_solver_recovers_a_known_solution_and_refuses_a_singular_system() {
+    // A system that needs a row swap (a zero first pivot), solution (1, -2, 3).
+    let a = vec![
+        vec![0.0, 2.0, 1.0],
+        vec![1.0, 1.0, 1.0],
+        vec![2.0, -1.0, 4.0],
+    ];
+    let x_true = [1.0, -2.0, 3.0];
+    let b: Vec<f64> = a
+        .iter()
+        .map(|row| row.iter().zip(&x_true).map(|(r, x)| r * x).sum())
+        .collect();
+    let x = solve(a, b).expect("regular");
+    for (got, want) in x.iter().zip(x_true) {
+        assert!((got - want).abs() < 1e-12, "{x:?}");
+    }
+    // Rows one and three are the same up to a factor.
+    let singular = vec![
+        vec![1.0, 2.0, 3.0],
+        vec![0.0, 1.0, 1.0],
+        vec![2.0, 4.0, 6.0],
+    ];
+    assert_eq!(solve(singular, vec![1.0, 2.0, 3.0]), None);
+    assert_eq!(solve(vec![vec![1.0, 2.0]], vec![1.0]), None);
+}
+
+/// The swap's residual of `q` against `goal` (the ends `reversed_forearm` aims at), m: the
+/// root of the ends' summed squared distances, the quantity its Gauss-Newton minimises.
+fn swap_residual_m(arm: &ArticulatedArm, q: &[f64], goal: &[Vector; 2]) -> f64 {
+    let ends = arm.forearm_ends(q).expect("ends");
+    ((ends[0] - goal[0]).length_squared() + (ends[1] - goal[1]).length_squared()).sqrt()
+}
+
+#[test]
+fn the_reversed_forearm_is_as_near_as_a_brute_force_search() {
+    // The paper's arm has three joints, few enough to grid: at 3-degree steps over every
+    // range, and the Gauss-Newton climb must do at least as well as the grid. Its two
+    // shoulder joints and the elbow cannot turn a forearm end for end exactly (the elbow on
+    // the old wrist leaves one joint for the two angles of the forearm's direction).
+    let (arm, _) = setup();
+    let steps = 61;
+    let grid: Vec<Vec<f64>> = arm
+        .limits()
+        .iter()
+        .map(|&[lo, hi]| {
+            (0..steps)
+                .map(|k| lo + (hi - lo) * k as f64 / (steps - 1) as f64)
+                .collect()
+        })
+        .collect();
+    for q in FAR_CONFIGURATIONS {
+        let [elbow, wrist] = arm.forearm_ends(&q).expect("ends");
+        let goal = [wrist, elbow];
+        let mut grid_best = f64::INFINITY;
+        for &a in &grid[0] {
+            for &b in &grid[1] {
+                for &c in &grid[2] {
+                    grid_best = grid_best.min(swap_residual_m(&arm, &[a, b, c], &goal));
+                }
+            }
+        }
+        let reversed = arm.reversed_forearm(&q).expect("reversed");
+        assert!(
+            reversed
+                .iter()
+                .zip(arm.limits())
+                .all(|(v, [lo, hi])| (*lo..=*hi).contains(v)),
+            "{reversed:?} outside the limits"
+        );
+        let got = swap_residual_m(&arm, &reversed, &goal);
+        assert!(
+            got <= grid_best + 1e-3,
+            "{q:?}: {got} m, the grid {grid_best} m"
+        );
+    }
+    // Ends that some configuration within the limits reaches, the whole body's: the climb
+    // from the middle of the ranges reaches them (it is told nothing of that configuration).
+    let human = RobotModel::from_catalogue("human").expect("catalogue human");
+    let body = ArticulatedArm::new(&human, &Pose::IDENTITY).expect("arm");
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut misses = Vec::new();
+    for _ in 0..40 {
+        let q: Vec<f64> = body
+            .limits()
+            .iter()
+            .map(|&[lo, hi]| rng.random_range(lo..=hi))
+            .collect();
+        let goal = body.forearm_ends(&q).expect("ends");
+        let got = swap_residual_m(&body, &body.forearm_to(goal, &[]).expect("ik"), &goal);
+        if got > 0.005 {
+            misses.push(got);
+        }
+    }
+    assert!(
+        misses.len() <= 2,
+        "{} of 40 reachable ends missed: {misses:?} m",
+        misses.len()
+    );
+}
+
+#[test]
+fn a_trunk_held_at_known_joints_puts_the_shoulder_there() {
+    let human = RobotModel::from_catalogue("human").expect("catalogue human");
+    let arm = ArticulatedArm::new(&human, &Pose::IDENTITY).expect("arm");
+    let trunk = arm.trunk().expect("the whole body has a trunk").clone();
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), ArmFitConfig::default());
+    // Every trunk joint at a quarter of its range, the first one past its upper limit.
+    let mut q = vec![0.0; human.dof()];
+    for (&i, [lo, hi]) in trunk.all.iter().zip(&trunk.limits) {
+        q[i] = lo + 0.25 * (hi - lo);
+    }
+    let first = trunk.all[0];
+    q[first] = trunk.limits[0][1] + 0.5;
+    assert!(fitter.hold_trunk_at(&q).expect("a trunk"));
+    let mut want = q.clone();
+    want[first] = trunk.limits[0][1];
+    let held = fitter.arm().configuration(&vec![0.0; arm.dof()]);
+    for &i in &trunk.all {
+        assert!(
+            (held[i] - want[i]).abs() < 1e-12,
+            "joint {i}: {} vs {}",
+            held[i],
+            want[i]
+        );
+    }
+    let shoulder = human
+        .fk(Pose::IDENTITY, &held)
+        .expect("fk")
+        .link_pose(arm.links[0])
+        .translation;
+    assert!((fitter.arm().shoulder_W - shoulder).length() < 1e-12);
+    assert!(
+        (fitter.arm().shoulder_W - arm.shoulder_W).length() > 0.01,
+        "the trunk moved nothing"
+    );
+    // Not the model's length, or not finite: refused, the trunk where it was.
+    assert!(fitter.hold_trunk_at(&q[1..]).is_err());
+    q[first] = f64::NAN;
+    assert!(fitter.hold_trunk_at(&q).is_err());
+    assert!((fitter.arm().shoulder_W - shoulder).length() < 1e-12);
+    // The paper's arm has no trunk to hold.
+    let (paper, _) = setup();
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), paper, ArmFitConfig::default());
+    assert!(!fitter.hold_trunk_at(&[0.1, 0.2, 0.3]).expect("no trunk"));
 }
 
 #[test]
@@ -635,6 +782,65 @@ fn depth_tells_the_arm_from_its_mirror() {
         let err = distance_cm(&arm, &camera, &fit.q, &truth);
         assert!(err < 2.0, "{truth:?}: {err:.1} cm off, q {:?}", fit.q);
     }
+}
+
+/// The forearm's ends from its mask's depth points lie where the model puts them (either
+/// way round), within a few centimetres: the visible surface, pushed back to the axis.
+#[test]
+fn the_depth_image_measures_where_the_forearm_is() {
+    let (arm, camera) = setup();
+    for truth in FAR_CONFIGURATIONS {
+        let (classes, depth) = observe(&arm, &camera, &truth);
+        let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
+        assert_eq!(measured_forearm(&camera, &masks, arm.forearm()), None);
+        masks.depth_m = Some(depth);
+        let [a, b] = measured_forearm(&camera, &masks, arm.forearm()).expect("an axis");
+        let [elbow, wrist] = arm.forearm_ends(&truth).expect("ends");
+        // The axis's direction and the line it lies on come from the whole visible surface,
+        // which tapers from the elbow's radius to the wrist's (4.46 to 3.01 cm over 25.6 cm
+        // in human_arm.urdf, 3.3 degrees): the direction within that and 2 degrees of
+        // sampling. Where the axis lies along its line depends on which end of the forearm
+        // the hand or the upper arm hides.
+        let true_axis = (wrist - elbow).normalize();
+        let cos = (b - a).normalize().dot(true_axis).abs();
+        let taper_deg = (0.0446 - 0.0301f64).atan2(0.2555).to_degrees();
+        assert!(
+            cos > (taper_deg + 2.0).to_radians().cos(),
+            "{truth:?}: {} deg",
+            cos.acos().to_degrees()
+        );
+        let offset = 0.5 * (a + b) - 0.5 * (elbow + wrist);
+        let along = offset.dot(true_axis);
+        let across = (offset - along * true_axis).length();
+        assert!(across < 0.01, "{truth:?}: {across} m off the axis");
+        assert!(along.abs() < 0.04, "{truth:?}: {along} m along the axis");
+        // The ends' start, climbed from either order, finds the pose.
+        let config = ArmFitConfig {
+            depth_start: true,
+            search_below_gain: 0.0,
+            ..ArmFitConfig::default()
+        };
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
+        // A track far from the truth, which alone would climb to a wrong pose.
+        let mut wrong = truth.to_vec();
+        wrong[0] += 1.0;
+        wrong[2] = arm.limits()[2][0];
+        fitter.set_prior(&arm.configuration(&wrong));
+        let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
+        let err = distance_cm(&arm, &camera, &fit.q, &truth);
+        assert!(err < 2.0, "{truth:?}: {err:.1} cm off, q {:?}", fit.q);
+    }
+    // Too few pixels with depth: no axis.
+    let (classes, depth) = observe(&arm, &camera, &FAR_CONFIGURATIONS[0]);
+    let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
+    masks.depth_m = Some(
+        depth
+            .iter()
+            .enumerate()
+            .map(|(p, &z)| if p % 64 == 0 { z } else { 0.0 })
+            .collect(),
+    );
+    assert_eq!(measured_forearm(&camera, &masks, arm.forearm()), None);
 }
 
 /// Every point of every part lies within the reach of the shoulder, whatever the
