@@ -876,8 +876,8 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "--dataset",
             data_s,
         ],
-        "--search-starts, --min-gain, --confirm-min-gain and --trunk are settings of --method \
-         articulated",
+        "--search-starts, --search-below-gain, --reversed-start, --depth-start, --min-gain, \
+         --confirm-min-gain and --trunk are settings of --method articulated",
     );
     refused(
         &[
@@ -894,7 +894,7 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     );
     refused(
         &["eval", "pose", "--trunk", "bent", "--dataset", data_s],
-        "possible values: fit, upright",
+        "possible values: fit, upright, truth",
     );
     refused(
         &[
