@@ -324,6 +324,7 @@ impl<R: Renderer> ArmFitter<R> {
                 .as_deref()
                 .map(|q| self.arm.forearm_ends(q))
                 .transpose()?;
+            let from: Vec<&[f64]> = best.iter().map(Vec::as_slice).collect();
             for goal in [[a, b], [b, a]] {
                 let agrees = best_ends.is_some_and(|ends| {
                     ends.iter()
@@ -331,12 +332,7 @@ impl<R: Renderer> ArmFitter<R> {
                         .all(|(e, g)| (*e - *g).length() < DEPTH_START_AGREES_M)
                 });
                 if !agrees {
-                    starts.push(
-                        self.arm.forearm_to(
-                            goal,
-                            &best.iter().map(Vec::as_slice).collect::<Vec<_>>(),
-                        )?,
-                    );
+                    starts.push(self.arm.forearm_to(goal, &from)?);
                 }
             }
         }
