@@ -21,13 +21,24 @@ it reports the coverage there too, which is the honest figure: the calibration w
 the first.
 
     scripts/calibrate_uncertainty.py VALIDATION.csv [TEST.csv] [--target 0.99]
-        [--pool VALIDATION2.csv TEST2.csv]... [--write WEIGHTS --depth|--no-depth]
+        [--pool VALIDATION2.csv TEST2.csv]... [--tracked-floors]
+        [--write WEIGHTS --depth|--no-depth]
 
 `--write WEIGHTS` puts the chosen calibration into the calibration file beside the weights
 (`procnet-cpu.safetensors` has `procnet-cpu.calibration.toml`), with the weights' SHA-256,
 as the section of a fit with (`--depth`) or without (`--no-depth`) the depth image; the
 other section of an existing file of the same weights is kept. workcell applies a
 calibration to the weights of its hash only (`Calibration::of_weights`).
+
+`--tracked-floors` gives the fits that kept their track (the CSV's `reacquired` false: the
+tracked hypotheses explained the masks well enough that the global search did not run) floors
+of their own, each band for the target of its own frames, and the re-acquired fits theirs:
+a fit that kept its track is rarely far off, and one floor for both is set by the re-acquired.
+
+`--write` also records the fit's settings the CSVs were measured with (`fit.toml`, which
+`workcell eval pose` writes beside `pose_frames.csv`) as the section's `fit` table, so that
+workcell runs the fit whose bound this is (`Calibration::apply`); CSVs of different fits are
+refused.
 
 `--pool` adds a second source of the same masks' frames (the tracker's own crops beside the
 stored ones, say): the calibration is chosen on every validation CSV together, and each
@@ -61,8 +72,8 @@ def hidden_of(row):
 
 
 def load(path, min_gain=None):
-    """(error m, sigma m, spread m, hidden share) of every frame with a pose (and, given
-    `min_gain`, a gain of at least that)."""
+    """(error m, sigma m, spread m, hidden share, kept its track) of every frame with a pose
+    (and, given `min_gain`, a gain of at least that)."""
     try:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))
@@ -80,6 +91,7 @@ def load(path, min_gain=None):
             float(r["sigma_m"]),
             float(r["spread_m"]),
             hidden_of(r),
+            r.get("reacquired") == "false",
         )
         for r in rows
         if r["no_pose"] == "" and r["ends_cm"] != ""
@@ -101,10 +113,27 @@ def band_of(frame):
     return band(frame[3] if len(frame) > 3 else 0.0)
 
 
+def tracked(frame):
+    """Whether `frame` (error, sigma, spread[, hidden[, kept its track]]) kept its track."""
+    return len(frame) > 4 and frame[4]
+
+
+def tracked_floors_of(calibration):
+    """The floors (no band, then each band) of fits that kept their track under
+    `calibration` (scale, floor[, hidden floors[, tracked floors]]), or None: the same as
+    any fit's."""
+    return calibration[3] if len(calibration) > 3 else None
+
+
 def floor_at(calibration, frame):
-    """The floor for `frame` under `calibration` (scale, floor[, hidden floors]): its band's,
-    never below a less hidden band's."""
-    floors = [calibration[1]] + list(calibration[2] if len(calibration) > 2 else [])
+    """The floor for `frame` under `calibration` (scale, floor[, hidden floors[, tracked
+    floors]]): its band's, never below a less hidden band's; the tracked floors' for a frame
+    that kept its track, where the calibration has them (Calibration::radius)."""
+    own = tracked_floors_of(calibration)
+    if own is not None and tracked(frame):
+        floors = list(own)
+    else:
+        floors = [calibration[1]] + list(calibration[2] if len(calibration) > 2 else [])
     return max(floors[: band_of(frame) + 1])
 
 
@@ -133,15 +162,28 @@ def band_floors(frames, scale, target):
     return (scale, floors[0], tuple(floors[1:]))
 
 
+def split_floors(frames, scale, target):
+    """(scale, floor, hidden floors, tracked floors): band_floors of the re-acquired frames,
+    and of the frames that kept their track as the tracked floors (no band, then each)."""
+    _, floor, hidden = band_floors([f for f in frames if not tracked(f)], scale, target)
+    _, t_floor, t_hidden = band_floors([f for f in frames if tracked(f)], scale, target)
+    return (scale, floor, hidden, (t_floor,) + tuple(t_hidden))
+
+
 def coverage(frames, calibration):
     return sum(1 for f in frames if f[0] <= radius(f, calibration)) / len(frames)
 
 
-def calibrate(frames, target):
-    """Per scale, (scale, floor) and its mean radius; and the row of smallest mean radius."""
+def calibrate(frames, target, tracked_floors=False):
+    """Per scale, (scale, floor, hidden floors[, tracked floors]) and its mean radius; and
+    the row of smallest mean radius. With `tracked_floors`, the frames that kept their track
+    and the re-acquired ones each get floors for `target` of their own."""
     rows = []
     for a in SCALES:
-        calibration = band_floors(frames, a, target)
+        if tracked_floors:
+            calibration = split_floors(frames, a, target)
+        else:
+            calibration = band_floors(frames, a, target)
         rows.append((calibration, statistics.mean(radius(f, calibration) for f in frames)))
     return rows, min(rows, key=lambda r: r[1])
 
@@ -157,10 +199,40 @@ def toml_float(x):
     return repr(float(x))
 
 
+def toml_value(v):
+    """A fit setting as TOML: a boolean or a number."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return toml_float(v)
+
+
+FIT_KEYS = {"fit_trunk", "search_below_gain", "reversed_start", "depth_start"}
+
+
+def fit_settings(csv_path):
+    """The fit's settings (FitSettings) that `workcell eval pose` wrote beside `csv_path`
+    (`fit.toml` for `pose_frames.csv`, `fit_SUFFIX.toml` for `pose_frames_SUFFIX.csv`), or
+    None where there is none (an older run)."""
+    folder, name = os.path.split(csv_path)
+    suffix = name[len("pose_frames"):-len(".csv")] if name.startswith("pose_frames") else ""
+    path = os.path.join(folder, f"fit{suffix}.toml")
+    if not os.path.isfile(path):
+        return None
+    try:
+        with open(path, "rb") as f:
+            doc = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        sys.exit(f"{path}: {e}")
+    if set(doc) != FIT_KEYS:
+        sys.exit(f"{path}: not the fit's settings (keys {sorted(doc)}, expected {sorted(FIT_KEYS)})")
+    return doc
+
+
 def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain=math.inf,
-                      confirmed_floor_m=0.0, min_gain=None):
-    """Writes `calibration` ((scale, floor, hidden floors)) as `section` (`with_depth` or
-    `without_depth`) of the calibration file beside `weights`; returns its path."""
+                      confirmed_floor_m=0.0, min_gain=None, fit=None):
+    """Writes `calibration` ((scale, floor, hidden floors[, tracked floors])) as `section`
+    (`with_depth` or `without_depth`) of the calibration file beside `weights`, with the fit's
+    settings `fit` (a dict of FitSettings' keys) where given; returns its path."""
     with open(weights, "rb") as f:
         sha = hashlib.sha256(f.read()).hexdigest()
     path = calibration_path(weights)
@@ -173,7 +245,7 @@ def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain
                 f"{path} holds the calibration of other weights "
                 f"({doc.get('weights_sha256')}, these are {sha}): remove it first"
             )
-    scale, floor, hidden = calibration
+    scale, floor, hidden = calibration[:3]
     doc[section] = {
         "scale": scale,
         "floor_m": floor,
@@ -183,6 +255,10 @@ def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain
     }
     if min_gain is not None:
         doc[section]["min_gain"] = min_gain
+    if tracked_floors_of(calibration) is not None:
+        doc[section]["tracked_floors_m"] = list(tracked_floors_of(calibration))
+    if fit is not None:
+        doc[section]["fit"] = dict(fit)
     lines = [
         f"# The pose bound's calibration for {os.path.basename(weights)}: "
         "scripts/calibrate_uncertainty.py --write.",
@@ -203,6 +279,15 @@ def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain
             ]
             if "min_gain" in c:
                 lines.append(f"min_gain = {toml_float(c['min_gain'])}")
+            if "tracked_floors_m" in c:
+                lines.append(
+                    "tracked_floors_m = ["
+                    + ", ".join(toml_float(h) for h in c["tracked_floors_m"]) + "]"
+                )
+            if "fit" in c:
+                lines += ["", f"[{name}.fit]"] + [
+                    f"{k} = {toml_value(v)}" for k, v in c["fit"].items()
+                ]
     with open(path + ".tmp", "w") as f:
         f.write("\n".join(lines) + "\n")
     os.replace(path + ".tmp", path)
@@ -222,6 +307,8 @@ def main():
         metavar=("VALIDATION", "TEST"),
         help="another source's CSVs, pooled into the calibration, reported on their own",
     )
+    parser.add_argument("--tracked-floors", action="store_true",
+                        help="floors of their own for the fits that kept their track")
     parser.add_argument("--write", metavar="WEIGHTS", help="write the calibration beside WEIGHTS")
     depth = parser.add_mutually_exclusive_group()
     depth.add_argument("--depth", dest="depth", action="store_true", default=None,
@@ -259,14 +346,26 @@ def main():
         f"{' + '.join(v for v, _ in sources)}: {len(val)} frames with a pose; error median "
         f"{100 * quantile(errors, 0.5):.2f} cm, 99th percentile {100 * quantile(errors, 0.99):.2f} cm"
     )
-    rows, best = calibrate(val, args.target)
+    fits = {p: fit_settings(p) for v, t in sources for p in (v, t) if p}
+    if len({repr(sorted(f.items())) if f else None for f in fits.values()}) > 1:
+        sys.exit(
+            "the CSVs were measured with different fits: "
+            + "; ".join(f"{p}: {f}" for p, f in fits.items())
+        )
+    fit = next(iter(fits.values()))
+    if args.tracked_floors:
+        for name, frames in (("validation", val), ("test", test or [])):
+            kept = sum(1 for f in frames if tracked(f))
+            if frames:
+                print(f"{name}: {kept} of {len(frames)} frames with a pose kept their track")
+    rows, best = calibrate(val, args.target, args.tracked_floors)
     print(
         "| scale | floor (cm) | floors hidden 25/50/75 % (cm) | mean radius (cm) "
         "| 95th pct radius (cm) | validation coverage |" + (" test coverage |" if test else "")
     )
     print("|---|---|---|---|---|---|" + ("---|" if test else ""))
     for calibration, mean in rows:
-        a, floor, hidden = calibration
+        a, floor, hidden = calibration[:3]
         radii = sorted(radius(f, calibration) for f in val)
         row = (
             f"| {a:g} | {100 * floor:.2f} | {' / '.join(f'{100 * h:.2f}' for h in hidden)} "
@@ -276,11 +375,21 @@ def main():
         if test:
             row += f" {100 * coverage(test, calibration):.2f} % of {len(test)} |"
         print(row)
-    (a, floor, hidden), mean = best
+    (a, floor, hidden), mean = best[0][:3], best[1]
     print(
         f"\nsmallest mean radius: scale {a:g}, floor {floor:.4f} m, hidden floors "
         f"{', '.join(f'{h:.4f}' for h in hidden)} m (mean {100 * mean:.2f} cm)"
     )
+    if tracked_floors_of(best[0]) is not None:
+        print(
+            "  fits that kept their track: floors "
+            + ", ".join(f"{h:.4f}" for h in tracked_floors_of(best[0])) + " m"
+        )
+        for name, frames in (("validation", val), ("test", test or [])):
+            for kept, label in ((True, "kept their track"), (False, "re-acquired")):
+                own = [f for f in frames if tracked(f) == kept]
+                if own:
+                    print(f"  {name}, {label}: {100 * coverage(own, best[0]):.2f} % of {len(own)}")
     print("\ncoverage per band of the hidden share (validation" + (", test)" if test else ")"))
     for b in range(len(HIDDEN_BANDS) + 1):
         cells = []
@@ -302,6 +411,7 @@ def main():
             args.confirm_min_gain,
             args.confirmed_floor_m,
             args.min_gain,
+            fit,
         )
         print(f"\nwrote {path}")
     if len(sources) > 1:

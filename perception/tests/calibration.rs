@@ -36,6 +36,8 @@ fn the_shipped_networks_carry_their_measured_calibration() {
             confirm_min_gain: 0.2,
             confirmed_floor_m: 0.65,
             min_gain: None,
+            tracked_floors_m: None,
+            fit: None,
         }
     );
     // The network that reads depth was never measured without it.

@@ -11,7 +11,7 @@ use workcell::perception::eval::{
     VisibleMasks, compare_markdown, evaluate_pose,
 };
 use workcell::perception::pose::{
-    ArmFitConfig, BoundSource, Calibration, HIDDEN_BANDS, PoseConfig,
+    ArmFitConfig, BoundSource, Calibration, FitSettings, HIDDEN_BANDS, PoseConfig,
 };
 use workcell::plot::{Panel, svg_panels, svg_to_png};
 use workcell::procnet::{Backend, ProcNet, backend};
@@ -62,15 +62,18 @@ pub struct EvalPoseArgs {
     #[arg(long)]
     pub search_starts: Option<usize>,
     /// With --method articulated: the global search runs beside the tracked hypotheses when
-    /// their best gain is below this (0 to 1; default ArmFitConfig's 0.55).
+    /// their best gain is below this (0 to 1; default: the masks' calibration's, else
+    /// ArmFitConfig's 0.55).
     #[arg(long)]
     pub search_below_gain: Option<f64>,
     /// With --method articulated: climb from the best fit's forearm turned end for end as
-    /// well, kept as a hypothesis where it scores as well (ArmFitConfig::reversed_start).
+    /// well, kept as a hypothesis where it scores as well (ArmFitConfig::reversed_start; on
+    /// where the masks' calibration was measured with it).
     #[arg(long)]
     pub reversed_start: bool,
     /// With --method articulated and --depth: climb from the forearm where its mask's depth
-    /// points put it as well, both ways round (ArmFitConfig::depth_start).
+    /// points put it as well, both ways round (ArmFitConfig::depth_start; on where the masks'
+    /// calibration was measured with it).
     #[arg(long)]
     pub depth_start: bool,
     /// With --method articulated: a fit whose gain is below this is no pose (0 to 1; default
@@ -86,7 +89,7 @@ pub struct EvalPoseArgs {
     /// With --method articulated, on a model whose trunk turns and leans (`human`): `fit`
     /// fits the trunk to the torso's mask and depth before the arm, `upright` holds it
     /// upright, `truth` holds it where the labels put it (the arm's fit given a perfect
-    /// trunk: a bound, not a method) (default: ArmFitConfig's, `upright`). `human_arm`'s
+    /// trunk: a bound, not a method) (default: the masks' calibration's, else `upright`). `human_arm`'s
     /// torso does not move.
     #[arg(long, value_parser = ["fit", "upright", "truth"])]
     pub trunk: Option<String>,
@@ -210,7 +213,6 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 if !(0.0..=1.0).contains(&g) {
                     anyhow::bail!("--search-below-gain {g}: a gain from 0 to 1");
                 }
-                config.search_below_gain = g;
             }
             if let Some(g) = args.min_gain {
                 if !(0.0..=1.0).contains(&g) {
@@ -218,15 +220,11 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 config.min_gain = g;
             }
-            config.reversed_start = args.reversed_start;
             if args.depth_start && !args.depth {
                 anyhow::bail!("--depth-start starts from the depth image: add --depth");
             }
-            config.depth_start = args.depth_start;
-            if let Some(t) = &args.trunk {
-                config.fit_trunk = t == "fit";
-            }
-            // Set after the masks' calibration (below), which carries its own.
+            // The fit's settings and these gains are set after the masks' calibration
+            // (below), which carries its own.
             if let Some(g) = args.confirm_min_gain
                 && !(0.0..=1.0).contains(&g)
             {
@@ -304,8 +302,29 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 depth,
                 true_trunk,
             } => {
+                // The calibration's bound and the fit it was measured with; the flags given
+                // override its fit settings, and a fit other than the measured one is said.
                 let mut config =
                     calibration.map_or_else(|| config.clone(), |c| c.apply(config.clone()));
+                if let Some(g) = args.search_below_gain {
+                    config.search_below_gain = g;
+                }
+                if let Some(t) = &args.trunk {
+                    config.fit_trunk = t == "fit";
+                }
+                config.reversed_start |= args.reversed_start;
+                config.depth_start |= args.depth_start;
+                if let Some(measured) = calibration.and_then(|c| c.fit) {
+                    let differences = measured.differences(&FitSettings::of(&config));
+                    if !differences.is_empty() {
+                        eprintln!(
+                            "warning: the {kind} masks' bound was measured with another fit \
+                             ({}, measured vs this run): \"within the bound\" is not its \
+                             coverage",
+                            differences.join(", ")
+                        );
+                    }
+                }
                 if let Some(g) = args.confirm_min_gain {
                     config.confirm_min_gain = g;
                 }
@@ -376,6 +395,18 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         };
         write(&format!("pose_eval{suffix}.md"), &md)?;
         write(&format!("pose_frames{suffix}.csv"), &ev.to_csv())?;
+        if let PoseMethod::Articulated { config, .. } = &method {
+            // The fit's settings, for scripts/calibrate_uncertainty.py --write to record.
+            let settings = toml::to_string(&FitSettings::of(config))?;
+            write(
+                &format!("fit{suffix}.toml"),
+                &format!(
+                    "# The articulated fit's settings of pose_frames{suffix}.csv \
+                     (workcell_perception::pose::FitSettings)\n{settings}"
+                ),
+            )?;
+            written.push(format!("fit{suffix}.toml"));
+        }
         written.push(format!("pose_eval{suffix}.md"));
         written.push(format!("pose_frames{suffix}.csv"));
         if !ev.no_pose.is_empty() {

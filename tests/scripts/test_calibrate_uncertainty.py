@@ -133,5 +133,72 @@ class Calibrate(unittest.TestCase):
             with self.assertRaises(SystemExit):
                 write(weights, "with_depth", (1.0, 0.02, [0.03, 0.04, 0.3]), "c")
 
+    def test_fits_that_kept_their_track_get_floors_of_their_own(self):
+        # 300 tracked frames with errors up to 3 cm, 100 re-acquired with errors up to 50 cm:
+        # one floor for all would be set by the re-acquired frames' tail.
+        kept = [(k / 10_000.0, 0.0, 0.0, 0.0, True) for k in range(1, 301)]
+        lost = [(k / 200.0, 0.0, 0.0, 0.0, False) for k in range(1, 101)]
+        rows, best = calibrate_uncertainty.calibrate(kept + lost, 0.99, tracked_floors=True)
+        scale, floor, hidden, tracked = best[0]
+        # Index int(0.99 * 100) = 99 of the re-acquired errors: the 100th, 0.5 m.
+        self.assertAlmostEqual(floor, 0.5)
+        # Index int(0.99 * 300) = 297 of the tracked errors: the 298th, 2.98 cm.
+        self.assertAlmostEqual(tracked[0], 0.0298)
+        self.assertEqual(len(tracked), 4)
+        self.assertAlmostEqual(calibrate_uncertainty.radius((0.0, 0.0, 0.0, 0.0, True), best[0]), 0.0298)
+        self.assertAlmostEqual(calibrate_uncertainty.radius((0.0, 0.0, 0.0, 0.0, False), best[0]), 0.5)
+        for frames in (kept, lost):
+            self.assertGreaterEqual(calibrate_uncertainty.coverage(frames, best[0]), 0.99)
+        # Without tracked floors every frame takes the pooled floor: index 396 of 400.
+        _, pooled = calibrate_uncertainty.calibrate(kept + lost, 0.99)
+        self.assertAlmostEqual(pooled[0][1], 0.485)
+        self.assertLess(best[1], pooled[1])
+
+    def test_the_fits_settings_are_read_beside_the_csv_and_written(self):
+        import tomllib
+
+        def write_csv(path, reacquired):
+            with open(path, "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(["no_pose", "ends_cm", "sigma_m", "spread_m", "hidden_share", "reacquired", "gain"])
+                for k in range(100):
+                    w.writerow(["", 1.0 if reacquired == "false" else 20.0, 0.0, 0.0, 0.0, reacquired, 0.8])
+
+        fit = "fit_trunk = true\nsearch_below_gain = 0.7\nreversed_start = true\ndepth_start = true\n"
+        with tempfile.TemporaryDirectory() as d:
+            val, test = os.path.join(d, "val"), os.path.join(d, "test")
+            for folder in (val, test):
+                os.mkdir(folder)
+                write_csv(os.path.join(folder, "pose_frames.csv"), "false")
+                with open(os.path.join(folder, "pose_frames_b.csv"), "a") as f:
+                    pass
+                with open(os.path.join(folder, "fit.toml"), "w") as f:
+                    f.write("# a comment\n" + fit)
+            self.assertEqual(
+                calibrate_uncertainty.fit_settings(os.path.join(val, "pose_frames.csv")),
+                {"fit_trunk": True, "search_below_gain": 0.7, "reversed_start": True, "depth_start": True},
+            )
+            self.assertIsNone(calibrate_uncertainty.fit_settings(os.path.join(val, "pose_frames_b.csv")))
+            weights = os.path.join(d, "w.safetensors")
+            with open(weights, "wb") as f:
+                f.write(b"w")
+            script = os.path.join(HERE, "..", "..", "scripts", "calibrate_uncertainty.py")
+            args = [sys.executable, script, os.path.join(val, "pose_frames.csv"),
+                    os.path.join(test, "pose_frames.csv"), "--tracked-floors", "--write", weights, "--depth"]
+            out = subprocess.run(args, capture_output=True, text=True, check=True).stdout
+            self.assertIn("validation: 100 of 100 frames with a pose kept their track", out)
+            with open(os.path.join(d, "w.calibration.toml"), "rb") as f:
+                doc = tomllib.load(f)
+            self.assertEqual(doc["with_depth"]["fit"]["search_below_gain"], 0.7)
+            self.assertIs(doc["with_depth"]["fit"]["depth_start"], True)
+            self.assertEqual(doc["with_depth"]["tracked_floors_m"], [0.01, 0.01, 0.01, 0.01])
+            # The test split measured with another fit is refused.
+            with open(os.path.join(test, "fit.toml"), "w") as f:
+                f.write(fit.replace("0.7", "0.55"))
+            refused = subprocess.run(args, capture_output=True, text=True)
+            self.assertNotEqual(refused.returncode, 0)
+            self.assertIn("different fits", refused.stderr)
+
+
 if __name__ == "__main__":
     unittest.main()

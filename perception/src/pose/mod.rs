@@ -65,7 +65,7 @@ mod search;
 pub use arm::{ArmModel, POSE_MESH_SEGMENTS, PartCapsule};
 pub use articulated::{
     ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmGain, ArmMasks, ArticulatedArm, BoundSource,
-    Calibration, CalibrationFile, FITTED_PARTS, HIDDEN_BANDS, HIDDEN_MARGIN_M,
+    Calibration, CalibrationFile, FITTED_PARTS, FitSettings, HIDDEN_BANDS, HIDDEN_MARGIN_M,
     MAX_CALIBRATION_BYTES, MAX_GRID_JOINTS, NetworkCalibration, TrunkModel, calibration_path,
     file_sha256,
 };

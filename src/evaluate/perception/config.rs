@@ -92,9 +92,12 @@ pub struct ProcNetConfig {
     /// Default 0.
     pub occlusion: f64,
     /// On a human whose trunk turns, leans and walks (`human`), fit the trunk to the torso's
-    /// mask and depth before the arm (`ArmFitConfig::fit_trunk`). Default false (the trunk
-    /// upright where the cell puts the person): the shipped calibrations were fitted so.
-    pub fit_trunk: bool,
+    /// mask and depth before the arm (`ArmFitConfig::fit_trunk`); false holds the trunk
+    /// upright where the cell puts the person. Default: what the masks' calibration was
+    /// measured with (`workcell_perception::pose::Calibration::fit`), else false. A value
+    /// other than the calibration's runs a fit its bound was not measured for (warned of).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit_trunk: Option<bool>,
     /// The factor on the fit's curvature uncertainty (`ArmFitConfig::uncertainty_scale`),
     /// in place of the one calibrated for the masks and depth chosen (the calibration file
     /// beside the weights, `workcell_perception::pose::Calibration::of_weights`), which is
@@ -221,7 +224,7 @@ impl Default for ProcNetConfig {
             masks: MaskKind::Network,
             depth: false,
             occlusion: 0.0,
-            fit_trunk: false,
+            fit_trunk: None,
             uncertainty_scale: None,
             uncertainty_floor_m: None,
             latency_s: 0.05,

@@ -127,15 +127,23 @@ impl ProcNetCamera {
                 }
                 None => Calibration::true_masks(config.depth),
             };
-        let fit = Calibration {
+        let mut fit = Calibration {
             scale: config.uncertainty_scale.unwrap_or(measured.scale),
             floor_m: config.uncertainty_floor_m.unwrap_or(measured.floor_m),
             ..measured
         }
-        .apply(ArmFitConfig {
-            fit_trunk: config.fit_trunk,
-            ..ArmFitConfig::default()
-        });
+        .apply(ArmFitConfig::default());
+        // The fit the bound was measured with; a trunk setting of the scenario's own wins.
+        if let Some(fit_trunk) = config.fit_trunk {
+            if measured.fit.is_some_and(|f| f.fit_trunk != fit_trunk) {
+                tracing::warn!(
+                    "perception.fit_trunk = {fit_trunk}: the masks' bound was measured with \
+                     {}: it may not hold for this fit",
+                    !fit_trunk
+                );
+            }
+            fit.fit_trunk = fit_trunk;
+        }
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
         if let Some(net) = net {
             tracker = tracker.with_network(net)?;

@@ -37,6 +37,81 @@ pub struct Calibration {
     /// the bound holds for the fits above it only. Absent: the fit's own (0.3).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_gain: Option<f64>,
+    /// The floors (no band of [`HIDDEN_BANDS`], then each band) of a fit that kept its
+    /// track: the tracked hypotheses explained the masks with a gain of at least
+    /// [`ArmFitConfig::search_below_gain`], so the global search did not run
+    /// ([`ArmFit::reacquired`] false). Such fits are rarely far off, and `floor_m` and
+    /// `hidden_floors_m` are then measured on the re-acquired fits alone
+    /// (`scripts/calibrate_uncertainty.py --tracked-floors`). Absent: one set of floors for
+    /// every fit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracked_floors_m: Option<[f64; 4]>,
+    /// The fit's settings the bound was measured with ([`FitSettings`]): [`Calibration::apply`]
+    /// sets them, so that the fit whose bound this is runs. Absent: the fit's defaults.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit: Option<FitSettings>,
+}
+
+/// The settings of the fit that change which poses it finds (and so what its bound must
+/// cover), as a calibration records them: `workcell eval pose` writes them beside its
+/// per-frame CSV (`fit.toml`) and `scripts/calibrate_uncertainty.py --write` copies them into
+/// the calibration.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FitSettings {
+    /// [`ArmFitConfig::fit_trunk`].
+    pub fit_trunk: bool,
+    /// [`ArmFitConfig::search_below_gain`].
+    pub search_below_gain: f64,
+    /// [`ArmFitConfig::reversed_start`].
+    pub reversed_start: bool,
+    /// [`ArmFitConfig::depth_start`].
+    pub depth_start: bool,
+}
+
+impl FitSettings {
+    /// The settings `config` carries.
+    #[must_use]
+    pub fn of(config: &ArmFitConfig) -> Self {
+        Self {
+            fit_trunk: config.fit_trunk,
+            search_below_gain: config.search_below_gain,
+            reversed_start: config.reversed_start,
+            depth_start: config.depth_start,
+        }
+    }
+
+    /// `config` with these settings.
+    #[must_use]
+    pub fn apply(self, config: ArmFitConfig) -> ArmFitConfig {
+        ArmFitConfig {
+            fit_trunk: self.fit_trunk,
+            search_below_gain: self.search_below_gain,
+            reversed_start: self.reversed_start,
+            depth_start: self.depth_start,
+            ..config
+        }
+    }
+
+    /// How `other` differs from these settings, as `key: this vs other` for each setting
+    /// that does; empty where none does.
+    #[must_use]
+    pub fn differences(&self, other: &Self) -> Vec<String> {
+        let settings = |f: &Self| {
+            [
+                ("fit_trunk", f.fit_trunk.to_string()),
+                ("search_below_gain", f.search_below_gain.to_string()),
+                ("reversed_start", f.reversed_start.to_string()),
+                ("depth_start", f.depth_start.to_string()),
+            ]
+        };
+        settings(self)
+            .into_iter()
+            .zip(settings(other))
+            .filter(|((_, a), (_, b))| a != b)
+            .map(|((key, a), (_, b))| format!("{key}: {a} vs {b}"))
+            .collect()
+    }
 }
 
 /// Where [`ArmFit::hidden_share`] starts each band of [`Calibration::hidden_floors_m`].
@@ -129,6 +204,8 @@ impl Calibration {
         confirm_min_gain: f64::INFINITY,
         confirmed_floor_m: 0.0,
         min_gain: None,
+        tracked_floors_m: None,
+        fit: None,
     };
 
     /// The calibration measured for the fit of true masks (each part's pixels in the
@@ -153,6 +230,8 @@ impl Calibration {
             confirm_min_gain: f64::INFINITY,
             confirmed_floor_m: 0.0,
             min_gain: None,
+            tracked_floors_m: None,
+            fit: None,
         }
     }
 
@@ -234,6 +313,16 @@ impl Calibration {
             ("hidden_floors_m[2]", self.hidden_floors_m[2]),
             ("confirmed_floor_m", self.confirmed_floor_m),
         ];
+        let tracked = self.tracked_floors_m.unwrap_or_default();
+        let tracked_keys = [
+            "tracked_floors_m[0]",
+            "tracked_floors_m[1]",
+            "tracked_floors_m[2]",
+            "tracked_floors_m[3]",
+        ];
+        let lengths = lengths
+            .into_iter()
+            .chain(tracked_keys.into_iter().zip(tracked));
         for (key, v) in lengths {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("{key}: {v} is not a finite value >= 0"));
@@ -244,6 +333,14 @@ impl Calibration {
         {
             return Err(format!("min_gain: {g} is not a gain from 0 to 1"));
         }
+        if let Some(f) = self.fit
+            && !(0.0..=1.0).contains(&f.search_below_gain)
+        {
+            return Err(format!(
+                "fit.search_below_gain: {} is not a gain from 0 to 1",
+                f.search_below_gain
+            ));
+        }
         if self.confirm_min_gain.is_nan() || self.confirm_min_gain < 0.0 {
             return Err(format!(
                 "confirm_min_gain: {} is not a value >= 0",
@@ -253,10 +350,16 @@ impl Calibration {
         Ok(())
     }
 
-    /// `config` with this calibration.
+    /// `config` with this calibration: its bound, and the fit's settings it was measured
+    /// with where it records them ([`Calibration::fit`]).
     #[must_use]
     pub fn apply(self, config: ArmFitConfig) -> ArmFitConfig {
+        let config = match self.fit {
+            Some(fit) => fit.apply(config),
+            None => config,
+        };
         ArmFitConfig {
+            uncertainty_tracked_floors_m: self.tracked_floors_m,
             uncertainty_scale: self.scale,
             uncertainty_floor_m: self.floor_m,
             uncertainty_hidden_floors_m: self.hidden_floors_m,
@@ -269,12 +372,24 @@ impl Calibration {
 
     /// The radius of a fit whose curvature spreads the forearm's centre and wrist by
     /// `sigma_m`, whose hypotheses lie `spread_m` apart and whose forearm's region is
-    /// `hidden_share` hidden, under this calibration (what [`ArmFit::uncertainty_m`]
-    /// reports): `scale sigma + floor`, or the spread where that is larger; for a pose
-    /// `confirmed` below the gain threshold, at least `confirmed_floor_m`.
+    /// `hidden_share` hidden, that kept its track or not (`tracked`: [`ArmFit::reacquired`]
+    /// false), under this calibration (what [`ArmFit::uncertainty_m`] reports):
+    /// `scale sigma + floor`, or the spread where that is larger; for a pose `confirmed`
+    /// below the gain threshold, at least `confirmed_floor_m`.
     #[must_use]
-    pub fn radius(&self, sigma_m: f64, spread_m: f64, hidden_share: f64, confirmed: bool) -> f64 {
-        let r = (self.scale * sigma_m + self.floor_at(hidden_share)).max(spread_m);
+    pub fn radius(
+        &self,
+        sigma_m: f64,
+        spread_m: f64,
+        hidden_share: f64,
+        confirmed: bool,
+        tracked: bool,
+    ) -> f64 {
+        let floor = match self.tracked_floors_m {
+            Some(floors) if tracked => Self::band_floor(floors, hidden_share),
+            _ => self.floor_at(hidden_share),
+        };
+        let r = (self.scale * sigma_m + floor).max(spread_m);
         if confirmed {
             r.max(self.confirmed_floor_m)
         } else {
@@ -286,10 +401,15 @@ impl Calibration {
     /// [`HIDDEN_BANDS`], else the band's floor, never below a less hidden band's.
     #[must_use]
     pub fn floor_at(&self, hidden_share: f64) -> f64 {
+        let [h1, h2, h3] = self.hidden_floors_m;
+        Self::band_floor([self.floor_m, h1, h2, h3], hidden_share)
+    }
+
+    /// Of `floors` (no band, then each of [`HIDDEN_BANDS`]), the one for `hidden_share`:
+    /// its band's, never below a less hidden band's.
+    fn band_floor(floors: [f64; 4], hidden_share: f64) -> f64 {
         let bands = HIDDEN_BANDS.iter().filter(|&&b| hidden_share >= b).count();
-        self.hidden_floors_m[..bands]
-            .iter()
-            .fold(self.floor_m, |a, &b| a.max(b))
+        floors[..=bands].iter().fold(0.0, |a, &b| a.max(b))
     }
 
     /// The calibration `config` carries.
@@ -302,6 +422,8 @@ impl Calibration {
             confirm_min_gain: config.confirm_min_gain,
             confirmed_floor_m: config.uncertainty_confirmed_floor_m,
             min_gain: Some(config.min_gain),
+            tracked_floors_m: config.uncertainty_tracked_floors_m,
+            fit: Some(FitSettings::of(config)),
         }
     }
 }

@@ -71,6 +71,9 @@ pub struct ArmFitConfig {
     /// The least uncertainty of a pose confirmed below `min_gain`
     /// ([`Calibration::confirmed_floor_m`]), m. Default 0.
     pub uncertainty_confirmed_floor_m: f64,
+    /// The floors of a fit that kept its track ([`Calibration::tracked_floors_m`]), m.
+    /// Default none: the same floors as any fit.
+    pub uncertainty_tracked_floors_m: Option<[f64; 4]>,
     /// The global search runs, beside the tracked hypotheses, when their best gain is below
     /// this: a track that explains the masks this poorly has likely followed a wrong
     /// optimum. Default 0.55.
@@ -130,6 +133,7 @@ impl Default for ArmFitConfig {
             uncertainty_floor_m: 0.0,
             uncertainty_hidden_floors_m: [0.0; 3],
             uncertainty_confirmed_floor_m: 0.0,
+            uncertainty_tracked_floors_m: None,
             search_below_gain: 0.55,
             depth_sigma_m: 0.03,
             depth_weight: 0.05,

@@ -95,7 +95,7 @@ mod trunk;
 use workcell_robots::HumanPart;
 
 pub use calibration::{
-    BoundSource, Calibration, CalibrationFile, HIDDEN_BANDS, MAX_CALIBRATION_BYTES,
+    BoundSource, Calibration, CalibrationFile, FitSettings, HIDDEN_BANDS, MAX_CALIBRATION_BYTES,
     NetworkCalibration, calibration_path, file_sha256,
 };
 pub use config::ArmFitConfig;

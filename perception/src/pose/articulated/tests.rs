@@ -924,6 +924,8 @@ fn an_occluder_in_front_is_measured_and_widens_the_bound() {
         confirm_min_gain: f64::INFINITY,
         confirmed_floor_m: 0.0,
         min_gain: None,
+        tracked_floors_m: None,
+        fit: None,
     };
     let config = calibration.apply(ArmFitConfig::default());
     let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
@@ -945,28 +947,60 @@ fn an_occluder_in_front_is_measured_and_widens_the_bound() {
 }
 
 /// The floor grows band by band with the hidden share, and never falls below a less
-/// hidden band's; a confirmed pose's bound is at least its own floor; the calibration
-/// round-trips through the fit's settings, its gain threshold with it.
+/// hidden band's; a confirmed pose's bound is at least its own floor; a fit that kept its
+/// track takes the tracked floors where the calibration has them; the calibration
+/// round-trips through the fit's settings, its gain threshold and fit settings with it.
 #[test]
 fn the_floor_follows_the_hidden_share() {
-    let c = Calibration {
+    let mut c = Calibration {
         scale: 2.0,
         floor_m: 0.05,
         hidden_floors_m: [0.04, 0.2, 0.1],
         confirm_min_gain: 0.2,
         confirmed_floor_m: 0.6,
         min_gain: Some(0.45),
+        tracked_floors_m: None,
+        fit: Some(FitSettings {
+            fit_trunk: true,
+            search_below_gain: 0.7,
+            reversed_start: true,
+            depth_start: false,
+        }),
     };
     let floors: Vec<f64> = [0.0, 0.24, 0.25, 0.5, 0.74, 0.75, 1.0]
         .iter()
         .map(|&h| c.floor_at(h))
         .collect();
     assert_eq!(floors, [0.05, 0.05, 0.05, 0.2, 0.2, 0.2, 0.2]);
-    assert!((c.radius(0.01, 0.0, 0.5, false) - 0.22).abs() < 1e-12);
-    assert_eq!(c.radius(0.01, 0.5, 0.5, false), 0.5);
-    assert_eq!(c.radius(0.01, 0.5, 0.5, true), 0.6);
-    assert_eq!(c.radius(0.01, 0.7, 0.5, true), 0.7);
-    assert_eq!(Calibration::of(&c.apply(ArmFitConfig::default())), c);
+    assert!((c.radius(0.01, 0.0, 0.5, false, false) - 0.22).abs() < 1e-12);
+    // Without tracked floors, a tracked fit has the same bound.
+    assert!((c.radius(0.01, 0.0, 0.5, false, true) - 0.22).abs() < 1e-12);
+    assert_eq!(c.radius(0.01, 0.5, 0.5, false, false), 0.5);
+    assert_eq!(c.radius(0.01, 0.5, 0.5, true, false), 0.6);
+    assert_eq!(c.radius(0.01, 0.7, 0.5, true, false), 0.7);
+    c.tracked_floors_m = Some([0.01, 0.03, 0.02, 0.08]);
+    let tracked: Vec<f64> = [0.0, 0.25, 0.5, 0.75]
+        .iter()
+        .map(|&h| c.radius(0.0, 0.0, h, false, true))
+        .collect();
+    assert_eq!(tracked, [0.01, 0.03, 0.03, 0.08]);
+    assert_eq!(c.radius(0.0, 0.0, 0.5, false, false), 0.2);
+    let config = c.apply(ArmFitConfig::default());
+    assert!(config.fit_trunk && config.reversed_start && !config.depth_start);
+    assert_eq!(config.search_below_gain, 0.7);
+    assert_eq!(Calibration::of(&config), c);
+    // The file's form: a calibration's fit settings are a table of their own.
+    let text = toml::to_string(&c).expect("serialises");
+    assert!(text.contains("[fit]"), "{text}");
+    assert_eq!(toml::from_str::<Calibration>(&text).expect("parses"), c);
+    let other = FitSettings {
+        depth_start: true,
+        ..c.fit.expect("fit settings")
+    };
+    assert_eq!(
+        c.fit.expect("fit settings").differences(&other),
+        ["depth_start: false vs true"]
+    );
 }
 
 #[test]
