@@ -771,6 +771,24 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
         ] {
             assert!(pose_out.join(file).exists(), "{masks}: {file} missing");
         }
+        // The articulated fit's settings beside its frames, for a calibration to record:
+        // with no flags and a calibration without a fit table, the fit's defaults.
+        if method == "articulated" {
+            let fit = std::fs::read_to_string(pose_out.join("fit.toml")).expect("fit.toml");
+            for line in [
+                "fit_trunk = false",
+                "search_below_gain = 0.55",
+                "reversed_start = false",
+                "depth_start = false",
+            ] {
+                assert!(fit.contains(line), "{fit}");
+            }
+        } else {
+            assert!(
+                !pose_out.join("fit.toml").exists(),
+                "the paper's method has no fit.toml"
+            );
+        }
         let csv = std::fs::read_to_string(pose_out.join("pose_frames.csv")).expect("csv");
         let header: Vec<&str> = csv.lines().next().expect("header").split(',').collect();
         assert!(

@@ -104,11 +104,13 @@ impl Default for AugmentConfig {
 /// How often each training sequence is drawn, relative to the others.
 ///
 /// A sequence's weight is the product of the factors that its distance class (or camera
-/// row, [`workcell_render::dataset::SequenceEntry::camera_class`]), its region of interest
-/// and its view match, 1 where none does. The region of interest is the kind of its first
+/// row, [`workcell_render::dataset::SequenceEntry::camera_class`]), its region of interest,
+/// its view and its motion match, 1 where none does. The region of interest is the kind of its first
 /// frame's crop (`workspace`, `tracked`, or `frame` for a dataset without crops; a stored
 /// sequence keeps one); the view is the side from which its first frame's camera sees the
-/// human (`front`, `side` or `back`, [`workcell_render::dataset::View`]). With every table
+/// human (`front`, `side` or `back`, [`workcell_render::dataset::View`]); the motion is
+/// `recorded` where the sequence plays a recorded clip
+/// ([`workcell_render::dataset::SequenceEntry::clip`]), else `generated`. With every table
 /// empty every sequence is equally likely, drawn exactly as before the tables existed.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -119,6 +121,9 @@ pub struct SamplingConfig {
     pub roi: std::collections::BTreeMap<String, f64>,
     /// Factor per view of the human, e.g. `{ back = 2.0 }`.
     pub view: std::collections::BTreeMap<String, f64>,
+    /// Factor per source of the human's motion, `recorded` or `generated`, e.g.
+    /// `{ recorded = 3.0 }`.
+    pub motion: std::collections::BTreeMap<String, f64>,
 }
 
 /// What [`SamplingConfig`] weighs a training sequence by (`None`: not read, since no factor
@@ -128,6 +133,8 @@ pub struct SamplingKeys {
     pub distance: String,
     pub roi: Option<String>,
     pub view: Option<String>,
+    /// `recorded` or `generated`.
+    pub motion: String,
 }
 
 /// The key of a sequence that one table of [`SamplingConfig`] reads.
@@ -137,7 +144,10 @@ impl SamplingConfig {
     /// Every table empty: uniform over the sequences.
     #[must_use]
     pub fn is_uniform(&self) -> bool {
-        self.distance.is_empty() && self.roi.is_empty() && self.view.is_empty()
+        self.distance.is_empty()
+            && self.roi.is_empty()
+            && self.view.is_empty()
+            && self.motion.is_empty()
     }
 
     /// Each table by name, with the key of a sequence that it reads.
@@ -147,11 +157,12 @@ impl SamplingConfig {
         &'static str,
         &std::collections::BTreeMap<String, f64>,
         KeyOf,
-    ); 3] {
+    ); 4] {
         [
             ("distance", &self.distance, |s| Some(s.distance.as_str())),
             ("roi", &self.roi, |s| s.roi.as_deref()),
             ("view", &self.view, |s| s.view.as_deref()),
+            ("motion", &self.motion, |s| Some(s.motion.as_str())),
         ]
     }
 
@@ -867,10 +878,16 @@ impl Trainer {
                         .filter(|_| !sampling.view.is_empty())
                         .and_then(FrameLabels::view)
                         .map(|v| v.name().to_string());
+                    let motion = if s.entry.clip.is_some() {
+                        "recorded"
+                    } else {
+                        "generated"
+                    };
                     Ok(SamplingKeys {
                         distance: s.entry.camera_class(),
                         roi,
                         view,
+                        motion: motion.to_string(),
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;
@@ -880,7 +897,7 @@ impl Trainer {
             tracing::info!(
                 sequences = weights.len(),
                 weighted_up = favoured,
-                "sampling by distance class, region of interest and view"
+                "sampling by distance class, region of interest, view and motion"
             );
             Some(
                 weights
@@ -1336,6 +1353,7 @@ mod tests {
                 distance: (*d).to_string(),
                 roi: r.map(str::to_string),
                 view: None,
+                motion: "generated".to_string(),
             })
             .collect()
     }
@@ -1375,6 +1393,21 @@ mod tests {
             sampling.weights(&seqs).expect("valid"),
             vec![6.0, 1.0, 3.0, 1.0]
         );
+        // The motion's source multiplies in too; a table names a source some sequence has.
+        let sampling: SamplingConfig =
+            toml::from_str("distance = { large = 2.0 }\nmotion = { recorded = 3.0 }")
+                .expect("parses");
+        assert!(!sampling.is_uniform());
+        seqs[1].motion = "recorded".to_string();
+        seqs[2].motion = "recorded".to_string();
+        assert_eq!(
+            sampling.weights(&seqs).expect("valid"),
+            vec![2.0, 6.0, 3.0, 1.0]
+        );
+        let misspelt: SamplingConfig =
+            toml::from_str("motion = { recordeds = 3.0 }").expect("parses");
+        let err = misspelt.weights(&seqs).expect_err("no such motion");
+        assert!(err.to_string().contains("sampling.motion"), "{err}");
         // No tables: every sequence 1.
         let uniform = SamplingConfig::default();
         assert!(uniform.is_uniform());

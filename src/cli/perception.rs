@@ -153,10 +153,11 @@ pub fn train(args: &TrainArgs) -> Result<ExitCode> {
     );
     if !config.sampling.is_uniform() {
         say!(
-            "training sequences drawn unevenly (factors multiply): distance {:?}, region of interest {:?}, view {:?}",
+            "training sequences drawn unevenly (factors multiply): distance {:?}, region of interest {:?}, view {:?}, motion {:?}",
             config.sampling.distance,
             config.sampling.roi,
-            config.sampling.view
+            config.sampling.view,
+            config.sampling.motion
         );
     }
     backend::set_threads(config.threads);
