@@ -209,10 +209,10 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 config.refine = n;
             }
-            if let Some(g) = args.search_below_gain {
-                if !(0.0..=1.0).contains(&g) {
-                    anyhow::bail!("--search-below-gain {g}: a gain from 0 to 1");
-                }
+            if let Some(g) = args.search_below_gain
+                && !(0.0..=1.0).contains(&g)
+            {
+                anyhow::bail!("--search-below-gain {g}: a gain from 0 to 1");
             }
             if let Some(g) = args.min_gain {
                 if !(0.0..=1.0).contains(&g) {
@@ -231,7 +231,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 anyhow::bail!("--confirm-min-gain {g}: a gain from 0 to 1");
             }
             PoseMethod::Articulated {
-                config,
+                config: Box::new(config),
                 depth: args.depth,
                 true_trunk: args.trunk.as_deref() == Some("truth"),
             }
@@ -305,7 +305,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 // The calibration's bound and the fit it was measured with; the flags given
                 // override its fit settings, and a fit other than the measured one is said.
                 let mut config =
-                    calibration.map_or_else(|| config.clone(), |c| c.apply(config.clone()));
+                    calibration.map_or_else(|| (**config).clone(), |c| c.apply((**config).clone()));
                 if let Some(g) = args.search_below_gain {
                     config.search_below_gain = g;
                 }
@@ -332,7 +332,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                     config.min_gain = g;
                 }
                 PoseMethod::Articulated {
-                    config,
+                    config: Box::new(config),
                     depth: *depth,
                     true_trunk: *true_trunk,
                 }

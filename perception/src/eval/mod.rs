@@ -44,7 +44,7 @@ pub enum PoseMethod {
     /// trunk is held where the labels put it ([`ArmFitter::hold_trunk_at`]) instead of
     /// fitted or upright: what the arm's fit scores given a perfect trunk.
     Articulated {
-        config: ArmFitConfig,
+        config: Box<ArmFitConfig>,
         depth: bool,
         true_trunk: bool,
     },
@@ -217,7 +217,7 @@ pub fn evaluate_pose(
         PoseMethod::Articulated { config, .. } => Estimator::Articulated(Box::new(ArmFitter::new(
             CpuRenderer::new(),
             ArticulatedArm::of_dataset(dataset)?,
-            config.clone(),
+            (**config).clone(),
         ))),
     };
     // Mask values above this are a part's support, for the contact sheet.
