@@ -591,6 +591,7 @@ mod tests {
                 PerceptionKind::Procnet,
                 toml::Table::try_from(ProcNetConfig {
                     weights: Some("w.safetensors".into()),
+                    fit_trunk: Some(true),
                     uncertainty_scale: Some(1.0),
                     uncertainty_floor_m: Some(0.01),
                     camera_fails_at_s: Some(1.0),
