@@ -106,7 +106,8 @@ pub struct ProcNetConfig {
     pub uncertainty_scale: Option<f64>,
     /// The uncertainty's floor, m (`ArmFitConfig::uncertainty_floor_m`), in place of the
     /// calibrated one (left out: the calibrated one). The floors where the depth image shows
-    /// the forearm hidden are the calibrated ones, never below this.
+    /// the forearm hidden, and those of a fit that kept its track, are the calibrated ones,
+    /// never below this.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub uncertainty_floor_m: Option<f64>,
     /// Time from exposure to the estimate being available, s. Default 0.05.

@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 
-use workcell_perception::pose::{ArmFitConfig, ArmMasks, Calibration};
+use workcell_perception::pose::{ArmFitConfig, ArmMasks, Calibration, FitSettings};
 use workcell_perception::{ArmTracker, NoEstimate};
 use workcell_procnet::{Backend, ProcNet};
 use workcell_safety::{HumanEstimate, HumanGeometry};
@@ -127,22 +127,25 @@ impl ProcNetCamera {
                 }
                 None => Calibration::true_masks(config.depth),
             };
-        let mut fit = Calibration {
-            scale: config.uncertainty_scale.unwrap_or(measured.scale),
-            floor_m: config.uncertainty_floor_m.unwrap_or(measured.floor_m),
-            ..measured
-        }
+        let mut fit = with_overrides(
+            measured,
+            config.uncertainty_scale,
+            config.uncertainty_floor_m,
+        )
         .apply(ArmFitConfig::default());
         // The fit the bound was measured with; a trunk setting of the scenario's own wins.
         if let Some(fit_trunk) = config.fit_trunk {
-            if measured.fit.is_some_and(|f| f.fit_trunk != fit_trunk) {
-                tracing::warn!(
-                    "perception.fit_trunk = {fit_trunk}: the masks' bound was measured with \
-                     {}: it may not hold for this fit",
-                    !fit_trunk
-                );
-            }
             fit.fit_trunk = fit_trunk;
+            if let Some(measured_fit) = measured.fit {
+                let differences = measured_fit.differences(&FitSettings::of(&fit));
+                if !differences.is_empty() {
+                    tracing::warn!(
+                        "perception.fit_trunk: the masks' bound was measured with another fit \
+                         ({}, measured vs this run): it may not hold",
+                        differences.join(", ")
+                    );
+                }
+            }
         }
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
         if let Some(net) = net {
@@ -415,6 +418,25 @@ pub fn bench_tracker(
     Ok(out)
 }
 
+/// `measured` with a scenario's own scale and floor where it gives them: its floor is the
+/// least of every floor, the hidden bands' and a kept track's too (ProcNetConfig's keys).
+fn with_overrides(measured: Calibration, scale: Option<f64>, floor_m: Option<f64>) -> Calibration {
+    let Some(floor_m) = floor_m else {
+        return Calibration {
+            scale: scale.unwrap_or(measured.scale),
+            ..measured
+        };
+    };
+    Calibration {
+        scale: scale.unwrap_or(measured.scale),
+        floor_m,
+        tracked_floors_m: measured
+            .tracked_floors_m
+            .map(|floors| floors.map(|f| f.max(floor_m))),
+        ..measured
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -553,6 +575,29 @@ mod tests {
             "last seen at {last_seen} s"
         );
         assert!(perception.counts().no_frame >= 20);
+    }
+
+    /// A scenario's floor replaces the calibrated one and is the least of a kept track's
+    /// floors; the hidden bands keep theirs (the radius never falls below the floor).
+    #[test]
+    fn a_scenarios_floor_is_the_least_of_every_floor() {
+        let measured = Calibration {
+            scale: 1.0,
+            floor_m: 0.3,
+            hidden_floors_m: [0.3, 0.4, 0.6],
+            tracked_floors_m: Some([0.02, 0.1, 0.2, 0.3]),
+            ..Calibration::UNCALIBRATED
+        };
+        assert_eq!(with_overrides(measured, None, None), measured);
+        let own = with_overrides(measured, Some(2.0), Some(0.15));
+        assert_eq!((own.scale, own.floor_m), (2.0, 0.15));
+        assert_eq!(own.tracked_floors_m, Some([0.15, 0.15, 0.2, 0.3]));
+        assert_eq!(own.hidden_floors_m, measured.hidden_floors_m);
+        for hidden in [0.0, 0.3, 0.6, 0.9] {
+            for tracked in [false, true] {
+                assert!(own.radius(0.0, 0.0, hidden, false, tracked) >= 0.15);
+            }
+        }
     }
 
     /// The artificial occluder hides the configured share of the forearm's pixels,
