@@ -307,6 +307,66 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
     );
 }
 
+/// Splits made one run at a time into one folder add up: a later run of another split keeps
+/// the earlier ones' sequences in the manifest, the stamp names the splits the folder holds,
+/// and a run of every split adopts what is there and makes the rest.
+#[test]
+fn splits_made_one_run_at_a_time_add_up() {
+    let tmp = tempfile::tempdir().unwrap();
+    // One camera class and one level: one sequence of each split.
+    let mut small = DatasetConfig::from_file(&small_config(tmp.path())).unwrap();
+    small.cell_cameras.enabled = false;
+    small.distances.truncate(1);
+    small.occlusion_levels.truncate(1);
+    small.sequences_per_pair = 3;
+    small.sequences_per_episode = 1;
+    small.splits = [0.34, 0.33, 0.33];
+    let config = tmp.path().join("one-of-each.toml");
+    std::fs::write(&config, small.to_toml()).unwrap();
+    let out = tmp.path().join("out");
+    let run = |splits: &[Split]| {
+        Generator::from_file(&config)
+            .unwrap()
+            .with_splits(splits)
+            .generate(&out, &|_| {})
+            .unwrap()
+    };
+    let in_manifest = |report: &workcell_sim::dataset::Report, split: Split| {
+        report
+            .manifest
+            .sequences
+            .iter()
+            .filter(|s| s.split == split)
+            .count()
+    };
+    let stamp = || std::fs::read_to_string(out.join("config.toml")).unwrap();
+    let test = run(&[Split::Test]);
+    assert_eq!((test.generated, in_manifest(&test, Split::Test)), (1, 1));
+    assert!(stamp().ends_with("\n# splits: test\n"), "{}", stamp());
+    let validation = run(&[Split::Validation]);
+    assert!(stamp().ends_with("\n# splits: validation, test\n"), "{}", stamp());
+    assert_eq!(validation.generated, 1);
+    assert_eq!(validation.manifest.sequences.len(), 2);
+    assert_eq!(in_manifest(&validation, Split::Test), 1);
+    assert_eq!(Dataset::open(&out).unwrap().manifest.sequences.len(), 2);
+    let all = run(&[]);
+    assert!(!stamp().contains("# splits"), "{}", stamp());
+    assert_eq!(all.manifest.sequences.len(), 3);
+    assert_eq!((all.generated, in_manifest(&all, Split::Train)), (1, 1));
+    // A configuration that differs in more than its splits is still refused.
+    let other = Generator::new(
+        DatasetConfig {
+            seed: 99,
+            ..small
+        },
+        &config,
+    )
+    .unwrap()
+    .with_splits(&[Split::Test]);
+    let err = other.generate(&out, &|_| {}).unwrap_err();
+    assert!(err.to_string().contains("another configuration"), "{err}");
+}
+
 #[test]
 fn a_killed_run_leaves_nothing_the_loader_accepts_and_a_rerun_completes_it() {
     let tmp = tempfile::tempdir().unwrap();

@@ -44,7 +44,7 @@ pub struct GenerateArgs {
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Make only the sequences of these splits (comma-separated: train, validation, test)
-    /// [default: all].
+    /// [default: all]. A later run into the same folder may add the others.
     #[arg(long, value_delimiter = ',')]
     pub splits: Vec<String>,
 }

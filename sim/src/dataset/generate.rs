@@ -264,6 +264,48 @@ fn refuse_held_out_clips(recorded: &RecordedConfig, key: &str, path: &Path) -> R
     })
 }
 
+/// The line of a dataset's `config.toml` that names the splits made when not all were.
+const SPLITS_LINE: &str = "\n# splits: ";
+
+/// A dataset stamp's configuration without its splits line, and the splits it names (`None`:
+/// every split).
+fn stamp_splits(stamp: &str) -> (&str, Option<Vec<&str>>) {
+    match stamp.rfind(SPLITS_LINE) {
+        Some(at) if stamp[at + SPLITS_LINE.len()..].trim_end().lines().count() == 1 => {
+            let names = stamp[at + SPLITS_LINE.len()..].trim_end();
+            (&stamp[..at], Some(names.split(", ").collect()))
+        }
+        _ => (stamp, None),
+    }
+}
+
+/// The splits a folder holds after `made` were added to `existing` (`None`: every split).
+fn union_of_splits<'a>(existing: Option<Vec<&'a str>>, made: &[&'a str]) -> Option<Vec<&'a str>> {
+    let mut all = existing?;
+    if made.is_empty() {
+        return None;
+    }
+    for name in made {
+        if !all.contains(name) {
+            all.push(name);
+        }
+    }
+    if Split::ALL.iter().all(|s| all.contains(&s.name())) {
+        return None;
+    }
+    let order = |n: &&str| Split::ALL.iter().position(|s| s.name() == *n);
+    all.sort_by_key(order);
+    Some(all)
+}
+
+/// `config` with the line naming `splits` (none when every split is made).
+fn with_splits_line(config: String, splits: Option<&[&str]>) -> String {
+    match splits {
+        Some(names) => format!("{config}{SPLITS_LINE}{}\n", names.join(", ")),
+        None => config,
+    }
+}
+
 /// A 64-bit mix (splitmix64's finaliser) to derive seeds.
 fn mix(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
@@ -1103,19 +1145,24 @@ impl Generator {
         if let Some(crop) = &self.crop {
             config_text += &format!("\n# crop: {}\n", crop.name);
         }
-        if !self.splits.is_empty() {
-            let names: Vec<&str> = self.splits.iter().map(|s| s.name()).collect();
-            config_text += &format!("\n# splits: {}\n", names.join(", "));
-        }
+        let made: Vec<&str> = self.splits.iter().map(|s| s.name()).collect();
         match read_text_file(&stamp, MAX_CONFIG_BYTES) {
-            Ok(existing) if existing != config_text => {
-                return Err(SimError::Dataset {
-                    path: out.to_path_buf(),
-                    message: "holds a dataset of another configuration; choose another --out"
-                        .into(),
-                });
+            Ok(existing) => {
+                // The same configuration with other splits made: the folder gains these.
+                let (existing_config, existing_splits) = stamp_splits(&existing);
+                if existing_config != config_text {
+                    return Err(SimError::Dataset {
+                        path: out.to_path_buf(),
+                        message: "holds a dataset of another configuration; choose another --out"
+                            .into(),
+                    });
+                }
+                let splits = union_of_splits(existing_splits, &made);
+                let updated = with_splits_line(config_text, splits.as_deref());
+                if updated != existing {
+                    write_atomic(&stamp, updated.as_bytes())?;
+                }
             }
-            Ok(_) => {}
             Err(_) => {
                 // Sequences without the stamp that says what made them are not adopted.
                 let sequences = std::fs::read_dir(out)
@@ -1130,7 +1177,9 @@ impl Generator {
                             .into(),
                     });
                 }
-                write_atomic(&stamp, config_text.as_bytes())?;
+                let made = (!made.is_empty()).then_some(made);
+                let text = with_splits_line(config_text, made.as_deref());
+                write_atomic(&stamp, text.as_bytes())?;
             }
         }
         let done = std::sync::atomic::AtomicUsize::new(0);
@@ -1147,11 +1196,15 @@ impl Generator {
                     let mut episode: Option<Result<Episode>> = None;
                     let mut out_e = Vec::with_capacity(per);
                     for index in indices {
+                        let kept = self.existing_sequence(out, index);
                         if !self.splits.is_empty() && !self.splits.contains(&self.plan(index).2) {
+                            // Another split's sequence an earlier run made stays listed.
+                            if let Some(entry) = kept {
+                                out_e.push(Ok((entry, Timing::default(), false)));
+                            }
                             progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
                             continue;
                         }
-                        let kept = self.existing_sequence(out, index);
                         let result = if let Some(entry) = kept {
                             Ok((entry, Timing::default(), false))
                         } else {
