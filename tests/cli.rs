@@ -859,6 +859,35 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "{masks}: {without} frames without a pose"
         );
     }
+    // The fit's flags set its settings either way, and fit.toml records what ran.
+    let flags_out = tmp.path().join("pose-flags");
+    let flagged = workcell(&[
+        "eval",
+        "pose",
+        "--depth",
+        "--masks",
+        "gt",
+        "--reversed-start",
+        "--depth-start",
+        "false",
+        "--search-below-gain",
+        "0.6",
+        "--dataset",
+        data_s,
+        "--split",
+        "test",
+        "--out",
+        flags_out.to_str().expect("utf-8"),
+    ]);
+    assert!(flagged.status.success(), "{}", text(&flagged.stderr));
+    let fit = std::fs::read_to_string(flags_out.join("fit.toml")).expect("fit.toml");
+    for line in [
+        "search_below_gain = 0.6",
+        "reversed_start = true",
+        "depth_start = false",
+    ] {
+        assert!(fit.contains(line), "{fit}");
+    }
     refused(
         &["eval", "pose", "--method", "pnp", "--dataset", data_s],
         "articulated, paper",

@@ -68,14 +68,15 @@ pub struct EvalPoseArgs {
     pub search_below_gain: Option<f64>,
     /// With --method articulated: climb from the best fit's forearm turned end for end as
     /// well, kept as a hypothesis where it scores as well (ArmFitConfig::reversed_start; on
-    /// where the masks' calibration was measured with it).
-    #[arg(long)]
-    pub reversed_start: bool,
+    /// where the masks' calibration was measured with it; `--reversed-start false` turns it
+    /// off).
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    pub reversed_start: Option<bool>,
     /// With --method articulated and --depth: climb from the forearm where its mask's depth
     /// points put it as well, both ways round (ArmFitConfig::depth_start; on where the masks'
-    /// calibration was measured with it).
-    #[arg(long)]
-    pub depth_start: bool,
+    /// calibration was measured with it; `--depth-start false` turns it off).
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    pub depth_start: Option<bool>,
     /// With --method articulated: a fit whose gain is below this is no pose (0 to 1; default
     /// ArmFitConfig's 0.3).
     #[arg(long)]
@@ -220,7 +221,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 config.min_gain = g;
             }
-            if args.depth_start && !args.depth {
+            if args.depth_start == Some(true) && !args.depth {
                 anyhow::bail!("--depth-start starts from the depth image: add --depth");
             }
             // The fit's settings and these gains are set after the masks' calibration
@@ -239,8 +240,8 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         "paper"
             if args.search_starts.is_some()
                 || args.search_below_gain.is_some()
-                || args.reversed_start
-                || args.depth_start
+                || args.reversed_start.is_some()
+                || args.depth_start.is_some()
                 || args.min_gain.is_some()
                 || args.confirm_min_gain.is_some()
                 || args.trunk.is_some() =>
@@ -312,8 +313,12 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 if let Some(t) = &args.trunk {
                     config.fit_trunk = t == "fit";
                 }
-                config.reversed_start |= args.reversed_start;
-                config.depth_start |= args.depth_start;
+                if let Some(on) = args.reversed_start {
+                    config.reversed_start = on;
+                }
+                if let Some(on) = args.depth_start {
+                    config.depth_start = on;
+                }
                 if let Some(measured) = calibration.and_then(|c| c.fit) {
                     let differences = measured.differences(&FitSettings::of(&config));
                     if !differences.is_empty() {
