@@ -344,7 +344,11 @@ fn splits_made_one_run_at_a_time_add_up() {
     assert_eq!((test.generated, in_manifest(&test, Split::Test)), (1, 1));
     assert!(stamp().ends_with("\n# splits: test\n"), "{}", stamp());
     let validation = run(&[Split::Validation]);
-    assert!(stamp().ends_with("\n# splits: validation, test\n"), "{}", stamp());
+    assert!(
+        stamp().ends_with("\n# splits: validation, test\n"),
+        "{}",
+        stamp()
+    );
     assert_eq!(validation.generated, 1);
     assert_eq!(validation.manifest.sequences.len(), 2);
     assert_eq!(in_manifest(&validation, Split::Test), 1);
@@ -354,15 +358,9 @@ fn splits_made_one_run_at_a_time_add_up() {
     assert_eq!(all.manifest.sequences.len(), 3);
     assert_eq!((all.generated, in_manifest(&all, Split::Train)), (1, 1));
     // A configuration that differs in more than its splits is still refused.
-    let other = Generator::new(
-        DatasetConfig {
-            seed: 99,
-            ..small
-        },
-        &config,
-    )
-    .unwrap()
-    .with_splits(&[Split::Test]);
+    let other = Generator::new(DatasetConfig { seed: 99, ..small }, &config)
+        .unwrap()
+        .with_splits(&[Split::Test]);
     let err = other.generate(&out, &|_| {}).unwrap_err();
     assert!(err.to_string().contains("another configuration"), "{err}");
 }
