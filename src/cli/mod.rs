@@ -178,13 +178,113 @@ impl Drop for OutputDir {
 }
 
 /// A progress bar of `len` steps drawn with indicatif's `template` (its default style when
-/// the template does not parse).
+/// the template does not parse). On a terminal it redraws in place; where standard error is
+/// not a terminal (a log file, CI, a background run) the bar is written as a plain line at
+/// most every [`LOG_PROGRESS_EVERY`], so that a long run's log still shows how far it got.
 pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
-    indicatif::ProgressBar::new(len).with_style(
+    use std::io::IsTerminal as _;
+    let bar = indicatif::ProgressBar::new(len).with_style(
         indicatif::ProgressStyle::with_template(template)
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
             .progress_chars("=> "),
-    )
+    );
+    if !std::io::stderr().is_terminal() {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::term_like_with_hz(
+            Box::new(LogLines::new(std::io::stderr(), LOG_PROGRESS_EVERY)),
+            1,
+        ));
+    }
+    bar
+}
+
+/// How often a progress bar writes a line where standard error is not a terminal.
+pub const LOG_PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// A progress bar's drawing as plain lines for a log: indicatif's redraws (cursor moves,
+/// cleared lines) collected into the text of the bar, written as one line when at least
+/// `every` has passed since the last line (the first at once).
+struct LogLines<W> {
+    every: std::time::Duration,
+    state: std::sync::Mutex<LogLinesState<W>>,
+}
+
+struct LogLinesState<W> {
+    sink: W,
+    /// The text of the draw in progress.
+    line: String,
+    /// When the last line was written.
+    last: Option<std::time::Instant>,
+}
+
+impl<W: std::io::Write> LogLines<W> {
+    fn new(sink: W, every: std::time::Duration) -> Self {
+        Self {
+            every,
+            state: std::sync::Mutex::new(LogLinesState {
+                sink,
+                line: String::new(),
+                last: None,
+            }),
+        }
+    }
+
+    fn state(&self) -> std::sync::MutexGuard<'_, LogLinesState<W>> {
+        // A panic elsewhere while the lock was held leaves only a partial line.
+        self.state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+impl<W> std::fmt::Debug for LogLines<W> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LogLines")
+            .field("every", &self.every)
+            .finish()
+    }
+}
+
+impl<W: std::io::Write + Send> indicatif::TermLike for LogLines<W> {
+    fn width(&self) -> u16 {
+        100
+    }
+    fn move_cursor_up(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_down(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_right(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_left(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn write_line(&self, s: &str) -> std::io::Result<()> {
+        self.write_str(s)?;
+        self.write_str(" ")
+    }
+    fn write_str(&self, s: &str) -> std::io::Result<()> {
+        self.state().line.push_str(&s.replace('\r', ""));
+        Ok(())
+    }
+    fn clear_line(&self) -> std::io::Result<()> {
+        self.state().line.clear();
+        Ok(())
+    }
+    fn flush(&self) -> std::io::Result<()> {
+        let mut state = self.state();
+        let line = std::mem::take(&mut state.line);
+        let line = line.trim();
+        let due = state.last.is_none_or(|t| t.elapsed() >= self.every);
+        if line.is_empty() || !due {
+            return Ok(());
+        }
+        let line = line.to_owned();
+        state.last = Some(std::time::Instant::now());
+        writeln!(state.sink, "{line}")?;
+        state.sink.flush()
+    }
 }
 
 /// Parses a whole number from `LO` to `HI`: the limit of a command-line count (threads,
@@ -240,6 +340,57 @@ pub fn write_stdout(text: std::fmt::Arguments<'_>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A writer into a buffer the test reads back.
+    #[derive(Clone, Default)]
+    struct Shared(std::sync::Arc<std::sync::Mutex<Vec<u8>>>);
+
+    impl std::io::Write for Shared {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().expect("buffer").extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// The lines a bar of 5 steps leaves in a log that takes a line at most every `every`.
+    fn logged(every: std::time::Duration) -> Vec<String> {
+        let buf = Shared::default();
+        let bar = progress_bar(5, "[{bar:10}] {pos}/{len} frames");
+        bar.set_draw_target(indicatif::ProgressDrawTarget::term_like(Box::new(
+            LogLines::new(buf.clone(), every),
+        )));
+        for _ in 0..5 {
+            bar.inc(1);
+        }
+        bar.finish();
+        let text = String::from_utf8(buf.0.lock().expect("buffer").clone()).expect("utf-8");
+        text.lines().map(str::to_owned).collect()
+    }
+
+    #[test]
+    fn a_progress_bar_in_a_log_is_plain_lines_at_most_every_interval() {
+        // Every draw due: whole lines, no cursor movement or carriage returns, the last one
+        // the finished bar.
+        let lines = logged(std::time::Duration::ZERO);
+        assert!(lines.len() >= 2, "{lines:?}");
+        assert!(
+            lines
+                .iter()
+                .all(|l| !l.contains('\r') && !l.contains('\x1b')),
+            "{lines:?}"
+        );
+        assert_eq!(
+            lines.last().map(String::as_str),
+            Some("[==========] 5/5 frames")
+        );
+        // An hour apart: only the first draw is written.
+        let lines = logged(std::time::Duration::from_secs(3600));
+        assert_eq!(lines.len(), 1, "{lines:?}");
+        assert!(lines[0].ends_with("/5 frames"), "{lines:?}");
+    }
 
     const OUTPUTS: [&str; 2] = ["summary.md", "plot.svg"];
 
