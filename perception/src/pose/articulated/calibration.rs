@@ -195,8 +195,9 @@ pub fn file_sha256(path: &Path, max_bytes: u64) -> Result<String> {
 impl Calibration {
     /// The bound of a fit whose masks' calibration was never measured: at least 0.45 m,
     /// plus the curvature's spread, in every band, and no faint fit taken for a pose. It
-    /// lies above every bound measured for the shipped networks (the largest: 40.6 cm, the
-    /// RGB network's fit without depth) and the true masks' (38.5 cm without depth).
+    /// lies above every bound measured for the shipped networks of the paper's arm (the
+    /// largest: 40.6 cm, the RGB network's fit without depth) and the true masks' (38.5 cm
+    /// without depth); not above the whole body's (`procnet-depth-human`: up to 66.9 cm).
     pub const UNCALIBRATED: Self = Self {
         scale: 1.0,
         floor_m: 0.45,
