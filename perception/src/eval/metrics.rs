@@ -75,6 +75,9 @@ pub fn pose_error_with(model: &RigidModel, estimate: &Pose, truth: &Pose, twin: 
 pub struct FrameResult {
     pub sequence: usize,
     pub frame: usize,
+    /// The sequence plays a recorded person (its manifest entry names a clip), not the
+    /// motion generator.
+    pub recorded: bool,
     pub distance_class: String,
     pub occlusion_level: String,
     /// The true forearm centre's distance from the camera, m.

@@ -371,6 +371,7 @@ pub fn evaluate_pose(
             frames.push(FrameResult {
                 sequence: entry.index,
                 frame: t,
+                recorded: entry.clip.is_some(),
                 distance_class: entry.distance_class.clone(),
                 occlusion_level: entry.occlusion_level.clone(),
                 distance_m: model.centre(&truth).length(),

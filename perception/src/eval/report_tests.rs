@@ -11,6 +11,7 @@ fn frame_result(
     super::FrameResult {
         sequence: 0,
         frame,
+        recorded: false,
         distance_class: "short".into(),
         occlusion_level: level.into(),
         distance_m: 1.0,
@@ -202,4 +203,56 @@ fn the_csv_quotes_reasons_with_commas() {
         assert_eq!(fields.len(), header.len(), "{line}");
         assert_eq!(fields[why], reason.to_string(), "{line}");
     }
+}
+
+/// A split that mixes recorded people with the generator's motion is reported per motion;
+/// one of a single kind is not.
+#[test]
+fn recorded_people_and_the_generators_motion_get_a_row_each() {
+    use super::{FrameResult, PoseError, PoseEvaluation};
+    let posed = |ends_cm: f64| {
+        Ok(PoseError {
+            position_cm: ends_cm / 2.0,
+            yaw_deg: 0.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+            axis_deg: 0.0,
+            spin_deg: 0.0,
+            flipped: false,
+            ends_cm,
+        })
+    };
+    let frame = |i: usize, recorded: bool, outcome| FrameResult {
+        recorded,
+        uncertainty_m: 0.5,
+        ..frame_result(i, "light", outcome)
+    };
+    // Recorded: ends 10 and 40 cm off (one far, within a 50 cm bound both) and a frame
+    // without a pose; generated: 4 cm off.
+    let frames = vec![
+        frame(0, true, posed(10.0)),
+        frame(1, true, posed(40.0)),
+        frame(2, true, Err(NoPose::PoorFit)),
+        frame(3, false, posed(4.0)),
+    ];
+    let eval = |frames: Vec<FrameResult>| PoseEvaluation {
+        masks: String::new(),
+        split: "test".into(),
+        sequences: 1,
+        method: String::new(),
+        frames,
+        no_pose: Vec::new(),
+    };
+    let md = eval(frames.clone()).by_motion_markdown();
+    assert!(
+        md.contains("| recorded people | 3 | 1 | 12.50 | 1 (50.0 %) | 100.0 % |"),
+        "{md}"
+    );
+    assert!(
+        md.contains("| generated motion | 1 | 0 | 2.00 | 0 (0.0 %) | 100.0 % |"),
+        "{md}"
+    );
+    assert!(eval(frames.clone()).to_markdown().contains(&md));
+    let generated: Vec<FrameResult> = frames.into_iter().filter(|f| !f.recorded).collect();
+    assert!(eval(generated).by_motion_markdown().is_empty());
 }
