@@ -280,7 +280,6 @@ impl<W: std::io::Write + Send> indicatif::TermLike for LogLines<W> {
         if line.is_empty() || !due {
             return Ok(());
         }
-        let line = line.to_owned();
         state.last = Some(std::time::Instant::now());
         writeln!(state.sink, "{line}")?;
         state.sink.flush()

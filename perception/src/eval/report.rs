@@ -148,11 +148,11 @@ fn fmt_deg(v: f64) -> String {
     }
 }
 
-/// The share of a group's posed frames within their uncertainty, as a percentage.
 /// An end of the forearm this far off, cm, is a pose that would mislead the safety filter:
 /// the share of such poses is what a bound's tail is made of.
 pub const FAR_OFF_CM: f64 = 30.0;
 
+/// The share of a group's posed frames within their uncertainty, as a percentage.
 fn within(s: &Summary) -> String {
     let posed = s.frames - s.no_pose;
     if posed == 0 {
@@ -209,8 +209,8 @@ impl PoseEvaluation {
         if recorded == 0 || recorded == self.frames.len() {
             return String::new();
         }
-        let mut md = String::from(
-            "| motion | frames | no pose | position (cm) | an end over 30 cm off | within the bound |\n|---|---|---|---|---|---|\n",
+        let mut md = format!(
+            "| motion | frames | no pose | position (cm) | an end over {FAR_OFF_CM} cm off | within the bound |\n|---|---|---|---|---|---|\n",
         );
         for (name, of_recorded) in [("recorded people", true), ("generated motion", false)] {
             let frames = || {

@@ -32,32 +32,40 @@ fn frame_result(
     }
 }
 
-#[test]
-fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
-    use super::{FrameResult, PoseError, PoseEvaluation, compare_markdown};
-    let frame = |i: usize, cm: Option<f64>| {
-        let outcome = cm
-            .map(|position_cm| PoseError {
-                position_cm,
-                yaw_deg: 0.0,
-                pitch_deg: 0.0,
-                roll_deg: 0.0,
-                axis_deg: 0.0,
-                spin_deg: 0.0,
-                flipped: false,
-                ends_cm: position_cm,
-            })
-            .ok_or(NoPose::Empty);
-        frame_result(i, "heavy", outcome)
-    };
-    let eval = |frames: Vec<FrameResult>| PoseEvaluation {
+/// A pose `position_cm` off at the centre and `ends_cm` at the farther end, right in angle.
+fn pose_error(position_cm: f64, ends_cm: f64) -> super::PoseError {
+    super::PoseError {
+        position_cm,
+        yaw_deg: 0.0,
+        pitch_deg: 0.0,
+        roll_deg: 0.0,
+        axis_deg: 0.0,
+        spin_deg: 0.0,
+        flipped: false,
+        ends_cm,
+    }
+}
+
+/// An evaluation of one test sequence's `frames`, no contact sheet.
+fn evaluation(frames: Vec<super::FrameResult>) -> super::PoseEvaluation {
+    super::PoseEvaluation {
         masks: String::new(),
         split: "test".into(),
         sequences: 1,
         method: String::new(),
         frames,
         no_pose: Vec::new(),
+    }
+}
+
+#[test]
+fn the_comparison_scores_every_source_on_the_frames_all_of_them_have() {
+    use super::compare_markdown;
+    let frame = |i: usize, cm: Option<f64>| {
+        let outcome = cm.map(|cm| pose_error(cm, cm)).ok_or(NoPose::Empty);
+        frame_result(i, "heavy", outcome)
     };
+    let eval = evaluation;
     let a = eval(vec![
         frame(0, Some(1.0)),
         frame(1, Some(2.0)),
@@ -209,19 +217,8 @@ fn the_csv_quotes_reasons_with_commas() {
 /// one of a single kind is not.
 #[test]
 fn recorded_people_and_the_generators_motion_get_a_row_each() {
-    use super::{FrameResult, PoseError, PoseEvaluation};
-    let posed = |ends_cm: f64| {
-        Ok(PoseError {
-            position_cm: ends_cm / 2.0,
-            yaw_deg: 0.0,
-            pitch_deg: 0.0,
-            roll_deg: 0.0,
-            axis_deg: 0.0,
-            spin_deg: 0.0,
-            flipped: false,
-            ends_cm,
-        })
-    };
+    use super::FrameResult;
+    let posed = |ends_cm: f64| Ok(pose_error(ends_cm / 2.0, ends_cm));
     let frame = |i: usize, recorded: bool, outcome| FrameResult {
         recorded,
         uncertainty_m: 0.5,
@@ -235,14 +232,7 @@ fn recorded_people_and_the_generators_motion_get_a_row_each() {
         frame(2, true, Err(NoPose::PoorFit)),
         frame(3, false, posed(4.0)),
     ];
-    let eval = |frames: Vec<FrameResult>| PoseEvaluation {
-        masks: String::new(),
-        split: "test".into(),
-        sequences: 1,
-        method: String::new(),
-        frames,
-        no_pose: Vec::new(),
-    };
+    let eval = evaluation;
     let md = eval(frames.clone()).by_motion_markdown();
     assert!(
         md.contains("| recorded people | 3 | 1 | 12.50 | 1 (50.0 %) | 100.0 % |"),
