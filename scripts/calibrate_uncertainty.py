@@ -21,7 +21,7 @@ it reports the coverage there too, which is the honest figure: the calibration w
 the first.
 
     scripts/calibrate_uncertainty.py VALIDATION.csv [TEST.csv] [--target 0.99]
-        [--pool VALIDATION2.csv TEST2.csv]... [--tracked-floors]
+        [--pool VALIDATION2.csv TEST2.csv]... [--tracked-floors] [--confident-gain G]
         [--write WEIGHTS --depth|--no-depth]
 
 `--write WEIGHTS` puts the chosen calibration into the calibration file beside the weights
@@ -34,6 +34,13 @@ calibration to the weights of its hash only (`Calibration::of_weights`).
 tracked hypotheses explained the masks well enough that the global search did not run) floors
 of their own, each band for the target of its own frames, and the re-acquired fits theirs:
 a fit that kept its track is rarely far off, and one floor for both is set by the re-acquired.
+
+`--confident-gain G` gives the fits whose gain is at least G floors of their own (each band
+for the target of its own frames), before any other floors: a fit that explains the masks
+that well is rarely far off, on recorded people as on the generator's motion, and one floor
+for every fit is set by the poor ones. Where the CSVs have the `recorded` column, the coverage
+of recorded people's frames and of the generator's is reported apart: a bound fitted on a mix
+can hold for one and not the other.
 
 `--write` also records the fit's settings the CSVs were measured with (`fit.toml`, which
 `workcell eval pose` writes beside `pose_frames.csv`) as the section's `fit` table, so that
@@ -72,8 +79,9 @@ def hidden_of(row):
 
 
 def load(path, min_gain=None):
-    """(error m, sigma m, spread m, hidden share, kept its track) of every frame with a pose
-    (and, given `min_gain`, a gain of at least that)."""
+    """(error m, sigma m, spread m, hidden share, kept its track, gain, recorded person) of
+    every frame with a pose (and, given `min_gain`, a gain of at least that); recorded is
+    None where the CSV does not say."""
     try:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))
@@ -92,6 +100,8 @@ def load(path, min_gain=None):
             float(r["spread_m"]),
             hidden_of(r),
             r.get("reacquired") == "false",
+            float(r.get("gain") or 0.0),
+            {"true": True, "false": False}.get(r.get("recorded")),
         )
         for r in rows
         if r["no_pose"] == "" and r["ends_cm"] != ""
@@ -118,6 +128,24 @@ def tracked(frame):
     return len(frame) > 4 and frame[4]
 
 
+def gain_of(frame):
+    """The gain of `frame` (error, sigma, spread, hidden, kept its track, gain[, ...]); 0
+    where it has none."""
+    return frame[5] if len(frame) > 5 else 0.0
+
+
+def recorded_of(frame):
+    """Whether `frame` is of a recorded person: True, False, or None where not known."""
+    return frame[6] if len(frame) > 6 else None
+
+
+def confident_of(calibration):
+    """(gain, floors: no band, then each band) of the confident fits under `calibration`
+    (scale, floor, hidden floors, tracked floors, confident), or None: the gain chooses no
+    floors."""
+    return calibration[4] if len(calibration) > 4 else None
+
+
 def tracked_floors_of(calibration):
     """The floors (no band, then each band) of fits that kept their track under
     `calibration` (scale, floor[, hidden floors[, tracked floors]]), or None: the same as
@@ -127,10 +155,14 @@ def tracked_floors_of(calibration):
 
 def floor_at(calibration, frame):
     """The floor for `frame` under `calibration` (scale, floor[, hidden floors[, tracked
-    floors]]): its band's, never below a less hidden band's; the tracked floors' for a frame
-    that kept its track, where the calibration has them (Calibration::radius)."""
+    floors[, confident]]]): its band's, never below a less hidden band's; the confident
+    floors' for a frame of their gain or more, else the tracked floors' for a frame that kept
+    its track, where the calibration has them (Calibration::radius)."""
     own = tracked_floors_of(calibration)
-    if own is not None and tracked(frame):
+    confident = confident_of(calibration)
+    if confident is not None and gain_of(frame) >= confident[0]:
+        floors = list(confident[1])
+    elif own is not None and tracked(frame):
         floors = list(own)
     else:
         floors = [calibration[1]] + list(calibration[2] if len(calibration) > 2 else [])
@@ -174,16 +206,26 @@ def coverage(frames, calibration):
     return sum(1 for f in frames if f[0] <= radius(f, calibration)) / len(frames)
 
 
-def calibrate(frames, target, tracked_floors=False):
-    """Per scale, (scale, floor, hidden floors[, tracked floors]) and its mean radius; and
-    the row of smallest mean radius. With `tracked_floors`, the frames that kept their track
-    and the re-acquired ones each get floors for `target` of their own."""
+def calibrate(frames, target, tracked_floors=False, confident_gain=None):
+    """Per scale, (scale, floor, hidden floors[, tracked floors[, confident]]) and its mean
+    radius; and the row of smallest mean radius. With `tracked_floors`, the frames that kept
+    their track and the re-acquired ones each get floors for `target` of their own; with
+    `confident_gain`, the frames of that gain or more get floors of their own first
+    (confident: (gain, floors)), and the others are calibrated as before."""
     rows = []
+    sure = [] if confident_gain is None else [f for f in frames if gain_of(f) >= confident_gain]
+    if confident_gain is not None and not sure:
+        sys.exit(f"no frame with a pose has a gain of {confident_gain:g} or more")
+    rest = [f for f in frames if confident_gain is None or gain_of(f) < confident_gain]
     for a in SCALES:
         if tracked_floors:
-            calibration = split_floors(frames, a, target)
+            calibration = split_floors(rest, a, target)
         else:
-            calibration = band_floors(frames, a, target)
+            calibration = band_floors(rest, a, target)
+        if confident_gain is not None:
+            calibration = calibration[:3] + (tracked_floors_of(calibration),)
+            _, floor, hidden = band_floors(sure, a, target)
+            calibration = calibration + ((confident_gain, (floor,) + tuple(hidden)),)
         rows.append((calibration, statistics.mean(radius(f, calibration) for f in frames)))
     return rows, min(rows, key=lambda r: r[1])
 
@@ -257,6 +299,9 @@ def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain
         doc[section]["min_gain"] = min_gain
     if tracked_floors_of(calibration) is not None:
         doc[section]["tracked_floors_m"] = list(tracked_floors_of(calibration))
+    if confident_of(calibration) is not None:
+        gain, floors = confident_of(calibration)
+        doc[section]["confident"] = {"min_gain": gain, "floors_m": list(floors)}
     if fit is not None:
         doc[section]["fit"] = dict(fit)
     lines = [
@@ -284,6 +329,14 @@ def write_calibration(weights, section, calibration, fitted_on, confirm_min_gain
                     "tracked_floors_m = ["
                     + ", ".join(toml_float(h) for h in c["tracked_floors_m"]) + "]"
                 )
+            if "confident" in c:
+                lines += [
+                    "",
+                    f"[{name}.confident]",
+                    f"min_gain = {toml_float(c['confident']['min_gain'])}",
+                    "floors_m = ["
+                    + ", ".join(toml_float(h) for h in c["confident"]["floors_m"]) + "]",
+                ]
             if "fit" in c:
                 lines += ["", f"[{name}.fit]"] + [
                     f"{k} = {toml_value(v)}" for k, v in c["fit"].items()
@@ -309,6 +362,8 @@ def main():
     )
     parser.add_argument("--tracked-floors", action="store_true",
                         help="floors of their own for the fits that kept their track")
+    parser.add_argument("--confident-gain", type=float, default=None, metavar="G",
+                        help="floors of their own for the fits of gain G or more")
     parser.add_argument("--write", metavar="WEIGHTS", help="write the calibration beside WEIGHTS")
     depth = parser.add_mutually_exclusive_group()
     depth.add_argument("--depth", dest="depth", action="store_true", default=None,
@@ -358,7 +413,9 @@ def main():
             kept = sum(1 for f in frames if tracked(f))
             if frames:
                 print(f"{name}: {kept} of {len(frames)} frames with a pose kept their track")
-    rows, best = calibrate(val, args.target, args.tracked_floors)
+    if args.confident_gain is not None and not 0.0 <= args.confident_gain <= 1.0:
+        sys.exit("--confident-gain is a gain from 0 to 1")
+    rows, best = calibrate(val, args.target, args.tracked_floors, args.confident_gain)
     print(
         "| scale | floor (cm) | floors hidden 25/50/75 % (cm) | mean radius (cm) "
         "| 95th pct radius (cm) | validation coverage |" + (" test coverage |" if test else "")
@@ -390,6 +447,25 @@ def main():
                 own = [f for f in frames if tracked(f) == kept]
                 if own:
                     print(f"  {name}, {label}: {100 * coverage(own, best[0]):.2f} % of {len(own)}")
+    if confident_of(best[0]) is not None:
+        gain, floors = confident_of(best[0])
+        print(
+            f"  fits of gain {gain:g} or more: floors " + ", ".join(f"{h:.4f}" for h in floors) + " m"
+        )
+        for name, frames in (("validation", val), ("test", test or [])):
+            for sure, label in ((True, f"gain {gain:g} or more"), (False, f"gain below {gain:g}")):
+                own = [f for f in frames if (gain_of(f) >= gain) == sure]
+                if own:
+                    print(f"  {name}, {label}: {100 * coverage(own, best[0]):.2f} % of {len(own)}")
+    for name, frames in (("validation", val), ("test", test or [])):
+        for who, label in ((True, "recorded people"), (False, "the generator's motion")):
+            own = [f for f in frames if recorded_of(f) is who]
+            if own and len(own) < len(frames):
+                mean = statistics.mean(radius(f, best[0]) for f in own)
+                print(
+                    f"{name}, {label}: {100 * coverage(own, best[0]):.2f} % of {len(own)} "
+                    f"within, mean radius {100 * mean:.2f} cm"
+                )
     print("\ncoverage per band of the hidden share (validation" + (", test)" if test else ")"))
     for b in range(len(HIDDEN_BANDS) + 1):
         cells = []

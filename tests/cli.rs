@@ -802,7 +802,8 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
                     "truth_gain_forearm",
                     "truth_gain_hand",
                     "hidden_share",
-                    "confirmed"
+                    "confirmed",
+                    "recorded"
                 ]),
             "{csv}"
         );
@@ -846,6 +847,14 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
                 other => panic!("confirmed: {other:?} in {line}"),
             }
         }
+        // This dataset plays the generator's motion: no frame is of a recorded person.
+        let recorded = column("recorded");
+        assert!(
+            csv.lines()
+                .skip(1)
+                .all(|l| l.split(',').nth(recorded) == Some("false")),
+            "{csv}"
+        );
         // The contact sheet of the frames without a pose, written when there are any.
         let why = column("no_pose");
         let without = csv

@@ -37,6 +37,7 @@ fn the_shipped_networks_carry_their_measured_calibration() {
             confirmed_floor_m: 0.65,
             min_gain: None,
             tracked_floors_m: None,
+            confident: None,
             fit: None,
         }
     );
@@ -96,6 +97,18 @@ fn a_malformed_calibration_is_refused_by_key() {
         (section("inf"), "with_depth.floor_m"),
         (section("0.1") + "extra = 1\n", "extra"),
         (section("0.1") + "min_gain = 1.5\n", "with_depth.min_gain"),
+        (
+            section("0.1") + "[with_depth.confident]\nmin_gain = 1.5\nfloors_m = [0, 0, 0, 0]\n",
+            "with_depth.confident.min_gain",
+        ),
+        (
+            section("0.1") + "[with_depth.confident]\nmin_gain = 0.7\nfloors_m = [0, -1, 0, 0]\n",
+            "with_depth.confident.floors_m[1]",
+        ),
+        (
+            section("0.1") + "[with_depth.confident]\nmin_gain = 0.7\nfloors_m = [0, 0]\n",
+            "floors_m = [0, 0]",
+        ),
         ("weights_sha256 = 3\n".to_string(), "weights_sha256"),
     ] {
         std::fs::write(calibration_path(&mine), &text).expect("write");

@@ -154,6 +154,59 @@ class Calibrate(unittest.TestCase):
         self.assertAlmostEqual(pooled[0][1], 0.485)
         self.assertLess(best[1], pooled[1])
 
+    def test_confident_fits_get_floors_of_their_own(self):
+        # 200 frames of gain 0.8 with errors up to 2 cm, 200 of gain 0.5 with errors up to
+        # 60 cm; the recorded people among them are the poor fits.
+        sure = [(k / 10_000.0, 0.0, 0.0, 0.0, False, 0.8, False) for k in range(1, 201)]
+        poor = [(k * 0.003, 0.0, 0.0, 0.0, False, 0.5, True) for k in range(1, 201)]
+        rows, best = calibrate_uncertainty.calibrate(sure + poor, 0.99, confident_gain=0.7)
+        scale, floor, hidden, tracked, confident = best[0]
+        self.assertIsNone(tracked)
+        # Index int(0.99 * 200) = 198 of each set's sorted errors: the 199th.
+        self.assertAlmostEqual(floor, 0.597)
+        self.assertEqual(confident[0], 0.7)
+        self.assertAlmostEqual(confident[1][0], 0.0199)
+        # A fit of the gain or more takes the confident floor; below it the others'.
+        radius = calibrate_uncertainty.radius
+        self.assertAlmostEqual(radius((0.0, 0.0, 0.0, 0.0, False, 0.7), best[0]), 0.0199)
+        self.assertAlmostEqual(radius((0.0, 0.0, 0.0, 0.0, False, 0.69), best[0]), 0.597)
+        for frames in (sure, poor):
+            self.assertGreaterEqual(calibrate_uncertainty.coverage(frames, best[0]), 0.99)
+        _, pooled = calibrate_uncertainty.calibrate(sure + poor, 0.99)
+        self.assertLess(best[1], pooled[1])
+        # Written, the confident floors are a table of their own that reads back.
+        import tomllib
+
+        with tempfile.TemporaryDirectory() as d:
+            weights = os.path.join(d, "w.safetensors")
+            with open(weights, "wb") as f:
+                f.write(b"w")
+            path = calibrate_uncertainty.write_calibration(weights, "with_depth", best[0], "v")
+            with open(path, "rb") as f:
+                doc = tomllib.load(f)
+            self.assertEqual(doc["with_depth"]["confident"]["min_gain"], 0.7)
+            self.assertEqual(len(doc["with_depth"]["confident"]["floors_m"]), 4)
+        # From the CSVs: the coverage of recorded people and of the generator apart.
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "pose_frames.csv")
+            with open(path, "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(["no_pose", "ends_cm", "sigma_m", "spread_m", "hidden_share",
+                            "reacquired", "gain", "recorded"])
+                for e, _, _, _, _, g, r in sure + poor:
+                    w.writerow(["", 100 * e, 0.0, 0.0, 0.0, "true", g, "true" if r else "false"])
+            script = os.path.join(HERE, "..", "..", "scripts", "calibrate_uncertainty.py")
+            out = subprocess.run([sys.executable, script, path, "--confident-gain", "0.7"],
+                                 capture_output=True, text=True, check=True).stdout
+            # The 99th percentile of each set: 199 of its 200 frames within.
+            self.assertIn("validation, gain 0.7 or more: 99.50 % of 200", out)
+            self.assertIn("validation, recorded people: 99.50 % of 200 within", out)
+            self.assertIn("validation, the generator's motion: 99.50 % of 200 within", out)
+            none = subprocess.run([sys.executable, script, path, "--confident-gain", "0.9"],
+                                  capture_output=True, text=True)
+            self.assertNotEqual(none.returncode, 0)
+            self.assertIn("no frame with a pose has a gain of 0.9", none.stderr)
+
     def test_the_fits_settings_are_read_beside_the_csv_and_written(self):
         import tomllib
 

@@ -64,10 +64,10 @@ mod search;
 
 pub use arm::{ArmModel, POSE_MESH_SEGMENTS, PartCapsule};
 pub use articulated::{
-    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmGain, ArmMasks, ArticulatedArm, BoundSource,
-    Calibration, CalibrationFile, FITTED_PARTS, FitSettings, HIDDEN_BANDS, HIDDEN_MARGIN_M,
-    MAX_CALIBRATION_BYTES, MAX_GRID_JOINTS, NetworkCalibration, TrunkModel, calibration_path,
-    file_sha256,
+    ArmFit, ArmFitConfig, ArmFitOutcome, ArmFitter, ArmGain, ArmMasks, ArticulatedArm, BoundInputs,
+    BoundSource, Calibration, CalibrationFile, ConfidentFloors, FITTED_PARTS, FitSettings,
+    HIDDEN_BANDS, HIDDEN_MARGIN_M, MAX_CALIBRATION_BYTES, MAX_GRID_JOINTS, NetworkCalibration,
+    TrunkModel, calibration_path, file_sha256,
 };
 pub use config::PoseConfig;
 pub use image::f_m;

@@ -8,7 +8,9 @@
 
 use std::collections::VecDeque;
 
-use workcell_perception::pose::{ArmFitConfig, ArmMasks, Calibration, FitSettings};
+use workcell_perception::pose::{
+    ArmFitConfig, ArmMasks, Calibration, ConfidentFloors, FitSettings,
+};
 use workcell_perception::{ArmTracker, NoEstimate};
 use workcell_procnet::{Backend, ProcNet};
 use workcell_safety::{HumanEstimate, HumanGeometry};
@@ -419,7 +421,7 @@ pub fn bench_tracker(
 }
 
 /// `measured` with a scenario's own scale and floor where it gives them: its floor is the
-/// least of every floor, the hidden bands' and a kept track's too (ProcNetConfig's keys).
+/// least of every floor, the hidden bands', a kept track's and a confident fit's too (ProcNetConfig's keys).
 fn with_overrides(measured: Calibration, scale: Option<f64>, floor_m: Option<f64>) -> Calibration {
     let Some(floor_m) = floor_m else {
         return Calibration {
@@ -433,6 +435,10 @@ fn with_overrides(measured: Calibration, scale: Option<f64>, floor_m: Option<f64
         tracked_floors_m: measured
             .tracked_floors_m
             .map(|floors| floors.map(|f| f.max(floor_m))),
+        confident: measured.confident.map(|c| ConfidentFloors {
+            floors_m: c.floors_m.map(|f| f.max(floor_m)),
+            ..c
+        }),
         ..measured
     }
 }
@@ -440,6 +446,7 @@ fn with_overrides(measured: Calibration, scale: Option<f64>, floor_m: Option<f64
 #[cfg(test)]
 mod tests {
     use super::*;
+    use workcell_perception::pose::BoundInputs;
     use workcell_safety::HumanPart;
     use workcell_sim::{CellState, RobotCommand, step};
 
@@ -586,16 +593,32 @@ mod tests {
             floor_m: 0.3,
             hidden_floors_m: [0.3, 0.4, 0.6],
             tracked_floors_m: Some([0.02, 0.1, 0.2, 0.3]),
+            confident: Some(ConfidentFloors {
+                min_gain: 0.7,
+                floors_m: [0.01, 0.05, 0.1, 0.3],
+            }),
             ..Calibration::UNCALIBRATED
         };
         assert_eq!(with_overrides(measured, None, None), measured);
         let own = with_overrides(measured, Some(2.0), Some(0.15));
         assert_eq!((own.scale, own.floor_m), (2.0, 0.15));
         assert_eq!(own.tracked_floors_m, Some([0.15, 0.15, 0.2, 0.3]));
+        assert_eq!(
+            own.confident.map(|c| c.floors_m),
+            Some([0.15, 0.15, 0.15, 0.3])
+        );
         assert_eq!(own.hidden_floors_m, measured.hidden_floors_m);
-        for hidden in [0.0, 0.3, 0.6, 0.9] {
-            for tracked in [false, true] {
-                assert!(own.radius(0.0, 0.0, hidden, false, tracked) >= 0.15);
+        for hidden_share in [0.0, 0.3, 0.6, 0.9] {
+            for (tracked, gain) in [(false, 0.5), (true, 0.5), (false, 0.8), (true, 0.8)] {
+                let fit = BoundInputs {
+                    sigma_m: 0.0,
+                    spread_m: 0.0,
+                    hidden_share,
+                    gain,
+                    confirmed: false,
+                    tracked,
+                };
+                assert!(own.radius(&fit) >= 0.15);
             }
         }
     }

@@ -46,10 +46,45 @@ pub struct Calibration {
     /// every fit.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tracked_floors_m: Option<[f64; 4]>,
+    /// The floors of a fit that explained the masks well ([`ConfidentFloors`]): from its
+    /// gain up, a fit takes these instead of any other floors. Absent: the gain does not
+    /// choose the floors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confident: Option<ConfidentFloors>,
     /// The fit's settings the bound was measured with ([`FitSettings`]): [`Calibration::apply`]
     /// sets them, so that the fit whose bound this is runs. Absent: the fit's defaults.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fit: Option<FitSettings>,
+}
+
+/// The floors of the fits whose gain reaches `min_gain`: a fit that explains the masks this
+/// well is rarely far off, on recorded people as on the generator's motion, so one set of
+/// floors fitted on every fit is set by the poor ones (`scripts/calibrate_uncertainty.py
+/// --confident-gain`; docs/perception.md, "A bound that reads the gain").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConfidentFloors {
+    /// The gain ([`ArmFit::gain`]) from which a fit takes these floors.
+    pub min_gain: f64,
+    /// The floors (no band of [`HIDDEN_BANDS`], then each band), m.
+    pub floors_m: [f64; 4],
+}
+
+/// What the bound of one fit is made from ([`Calibration::radius`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoundInputs {
+    /// The curvature's spread of the forearm's centre and wrist, m ([`ArmFit::sigma_m`]).
+    pub sigma_m: f64,
+    /// How far apart the hypotheses the masks cannot tell apart put them, m.
+    pub spread_m: f64,
+    /// The share of the forearm's region hidden by something in front of it.
+    pub hidden_share: f64,
+    /// How well the fit explains the masks ([`ArmFit::gain`]).
+    pub gain: f64,
+    /// A faint fit confirmed by the frame before ([`ArmFit::confirmed`]).
+    pub confirmed: bool,
+    /// The fit kept its track ([`ArmFit::reacquired`] false).
+    pub tracked: bool,
 }
 
 /// The settings of the fit that change which poses it finds (and so what its bound must
@@ -206,6 +241,7 @@ impl Calibration {
         confirmed_floor_m: 0.0,
         min_gain: None,
         tracked_floors_m: None,
+        confident: None,
         fit: None,
     };
 
@@ -232,6 +268,7 @@ impl Calibration {
             confirmed_floor_m: 0.0,
             min_gain: None,
             tracked_floors_m: None,
+            confident: None,
             fit: None,
         }
     }
@@ -321,9 +358,17 @@ impl Calibration {
             "tracked_floors_m[2]",
             "tracked_floors_m[3]",
         ];
+        let confident = self.confident.map_or([0.0; 4], |c| c.floors_m);
+        let confident_keys = [
+            "confident.floors_m[0]",
+            "confident.floors_m[1]",
+            "confident.floors_m[2]",
+            "confident.floors_m[3]",
+        ];
         let lengths = lengths
             .into_iter()
-            .chain(tracked_keys.into_iter().zip(tracked));
+            .chain(tracked_keys.into_iter().zip(tracked))
+            .chain(confident_keys.into_iter().zip(confident));
         for (key, v) in lengths {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("{key}: {v} is not a finite value >= 0"));
@@ -333,6 +378,14 @@ impl Calibration {
             && !(0.0..=1.0).contains(&g)
         {
             return Err(format!("min_gain: {g} is not a gain from 0 to 1"));
+        }
+        if let Some(c) = self.confident
+            && !(0.0..=1.0).contains(&c.min_gain)
+        {
+            return Err(format!(
+                "confident.min_gain: {} is not a gain from 0 to 1",
+                c.min_gain
+            ));
         }
         if let Some(f) = self.fit
             && !(0.0..=1.0).contains(&f.search_below_gain)
@@ -361,6 +414,7 @@ impl Calibration {
         };
         ArmFitConfig {
             uncertainty_tracked_floors_m: self.tracked_floors_m,
+            uncertainty_confident: self.confident,
             uncertainty_scale: self.scale,
             uncertainty_floor_m: self.floor_m,
             uncertainty_hidden_floors_m: self.hidden_floors_m,
@@ -371,27 +425,22 @@ impl Calibration {
         }
     }
 
-    /// The radius of a fit whose curvature spreads the forearm's centre and wrist by
-    /// `sigma_m`, whose hypotheses lie `spread_m` apart and whose forearm's region is
-    /// `hidden_share` hidden, that kept its track or not (`tracked`: [`ArmFit::reacquired`]
-    /// false), under this calibration (what [`ArmFit::uncertainty_m`] reports):
-    /// `scale sigma + floor`, or the spread where that is larger; for a pose `confirmed`
-    /// below the gain threshold, at least `confirmed_floor_m`.
+    /// The radius of a fit (what [`ArmFit::uncertainty_m`] reports) under this calibration:
+    /// `scale sigma + floor`, or the spread where that is larger; for a pose confirmed below
+    /// the gain threshold, at least `confirmed_floor_m`. The floor is the confident floors'
+    /// where the fit's gain reaches theirs, else the tracked floors' for a fit that kept its
+    /// track, else the floors of every fit; each by the band of the hidden share.
     #[must_use]
-    pub fn radius(
-        &self,
-        sigma_m: f64,
-        spread_m: f64,
-        hidden_share: f64,
-        confirmed: bool,
-        tracked: bool,
-    ) -> f64 {
-        let floor = match self.tracked_floors_m {
-            Some(floors) if tracked => Self::band_floor(floors, hidden_share),
-            _ => self.floor_at(hidden_share),
+    pub fn radius(&self, fit: &BoundInputs) -> f64 {
+        let floor = match (self.confident, self.tracked_floors_m) {
+            (Some(c), _) if fit.gain >= c.min_gain => {
+                Self::band_floor(c.floors_m, fit.hidden_share)
+            }
+            (_, Some(floors)) if fit.tracked => Self::band_floor(floors, fit.hidden_share),
+            _ => self.floor_at(fit.hidden_share),
         };
-        let r = (self.scale * sigma_m + floor).max(spread_m);
-        if confirmed {
+        let r = (self.scale * fit.sigma_m + floor).max(fit.spread_m);
+        if fit.confirmed {
             r.max(self.confirmed_floor_m)
         } else {
             r
@@ -424,6 +473,7 @@ impl Calibration {
             confirmed_floor_m: config.uncertainty_confirmed_floor_m,
             min_gain: Some(config.min_gain),
             tracked_floors_m: config.uncertainty_tracked_floors_m,
+            confident: config.uncertainty_confident,
             fit: Some(FitSettings::of(config)),
         }
     }

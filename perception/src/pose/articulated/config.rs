@@ -1,5 +1,7 @@
 //! The fit's settings ([`ArmFitConfig`]) and their defaults.
 
+use super::ConfidentFloors;
+
 /// Settings of the articulated fit.
 // Serialize: the docs' stated defaults are checked against it (tests/defaults.rs).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -74,6 +76,9 @@ pub struct ArmFitConfig {
     /// The floors of a fit that kept its track ([`Calibration::tracked_floors_m`]), m.
     /// Default none: the same floors as any fit.
     pub uncertainty_tracked_floors_m: Option<[f64; 4]>,
+    /// The floors of a fit from a gain up ([`Calibration::confident`]). Default none: the
+    /// gain does not choose the floors.
+    pub uncertainty_confident: Option<ConfidentFloors>,
     /// The global search runs, beside the tracked hypotheses, when their best gain is below
     /// this: a track that explains the masks this poorly has likely followed a wrong
     /// optimum. Default 0.55.
@@ -134,6 +139,7 @@ impl Default for ArmFitConfig {
             uncertainty_hidden_floors_m: [0.0; 3],
             uncertainty_confirmed_floor_m: 0.0,
             uncertainty_tracked_floors_m: None,
+            uncertainty_confident: None,
             search_below_gain: 0.55,
             depth_sigma_m: 0.03,
             depth_weight: 0.05,

@@ -434,13 +434,14 @@ impl<R: Renderer> ArmFitter<R> {
             part_gain: climb.score.part_gain,
             sigma_q,
             spread_m,
-            uncertainty_m: Calibration::of(&c).radius(
+            uncertainty_m: Calibration::of(&c).radius(&BoundInputs {
                 sigma_m,
                 spread_m,
                 hidden_share,
+                gain: climb.score.gain,
                 confirmed,
-                !reacquired,
-            ),
+                tracked: !reacquired,
+            }),
             hidden_share,
             sigma_m,
             reacquired,

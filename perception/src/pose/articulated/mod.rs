@@ -95,8 +95,8 @@ mod trunk;
 use workcell_robots::HumanPart;
 
 pub use calibration::{
-    BoundSource, Calibration, CalibrationFile, FitSettings, HIDDEN_BANDS, MAX_CALIBRATION_BYTES,
-    NetworkCalibration, calibration_path, file_sha256,
+    BoundInputs, BoundSource, Calibration, CalibrationFile, ConfidentFloors, FitSettings,
+    HIDDEN_BANDS, MAX_CALIBRATION_BYTES, NetworkCalibration, calibration_path, file_sha256,
 };
 pub use config::ArmFitConfig;
 pub use fit::{ArmFit, ArmFitOutcome, ArmFitter, ArmGain, MAX_GRID_JOINTS};

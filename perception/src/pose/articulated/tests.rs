@@ -925,6 +925,7 @@ fn an_occluder_in_front_is_measured_and_widens_the_bound() {
         confirmed_floor_m: 0.0,
         min_gain: None,
         tracked_floors_m: None,
+        confident: None,
         fit: None,
     };
     let config = calibration.apply(ArmFitConfig::default());
@@ -948,8 +949,9 @@ fn an_occluder_in_front_is_measured_and_widens_the_bound() {
 
 /// The floor grows band by band with the hidden share, and never falls below a less
 /// hidden band's; a confirmed pose's bound is at least its own floor; a fit that kept its
-/// track takes the tracked floors where the calibration has them; the calibration
-/// round-trips through the fit's settings, its gain threshold and fit settings with it.
+/// track takes the tracked floors where the calibration has them, and a fit of a gain from
+/// the confident floors' up takes theirs; the calibration round-trips through the fit's
+/// settings, its gain threshold, confident floors and fit settings with it.
 #[test]
 fn the_floor_follows_the_hidden_share() {
     let mut c = Calibration {
@@ -960,6 +962,7 @@ fn the_floor_follows_the_hidden_share() {
         confirmed_floor_m: 0.6,
         min_gain: Some(0.45),
         tracked_floors_m: None,
+        confident: None,
         fit: Some(FitSettings {
             fit_trunk: true,
             search_below_gain: 0.7,
@@ -972,26 +975,75 @@ fn the_floor_follows_the_hidden_share() {
         .map(|&h| c.floor_at(h))
         .collect();
     assert_eq!(floors, [0.05, 0.05, 0.05, 0.2, 0.2, 0.2, 0.2]);
-    assert!((c.radius(0.01, 0.0, 0.5, false, false) - 0.22).abs() < 1e-12);
+    // A fit of a gain below any confident floors', with its curvature, spread, hidden share,
+    // confirmation and track.
+    let fit = |sigma_m, spread_m, hidden_share, confirmed, tracked| BoundInputs {
+        sigma_m,
+        spread_m,
+        hidden_share,
+        gain: 0.5,
+        confirmed,
+        tracked,
+    };
+    assert!((c.radius(&fit(0.01, 0.0, 0.5, false, false)) - 0.22).abs() < 1e-12);
     // Without tracked floors, a tracked fit has the same bound.
-    assert!((c.radius(0.01, 0.0, 0.5, false, true) - 0.22).abs() < 1e-12);
-    assert_eq!(c.radius(0.01, 0.5, 0.5, false, false), 0.5);
-    assert_eq!(c.radius(0.01, 0.5, 0.5, true, false), 0.6);
-    assert_eq!(c.radius(0.01, 0.7, 0.5, true, false), 0.7);
+    assert!((c.radius(&fit(0.01, 0.0, 0.5, false, true)) - 0.22).abs() < 1e-12);
+    assert_eq!(c.radius(&fit(0.01, 0.5, 0.5, false, false)), 0.5);
+    assert_eq!(c.radius(&fit(0.01, 0.5, 0.5, true, false)), 0.6);
+    assert_eq!(c.radius(&fit(0.01, 0.7, 0.5, true, false)), 0.7);
     c.tracked_floors_m = Some([0.01, 0.03, 0.02, 0.08]);
     let tracked: Vec<f64> = [0.0, 0.25, 0.5, 0.75]
         .iter()
-        .map(|&h| c.radius(0.0, 0.0, h, false, true))
+        .map(|&h| c.radius(&fit(0.0, 0.0, h, false, true)))
         .collect();
     assert_eq!(tracked, [0.01, 0.03, 0.03, 0.08]);
-    assert_eq!(c.radius(0.0, 0.0, 0.5, false, false), 0.2);
+    assert_eq!(c.radius(&fit(0.0, 0.0, 0.5, false, false)), 0.2);
+    // From the confident floors' gain up, a fit takes them, tracked or not; below it, the
+    // floors it took before.
+    c.confident = Some(ConfidentFloors {
+        min_gain: 0.7,
+        floors_m: [0.005, 0.004, 0.02, 0.01],
+    });
+    for tracked in [false, true] {
+        let confident: Vec<f64> = [0.0, 0.25, 0.5, 0.75]
+            .iter()
+            .map(|&hidden_share| {
+                c.radius(&BoundInputs {
+                    gain: 0.7,
+                    ..fit(0.0, 0.0, hidden_share, false, tracked)
+                })
+            })
+            .collect();
+        assert_eq!(confident, [0.005, 0.005, 0.02, 0.02]);
+    }
+    assert_eq!(
+        c.radius(&BoundInputs {
+            gain: 0.69,
+            ..fit(0.0, 0.0, 0.75, false, true)
+        }),
+        0.08
+    );
+    // The spread and the curvature still count.
+    let spread = BoundInputs {
+        gain: 0.9,
+        ..fit(0.01, 0.3, 0.0, false, false)
+    };
+    assert_eq!(c.radius(&spread), 0.3);
+    let curved = BoundInputs {
+        gain: 0.9,
+        ..fit(0.01, 0.0, 0.0, false, false)
+    };
+    assert!((c.radius(&curved) - 0.025).abs() < 1e-12);
     let config = c.apply(ArmFitConfig::default());
     assert!(config.fit_trunk && config.reversed_start && !config.depth_start);
     assert_eq!(config.search_below_gain, 0.7);
     assert_eq!(Calibration::of(&config), c);
     // The file's form: a calibration's fit settings are a table of their own.
     let text = toml::to_string(&c).expect("serialises");
-    assert!(text.contains("[fit]"), "{text}");
+    assert!(
+        text.contains("[fit]") && text.contains("[confident]"),
+        "{text}"
+    );
     assert_eq!(toml::from_str::<Calibration>(&text).expect("parses"), c);
     let other = FitSettings {
         depth_start: true,
