@@ -357,7 +357,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
             (_, Some(c)) => format!(
                 "\nThe bound is {}: \
                  {:.2} cm plus {} times the curvature's spread, the hypotheses' spread where it \
-                 is larger{}.\n",
+                 is larger{}{}.\n",
                 uncalibrated.as_ref().map_or_else(
                     || "the one calibrated for these masks".to_string(),
                     |why| format!("the conservative one of uncalibrated masks ({why})")
@@ -377,7 +377,12 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                     )
                 } else {
                     String::new()
-                }
+                },
+                c.confident.map_or_else(String::new, |c| format!(
+                    "; a fit of a gain of {} or more, {} cm from 0, 25, 50 and 75 % hidden",
+                    c.min_gain,
+                    c.floors_m.map(|f| format!("{:.2}", 100.0 * f)).join(", ")
+                ))
             ),
             (_, None) => "\nThese masks have no calibration: the bound is the curvature's spread \
                           alone, or the hypotheses' where it is larger \

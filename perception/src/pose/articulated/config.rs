@@ -97,9 +97,12 @@ pub struct ArmFitConfig {
     /// out/dataset-human --depth --trunk fit|upright`) it gives a pose in 3,247 instead of
     /// 2,113 of 3,460 frames with true masks, and with `procnet-depth-human`'s masks in
     /// 2,822 instead of 1,974 at a median forearm error of 1.5 against 2.1 cm on generated
-    /// motion and 4.9 against 8.2 cm on recorded people; but the frames it adds are hard
-    /// ones, and a bound that covers 99 % of them needs floors of 60 cm (docs/perception.md,
-    /// "A network for the whole body").
+    /// motion and 4.9 against 8.2 cm on recorded people. The frames it adds are hard ones:
+    /// below a gain of 0.7 a bound that covers 99 % of them needs floors of 58 to 114 cm, and
+    /// `procnet-depth-human`'s calibration, which runs this fit, gives the fits of a gain of
+    /// 0.7 or more floors of 9 cm (51 cm where three quarters of the forearm is hidden);
+    /// on recorded people no tuning saw that bound holds for 99.3 % of the frames with a
+    /// pose, the upright fit's for 89 % (docs/perception.md, "A bound that reads the gain").
     pub fit_trunk: bool,
     /// Climb from the best fit's forearm turned end for end as well
     /// ([`ArticulatedArm::reversed_forearm`]) and keep it as a hypothesis where it scores as
