@@ -8,6 +8,7 @@ use std::sync::Mutex;
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
 use workcell::evaluate::html::{PageReplay, replay_script, summary_html};
+use workcell::evaluate::perception::procnet::camera_coverage_warning;
 use workcell::evaluate::record::{
     KeptTrace, PLOTTED_EPISODES, RUN_RECORD, RUN_RECORD_FORMAT, RunRecord, RunSettings,
     shard_episodes, worst_episodes,
@@ -261,6 +262,12 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
         );
     }
     let evaluation = load(path, args.perception, &args.overrides)?;
+    if let PerceptionConfig::Procnet(p) = &evaluation.config.perception {
+        let model = workcell::sim::CellModel::new(&evaluation.scenario, &evaluation.scenario_path)?;
+        if let Some(warning) = camera_coverage_warning(p, &evaluation.scenario, &model)? {
+            tracing::warn!("{warning}");
+        }
+    }
     let mode = match args.filter {
         FilterArg::None => FilterMode::None,
         FilterArg::Qp => FilterMode::Qp,

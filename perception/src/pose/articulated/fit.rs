@@ -353,6 +353,10 @@ impl<R: Renderer> ArmFitter<R> {
                 .into_iter()
                 .max_by(|a, b| a.0.score.objective.total_cmp(&b.0.score.objective));
             let Some((best, track)) = best else {
+                tracing::trace!(
+                    tracks = self.tracks.len(),
+                    "poor fit: no fit above confirm_min_gain"
+                );
                 return Ok(Err(NoPose::PoorFit));
             };
             let points = self.forearm_points(&best.q, &target.X_WC)?;
@@ -362,6 +366,15 @@ impl<R: Renderer> ArmFitter<R> {
                     .zip(&points)
                     .all(|(a, b)| (*a - *b).length() <= c.confirm_m)
             });
+            tracing::trace!(
+                gain = best.score.gain,
+                from_track = !track.is_empty(),
+                moved_m = ?last_points.map(|last| {
+                    [(last[0] - points[0]).length(), (last[1] - points[1]).length()]
+                }),
+                confirmed,
+                "faint fit"
+            );
             self.last_points = Some(points);
             if !confirmed {
                 self.tracks = vec![vec![best.q]];
