@@ -115,6 +115,13 @@ pub struct ProcNetConfig {
     /// Bound on the human's acceleration used to grow the uncertainty of an ageing estimate,
     /// m/s^2. Default 10.
     pub human_acceleration_m_s2: f64,
+    /// The joints' velocity is the least-squares slope through the last this many fits (2 to
+    /// 8) within [`super::procnet::MAX_AGE_S`] of the newest: it carries the estimate over its
+    /// age and is the velocity the filter sees. 2 is the difference of the last two; 3 cut
+    /// the closed loop's perception error on the recorded tuning clips, but not on the
+    /// held-out ones (docs/perception.md, "The joints' velocity through three fits").
+    /// Default 2.
+    pub velocity_fits: usize,
     /// The camera delivers nothing from this time on, s (a failed camera): the last estimate
     /// ages out ([`super::procnet::MAX_AGE_S`]) and the filter then brakes. Left out, never.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -177,6 +184,7 @@ impl PerceptionKind {
                 "uncertainty_floor_m",
                 "latency_s",
                 "human_acceleration_m_s2",
+                "velocity_fits",
                 "camera_fails_at_s",
             ],
         }
@@ -230,6 +238,7 @@ impl Default for ProcNetConfig {
             uncertainty_floor_m: None,
             latency_s: 0.05,
             human_acceleration_m_s2: 10.0,
+            velocity_fits: 2,
             camera_fails_at_s: None,
         }
     }
@@ -390,7 +399,7 @@ impl ProcNetConfig {
     #[must_use]
     pub fn describe(&self) -> String {
         format!(
-            "{} + articulated render-and-compare{}{}, latency {:.0} ms",
+            "{} + articulated render-and-compare{}{}, latency {:.0} ms{}",
             match self.masks {
                 // The weights' own header says which network they hold (ProcNet or the
                 // feed-forward baseline); an unreadable file fails when it is loaded.
@@ -412,7 +421,12 @@ impl ProcNetConfig {
             } else {
                 String::new()
             },
-            self.latency_s * 1e3
+            self.latency_s * 1e3,
+            if self.velocity_fits == ProcNetConfig::default().velocity_fits {
+                String::new()
+            } else {
+                format!(", velocity through the last {} fits", self.velocity_fits)
+            }
         )
     }
 }
@@ -514,6 +528,12 @@ impl PerceptionConfig {
                     c.human_acceleration_m_s2,
                     c.human_acceleration_m_s2 >= 0.0,
                 )?;
+                if !(2..=8).contains(&c.velocity_fits) {
+                    return Err(crate::Error::config(
+                        "perception.velocity_fits",
+                        format!("out of range: {} (2 to 8)", c.velocity_fits),
+                    ));
+                }
                 check_optional("uncertainty_scale", c.uncertainty_scale)?;
                 check_optional("uncertainty_floor_m", c.uncertainty_floor_m)
             }
@@ -681,6 +701,22 @@ mod tests {
             );
             let text = toml::to_string(&document).expect("serialises");
             assert_eq!(parse(&text).expect("reads back"), config, "{text}");
+        }
+    }
+
+    /// `velocity_fits` takes 2 to 8 fits; out of that, the check names the key.
+    #[test]
+    fn velocity_fits_is_checked() {
+        for (n, ok) in [(1, false), (2, true), (3, true), (8, true), (9, false)] {
+            let config = parse(&format!(
+                "[perception]\nkind = \"procnet\"\nvelocity_fits = {n}\n"
+            ))
+            .expect("reads");
+            let checked = config.validate();
+            assert_eq!(checked.is_ok(), ok, "{n}: {checked:?}");
+            if let Err(e) = checked {
+                assert!(e.to_string().contains("perception.velocity_fits"), "{e}");
+            }
         }
     }
 

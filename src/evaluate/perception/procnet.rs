@@ -2,7 +2,8 @@
 //! image when the camera measures depth, with a black disc over the forearm when the
 //! evaluation asks for artificial occlusion), an [`ArmTracker`] segments every arm part and
 //! fits the human model's joints to the masks, and the arm's parts are where the fitted
-//! joints put them, carried forward by the joints' velocity over the estimate's age. A frame
+//! joints put them, carried forward over the estimate's age by the joints' velocity (the
+//! least-squares slope through the last `velocity_fits` fits). A frame
 //! without a pose delivers nothing: the last estimate ages (its uncertainty grows); without
 //! one, or once it is older than [`MAX_AGE_S`], the filter sees no human and brakes.
 
@@ -58,9 +59,12 @@ pub struct ProcNetCamera {
     frame: Frame,
     next_frame_s: f64,
     in_flight: VecDeque<(f64, Option<Measured>)>,
-    /// The newest delivered measurement, its exposure time, and the one before (velocity).
+    /// The newest delivered measurement and its exposure time.
     latest: Option<(f64, Measured)>,
-    previous: Option<(f64, Measured)>,
+    /// The last `velocity_fits` delivered fits (exposure time, joints), newest last, and
+    /// the joints' velocity through them.
+    fits: VecDeque<(f64, Vec<f64>)>,
+    fit_qd: Vec<f64>,
     geometry: HumanGeometry,
     kinematics: KinematicState,
     q: Vec<f64>,
@@ -167,7 +171,8 @@ impl ProcNetCamera {
             next_frame_s: 0.0,
             in_flight: VecDeque::new(),
             latest: None,
-            previous: None,
+            fits: VecDeque::new(),
+            fit_qd: vec![0.0; model.human.dof()],
             geometry: HumanGeometry::new(&model.human)?,
             kinematics,
             q: vec![0.0; model.human.dof()],
@@ -322,7 +327,12 @@ impl HumanPerception for ProcNetCamera {
             .is_some_and(|(t0, _)| t0 + self.config.latency_s <= t + 1e-9)
         {
             if let Some((t0, Some(m))) = self.in_flight.pop_front() {
-                self.previous = self.latest.replace((t0, m));
+                self.fits.push_back((t0, m.q.clone()));
+                while self.fits.len() > self.config.velocity_fits.max(2) {
+                    self.fits.pop_front();
+                }
+                least_squares_velocity(&self.fits, &mut self.fit_qd);
+                self.latest = Some((t0, m));
             }
         }
         out.parts.clear();
@@ -335,17 +345,9 @@ impl HumanPerception for ProcNetCamera {
         if age > MAX_AGE_S {
             return; // too old to trust: the filter brakes
         }
-        // The joints' velocity from the last two measurements, when they are close enough
-        // in time to be one movement (zero otherwise).
-        self.qd.iter_mut().for_each(|v| *v = 0.0);
-        if let Some((t1, p)) = &self.previous {
-            let dt = t0 - t1;
-            if dt > 1e-6 && dt <= MAX_AGE_S {
-                for ((v, a), b) in self.qd.iter_mut().zip(&m.q).zip(&p.q) {
-                    *v = (a - b) / dt;
-                }
-            }
-        }
+        // The joints' velocity through the last fits (`velocity_fits`) close enough in time
+        // to be one movement.
+        self.qd.copy_from_slice(&self.fit_qd);
         for ((q, q0), v) in self.q.iter_mut().zip(&m.q).zip(&self.qd) {
             *q = q0 + v * age;
         }
@@ -384,6 +386,40 @@ impl HumanPerception for ProcNetCamera {
                 "estimate error"
             );
         }
+    }
+}
+
+/// The joints' velocity through `fits` (exposure time, joints; newest last) into `qd`: the
+/// least-squares slope of each joint against time over the fits within [`MAX_AGE_S`] of the
+/// newest (of two, their difference quotient); zero with fewer than two.
+fn least_squares_velocity(fits: &VecDeque<(f64, Vec<f64>)>, qd: &mut [f64]) {
+    qd.iter_mut().for_each(|v| *v = 0.0);
+    let Some(&(newest, _)) = fits.back() else {
+        return;
+    };
+    let used = || fits.iter().filter(|(t, _)| newest - t <= MAX_AGE_S);
+    if let [(t1, q1), (t0, q0)] = used().collect::<Vec<_>>()[..] {
+        // Two: their difference quotient, as written (bit for bit the same as before).
+        let dt = t0 - t1;
+        if dt > 1e-6 {
+            for ((v, a), b) in qd.iter_mut().zip(q0).zip(q1) {
+                *v = (a - b) / dt;
+            }
+        }
+        return;
+    }
+    let n = used().count() as f64;
+    let mean_t = used().map(|(t, _)| t).sum::<f64>() / n;
+    let stt: f64 = used().map(|(t, _)| (t - mean_t).powi(2)).sum();
+    if n < 2.0 || stt < 1e-12 {
+        return;
+    }
+    for (j, v) in qd.iter_mut().enumerate() {
+        let mean_q = used().map(|(_, q)| q[j]).sum::<f64>() / n;
+        *v = used()
+            .map(|(t, q)| (t - mean_t) * (q[j] - mean_q))
+            .sum::<f64>()
+            / stt;
     }
 }
 
@@ -728,6 +764,43 @@ mod tests {
         // The paper's arm has no trunk joints: it stands where the cell puts it, in view.
         let (arm_scenario, arm_model) = cell();
         assert_eq!(warning_for(&arm_scenario, &arm_model), None);
+    }
+
+    /// The velocity through the last fits: exact on a ramp, the difference quotient of two,
+    /// a zigzag of three averaged out, a fit older than [`MAX_AGE_S`] left out.
+    #[test]
+    fn velocity_is_the_least_squares_slope_through_the_last_fits() {
+        let dt = 1.0 / 30.0;
+        let fits = |qs: &[(f64, f64)]| -> VecDeque<(f64, Vec<f64>)> {
+            qs.iter().map(|&(t, q)| (t, vec![q, 2.0 * q])).collect()
+        };
+        let mut qd = [f64::NAN; 2];
+        // A ramp of 0.5 rad/s: every window gives it.
+        let ramp: Vec<(f64, f64)> = (0..4)
+            .map(|i| (f64::from(i) * dt, 0.5 * f64::from(i) * dt))
+            .collect();
+        for k in 2..=4 {
+            least_squares_velocity(&fits(&ramp[4 - k..]), &mut qd);
+            assert!(
+                (qd[0] - 0.5).abs() < 1e-12 && (qd[1] - 1.0).abs() < 1e-12,
+                "{qd:?}"
+            );
+        }
+        // Two: the difference quotient; three in a zigzag 0, 1, 0: slope 0.
+        let zigzag = [(0.0, 0.0), (dt, 1.0), (2.0 * dt, 0.0)];
+        least_squares_velocity(&fits(&zigzag[1..]), &mut qd);
+        assert!((qd[0] + 30.0).abs() < 1e-9, "{qd:?}");
+        least_squares_velocity(&fits(&zigzag), &mut qd);
+        assert!(qd[0].abs() < 1e-9, "{qd:?}");
+        // A fit from before MAX_AGE_S is no part of the movement: 1 rad/s from the two.
+        let stale = [(0.0, 5.0), (0.5, 0.0), (0.5 + dt, dt)];
+        least_squares_velocity(&fits(&stale), &mut qd);
+        assert!((qd[0] - 1.0).abs() < 1e-9, "{qd:?}");
+        // One fit, or none: no velocity.
+        least_squares_velocity(&fits(&stale[2..]), &mut qd);
+        assert_eq!(qd, [0.0; 2]);
+        least_squares_velocity(&VecDeque::new(), &mut qd);
+        assert_eq!(qd, [0.0; 2]);
     }
 
     fn warning_for(scenario: &Scenario, model: &CellModel) -> Option<String> {
