@@ -170,12 +170,14 @@ pub struct TrunkReport {
     pub pelvis_travel_m: f64,
 }
 
-/// The joints of a model's trunk, by index: pelvis x and y, turn, lean, side bend.
+/// The joints of a model's trunk, by their index in a configuration: pelvis x and y, turn,
+/// lean, side bend (`None` for those the model lacks).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct TrunkJoints([Option<usize>; 5]);
+pub struct TrunkJoints(pub [Option<usize>; 5]);
 
 impl TrunkJoints {
-    const NAMES: [&'static str; 5] = [
+    /// The joints' names, in order.
+    pub const NAMES: [&'static str; 5] = [
         "pelvis_x",
         "pelvis_y",
         "trunk_turn",
@@ -183,7 +185,9 @@ impl TrunkJoints {
         "trunk_side",
     ];
 
-    fn of(model: &RobotModel) -> Self {
+    /// The trunk joints `model` has.
+    #[must_use]
+    pub fn of(model: &RobotModel) -> Self {
         Self(Self::NAMES.map(|name| {
             model
                 .actuated_joints()
@@ -201,7 +205,7 @@ impl TrunkJoints {
     }
 
     /// Writes `values` (pelvis x, y, turn, lean, side) into `q`.
-    fn set(&self, q: &mut [f64], values: [f64; 5]) {
+    pub fn set(&self, q: &mut [f64], values: [f64; 5]) {
         for (j, v) in self.0.iter().zip(values) {
             if let Some(j) = *j {
                 q[j] = v;

@@ -17,6 +17,7 @@ use workcell_procnet::{Backend, ProcNet};
 use workcell_safety::{HumanEstimate, HumanGeometry};
 use workcell_sim::render::occlusion::{OCCLUDER_DEPTH_M, Occluder, OccluderKind, fit_occluder};
 use workcell_sim::render::{Camera, Class, CpuRenderer, Frame, Renderer};
+use workcell_sim::retarget::TrunkJoints;
 use workcell_sim::{CellModel, CellScene, Scenario};
 
 use super::{AgeingBound, HumanPerception, MaskKind, PerceptionInput, ProcNetConfig};
@@ -397,29 +398,38 @@ fn least_squares_velocity(fits: &VecDeque<(f64, Vec<f64>)>, qd: &mut [f64]) {
     let Some(&(newest, _)) = fits.back() else {
         return;
     };
-    let used = || fits.iter().filter(|(t, _)| newest - t <= MAX_AGE_S);
-    if let [(t1, q1), (t0, q0)] = used().collect::<Vec<_>>()[..] {
+    // At most `velocity_fits` (8) entries, once per delivered fit.
+    let window: Vec<&(f64, Vec<f64>)> = fits
+        .iter()
+        .filter(|(t, _)| newest - t <= MAX_AGE_S)
+        .collect();
+    match window[..] {
+        [] | [_] => {}
         // Two: their difference quotient, as written (bit for bit the same as before).
-        let dt = t0 - t1;
-        if dt > 1e-6 {
-            for ((v, a), b) in qd.iter_mut().zip(q0).zip(q1) {
-                *v = (a - b) / dt;
+        [(t1, q1), (t0, q0)] => {
+            let dt = t0 - t1;
+            if dt > 1e-6 {
+                for ((v, a), b) in qd.iter_mut().zip(q0).zip(q1) {
+                    *v = (a - b) / dt;
+                }
             }
         }
-        return;
-    }
-    let n = used().count() as f64;
-    let mean_t = used().map(|(t, _)| t).sum::<f64>() / n;
-    let stt: f64 = used().map(|(t, _)| (t - mean_t).powi(2)).sum();
-    if n < 2.0 || stt < 1e-12 {
-        return;
-    }
-    for (j, v) in qd.iter_mut().enumerate() {
-        let mean_q = used().map(|(_, q)| q[j]).sum::<f64>() / n;
-        *v = used()
-            .map(|(t, q)| (t - mean_t) * (q[j] - mean_q))
-            .sum::<f64>()
-            / stt;
+        _ => {
+            let n = window.len() as f64;
+            let mean_t = window.iter().map(|(t, _)| t).sum::<f64>() / n;
+            let stt: f64 = window.iter().map(|(t, _)| (t - mean_t).powi(2)).sum();
+            if stt < 1e-12 {
+                return;
+            }
+            for (j, v) in qd.iter_mut().enumerate() {
+                let mean_q = window.iter().map(|(_, q)| q[j]).sum::<f64>() / n;
+                *v = window
+                    .iter()
+                    .map(|(t, q)| (t - mean_t) * (q[j] - mean_q))
+                    .sum::<f64>()
+                    / stt;
+            }
+        }
     }
 }
 
@@ -473,44 +483,24 @@ pub fn head_places_unseen(model: &CellModel, camera: &Camera) -> Result<usize> {
     let Some(head) = human.link_id("head").or_else(|| human.link_id("torso")) else {
         return Ok(0); // nothing to place
     };
+    // Each trunk joint's range ([0, 0] for those the model lacks).
     let limits = human.position_limits();
-    let joint = |name: &str| -> Option<(usize, [f64; 2])> {
-        let id = human.joint_id(name)?;
-        let index = human.actuated_joints().iter().position(|j| *j == id)?;
-        Some((index, limits[index]))
-    };
-    let set = |q: &mut [f64], joint: Option<(usize, [f64; 2])>, value: f64| {
-        if let Some((index, [lo, hi])) = joint {
-            q[index] = value.clamp(lo, hi);
-        }
-    };
-    let (x, y) = (joint("pelvis_x"), joint("pelvis_y"));
-    let (turn, lean) = (joint("trunk_turn"), joint("trunk_lean"));
+    let trunk = TrunkJoints::of(human);
+    let [x, y, turn, lean, side] = trunk.0.map(|j| j.map_or([0.0; 2], |i| limits[i]));
+    let upright = |[lo, hi]: [f64; 2]| 0.0_f64.clamp(lo, hi);
     let mut kinematics = KinematicState::new(human);
     kinematics.X_WB = model.X_WH;
     let mut q = human.neutral_configuration();
     let mut unseen = 0;
+    let slid = |range: [f64; 2], i: usize| [range[0], upright(range), range[1]][i];
     for place in 0..9 {
-        for (joint, i) in [(x, place % 3), (y, place / 3)] {
-            let [lo, hi] = joint.map_or([0.0; 2], |(_, l)| l);
-            set(&mut q, joint, [lo, 0.0, hi][i]);
-        }
-        for leaning in [false, true] {
-            set(
-                &mut q,
-                lean,
-                if leaning {
-                    lean.map_or(0.0, |(_, [_, hi])| hi)
-                } else {
-                    0.0
-                },
-            );
+        let (px, py) = (slid(x, place % 3), slid(y, place / 3));
+        for leaning in [upright(lean), lean[1]] {
             for heading in 0..8 {
-                set(
-                    &mut q,
-                    turn,
-                    f64::from(heading) * std::f64::consts::FRAC_PI_4 - std::f64::consts::PI,
-                );
+                let turned = (f64::from(heading) * std::f64::consts::FRAC_PI_4
+                    - std::f64::consts::PI)
+                    .clamp(turn[0], turn[1]);
+                trunk.set(&mut q, [px, py, turned, leaning, upright(side)]);
                 human.forward_kinematics(&q, &mut kinematics)?;
                 let p_W = kinematics.link_pose(head).translation;
                 let seen = camera
@@ -700,19 +690,11 @@ mod tests {
         // toward +x and +y in the world), upright; the head 0.6 m above the hip.
         let human = &model.human;
         let mut q = human.neutral_configuration();
-        for name in ["pelvis_x", "pelvis_y", "trunk_lean", "trunk_turn"] {
-            let id = human.joint_id(name).expect("trunk joint");
-            let i = human
-                .actuated_joints()
-                .iter()
-                .position(|j| *j == id)
-                .expect("index");
-            q[i] = if name.starts_with("pelvis") {
-                human.position_limits()[i][0]
-            } else {
-                0.0
-            };
-        }
+        let [lo_x, lo_y] = [0, 1].map(|k| {
+            let i = TrunkJoints::of(human).0[k].expect("a slide");
+            human.position_limits()[i][0]
+        });
+        TrunkJoints::of(human).set(&mut q, [lo_x, lo_y, 0.0, 0.0, 0.0]);
         let mut kinematics = KinematicState::new(human);
         kinematics.X_WB = model.X_WH;
         human
