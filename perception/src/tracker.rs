@@ -90,6 +90,9 @@ pub struct ArmTracker {
     /// The last estimate's shoulder, elbow and wrist: the next region of interest follows
     /// them.
     joints_W: Option<[Vector; 3]>,
+    /// The shoulder of the last pose, kept when the track is lost: where a human whose trunk
+    /// moves was last seen, the centre of the workspace crop.
+    last_shoulder_W: Option<Vector>,
     /// Frames in a row with a pose (a held frame, [`HOLD_REGION`], keeps the count): the
     /// region follows the arm from [`CONFIRM_POSES`] on.
     streak: usize,
@@ -157,6 +160,7 @@ impl ArmTracker {
             capsules,
             net: None,
             joints_W: None,
+            last_shoulder_W: None,
             streak: 0,
             held: 0,
             last_fx: None,
@@ -202,6 +206,7 @@ impl ArmTracker {
     pub fn reset(&mut self) {
         self.fitter.reset();
         self.joints_W = None;
+        self.last_shoulder_W = None;
         self.streak = 0;
         self.held = 0;
         self.last_fx = None;
@@ -214,7 +219,8 @@ impl ArmTracker {
     /// estimate's shoulder, elbow and wrist ([`Roi::of_joints`], the middle of
     /// [`roi::TRACKED_MARGIN`]) once [`CONFIRM_POSES`] frames in a row gave a pose (and for
     /// [`HOLD_REGION`] frames without one after that), else the sphere the forearm can reach
-    /// ([`Roi::of_sphere`]), else the whole frame.
+    /// ([`Roi::of_sphere`]) around the shoulder (for a human whose trunk moves, the last
+    /// pose's shoulder, before any pose the shoulder at rest), else the whole frame.
     #[must_use]
     pub fn roi(&self, camera: &Camera) -> Roi {
         self.region(camera).0
@@ -229,7 +235,10 @@ impl ArmTracker {
             .and_then(|joints| Roi::of_joints(camera, &joints, margin, roi::TRACKED_MIN_M))
             .map(|r| (r, RoiKind::Tracked))
             .or_else(|| {
-                let (shoulder, _) = self.arm.shoulder_W?;
+                let shoulder = match self.arm.shoulder_W {
+                    Some((fixed, _)) => fixed,
+                    None => self.last_shoulder_W.unwrap_or(self.arm.rest_shoulder_W.0),
+                };
                 Roi::of_sphere(camera, shoulder, self.arm.reach_m()?, roi::WORKSPACE_MARGIN)
                     .map(|r| (r, RoiKind::Workspace))
             })
@@ -452,6 +461,7 @@ impl ArmTracker {
                     }
                 });
         self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist]);
+        self.last_shoulder_W = Some(X_WL[0].translation);
         self.streak += 1;
         self.held = 0;
         Ok(Ok(ArmEstimate {
@@ -663,6 +673,78 @@ mod tests {
         };
         assert_eq!(lose(), (tracked, RoiKind::Tracked));
         assert_eq!(lose(), (workspace, RoiKind::Workspace));
+        // The pose's shoulder is remembered through the loss (a fixed shoulder's workspace
+        // does not read it).
+        let last = tracker.last_shoulder_W.expect("the last pose's shoulder");
+        assert!((last - shoulder).length() < 0.03, "{last} vs {shoulder}");
+    }
+
+    /// A human whose trunk moves (the catalogue's `human`: slides, turn, lean) has no fixed
+    /// shoulder, so its workspace is the reach sphere around the shoulder at rest before any
+    /// pose and around the last pose's shoulder after one, kept when the track is lost and
+    /// forgotten with the stream: never the whole frame, where a 64x64 network sees the arm
+    /// a few pixels long.
+    #[test]
+    fn the_workspace_follows_a_trunk_that_moves() {
+        let mut human = RobotModel::from_catalogue("human").expect("catalogue human");
+        human.retain_visuals(|g| workcell_robots::HumanLook::Flesh.shows(g.name.as_deref()));
+        let X_WH = pose_from_xyz_rpy([1.4, 0.0, 0.0], [0.0, 0.0, std::f64::consts::PI]);
+        let mut tracker = ArmTracker::new(&human, &X_WH, ArmFitConfig::default()).expect("tracker");
+        let arm = tracker.arm().clone();
+        assert_eq!(arm.shoulder_W, None);
+        // At rest: the upper arm link's origin with every joint at zero, and the reach is
+        // the upper arm's length (shoulder to elbow) plus the forearm's.
+        let zero: Vec<f64> = human
+            .position_limits()
+            .iter()
+            .map(|&[lo, hi]| 0.0_f64.clamp(lo, hi))
+            .collect();
+        let k = human.fk(X_WH, &zero).expect("fk");
+        let link = |part: HumanPart| {
+            let id = human.link_id(part.link_name()).expect("link");
+            k.link_pose(id).translation
+        };
+        let (rest, upper) = arm.rest_shoulder_W;
+        assert!(
+            (rest - link(HumanPart::UpperArm)).length() < 1e-12,
+            "{rest}"
+        );
+        assert!((upper - (link(HumanPart::Forearm) - rest).length()).abs() < 1e-12);
+        let reach = arm.reach_m().expect("reach");
+        assert!(
+            reach > upper + 0.2 && reach < upper + 0.4,
+            "{reach} from {upper}"
+        );
+        let camera = Camera::look_at(
+            [1.0, 2.9, 2.1],
+            [0.9, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+            640,
+            480,
+            55.0,
+        )
+        .expect("camera");
+        let around = |c: Vector| {
+            (
+                Roi::of_sphere(&camera, c, reach, roi::WORKSPACE_MARGIN).expect("in view"),
+                RoiKind::Workspace,
+            )
+        };
+        assert_eq!(tracker.region(&camera), around(rest));
+        // Where the last pose put the shoulder (0.5 m along a slide, say), the workspace
+        // follows; a frame without a pose keeps it; a new stream forgets it.
+        let moved = rest + Vector::new(0.0, 0.5, 0.0);
+        tracker.last_shoulder_W = Some(moved);
+        assert_ne!(around(moved), around(rest));
+        assert_eq!(tracker.region(&camera), around(moved));
+        let empty = ArmMasks::from_classes(&vec![0; 640 * 480], 640, 480).expect("masks");
+        tracker
+            .track_masks(&camera, &empty)
+            .expect("no error")
+            .expect_err("no arm in empty masks");
+        assert_eq!(tracker.region(&camera), around(moved));
+        tracker.reset();
+        assert_eq!(tracker.region(&camera), around(rest));
     }
 
     /// A tracker of the built-in human at the origin with the shipped network.

@@ -46,6 +46,9 @@ pub struct ArmModel {
     /// The shoulder in the world and the upper arm's length (shoulder to elbow), when the
     /// shoulder stays put whatever the joints do (a human whose torso does not move).
     pub shoulder_W: Option<(Vector, f64)>,
+    /// The shoulder in the world and the upper arm's length with every joint at zero (clamped
+    /// to its limits): where a human whose trunk moves stands at rest.
+    pub rest_shoulder_W: (Vector, f64),
     /// The arm's parts in [`HumanPart::ARM`] order, with their radii.
     parts: Vec<(HumanPart, Placement, f64)>,
 }
@@ -115,6 +118,10 @@ impl ArmModel {
             .collect();
         let reference = human.fk(*X_WH, &q_ref)?;
         let X_FW = reference.link_pose(forearm).inverse();
+        let rest_shoulder_W = {
+            let s = reference.link_pose(link(HumanPart::UpperArm)?).translation;
+            (s, (reference.link_pose(forearm).translation - s).length())
+        };
         let mut parts = Vec::with_capacity(HumanPart::ARM.len());
         for part in HumanPart::ARM {
             let l = link(part)?;
@@ -137,6 +144,7 @@ impl ArmModel {
         Ok(Self {
             forearm: model,
             shoulder_W,
+            rest_shoulder_W,
             parts,
         })
     }
@@ -153,7 +161,8 @@ impl ArmModel {
     }
 
     /// How far the wrist can be from the shoulder: the upper arm's length plus the forearm
-    /// capsule's far end from the elbow (`None` without a fixed shoulder).
+    /// capsule's far end from the elbow (the upper arm's length at rest where the shoulder
+    /// moves).
     #[must_use]
     pub fn reach_m(&self) -> Option<f64> {
         let forearm = self
@@ -165,7 +174,8 @@ impl ArmModel {
                 }
                 _ => None,
             })?;
-        self.shoulder_W.map(|(_, upper)| upper + forearm)
+        let (_, upper) = self.shoulder_W.unwrap_or(self.rest_shoulder_W);
+        Some(upper + forearm)
     }
 
     /// The arm's capsules in the world with the forearm link's frame at `X_WF`.
