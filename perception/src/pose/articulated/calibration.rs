@@ -232,7 +232,7 @@ impl Calibration {
     /// plus the curvature's spread, in every band, and no faint fit taken for a pose. It
     /// lies above every bound measured for the shipped networks of the paper's arm (the
     /// largest: 40.6 cm, the RGB network's fit without depth) and the true masks' (38.5 cm
-    /// without depth); not above the whole body's (`procnet-depth-human`: up to 113.9 cm).
+    /// without depth); not above the whole body's (`procnet-depth-human`: up to 72.8 cm).
     pub const UNCALIBRATED: Self = Self {
         scale: 1.0,
         floor_m: 0.45,
