@@ -19,7 +19,9 @@ that runs `workcell evaluate --shard K/N` (the work stays in the Rust binary) an
 run record; the driver merges each point's shards (`workcell report merge`) and tabulates the
 sweep (`workcell report sweep`). Output, under --out:
 
-    shards/point-NN/shard-K/   run records (a rerun skips the shards already there)
+    shards/point-NN/shard-K/   run records (a rerun skips the shards already there, unless
+                               the plan or what it reads changed: the evaluation file, its
+                               cell file, the shipped weights, the workcell binary)
     points/point-NN/           each point's merged report (summary.md, plots, violations)
     sweep.md, sweep.csv, sweep.png   violations and task time per point
     plan.json                  the points and their flags
@@ -35,6 +37,7 @@ shared filesystem, or the same checkout and `cargo build --release` on each node
 from __future__ import annotations
 
 import argparse
+import hashlib
 import itertools
 import json
 import os
@@ -103,12 +106,38 @@ def plan(sweep_path: Path) -> dict:
         points.append({"name": f"point-{i:02d}", "values": dict(zip(grid.keys(), combo)), "flags": flags})
     return {
         "evaluation": str(evaluation),
+        "inputs": inputs(evaluation),
         "episodes": episodes,
         "seed": seed,
         "shards": shards,
         "gltf": gltf,
         "points": points,
     }
+
+
+def sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def inputs(evaluation: Path) -> dict:
+    """The SHA-256 of the files a point's results depend on besides its flags: the evaluation
+    file, the cell file it names, and the shipped weights (read when the evaluation names
+    none). A shard run with other contents is another experiment, not one to resume."""
+    files = [evaluation]
+    try:
+        cell = tomllib.loads(evaluation.read_text()).get("cell")
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        cell = None  # workcell itself refuses the file with the reason
+    if isinstance(cell, str) and (evaluation.parent / cell).is_file():
+        files.append((evaluation.parent / cell).resolve())
+    weights = REPO / "procnet" / "weights"
+    if weights.is_dir():
+        files += sorted(f for f in weights.iterdir() if f.is_file())
+    return {str(f): sha256(f) for f in files}
 
 
 def evaluate_args(p: dict, point: dict, shard: int | None) -> list[str]:
@@ -215,6 +244,7 @@ def main() -> int:
     if not os.access(binary, os.X_OK):
         raise SystemExit(f"{binary}: no workcell binary there (cargo build --release, or --workcell PATH)")
     p = plan(args.sweep)
+    p["workcell"] = {binary: sha256(Path(binary))}
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     plan_file = out / "plan.json"

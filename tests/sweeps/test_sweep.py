@@ -39,6 +39,22 @@ class Plan(unittest.TestCase):
         self.assertEqual(args[-2:], ["--shard", "2/2"])
         self.assertIn("--seed", args)
 
+    def test_the_plan_changes_with_the_files_it_reads(self):
+        # A resumed sweep must not mix shards of another cell: the plan holds the evaluation
+        # file's and its cell file's contents (SHA-256), and a change to either changes it.
+        path = self.write('evaluation = "eval.toml"\nepisodes = 2\n')
+        (path.parent / "eval.toml").write_text('cell = "cell.toml"\n')
+        cell = path.parent / "cell.toml"
+        cell.write_text('[[cameras]]\neye = [0.6, 2.3, 1.8]\n')
+        first = sweep.plan(path)
+        self.assertIn(str(cell.resolve()), first["inputs"])
+        self.assertEqual(sweep.plan(path), first)
+        cell.write_text('[[cameras]]\neye = [1.0, 2.9, 2.1]\n')
+        self.assertNotEqual(sweep.plan(path)["inputs"], first["inputs"])
+        (path.parent / "eval.toml").write_text('cell = "cell.toml"\ntask_s = 2.0\n')
+        self.assertNotEqual(sweep.plan(path)["inputs"][str((path.parent / "eval.toml").resolve())],
+                            first["inputs"][str((path.parent / "eval.toml").resolve())])
+
     def test_values_are_written_as_toml(self):
         self.assertEqual(sweep.toml_value(True), "true")
         self.assertEqual(sweep.toml_value(4), "4")
