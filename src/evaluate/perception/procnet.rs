@@ -328,10 +328,19 @@ impl HumanPerception for ProcNetCamera {
             .is_some_and(|(t0, _)| t0 + self.config.latency_s <= t + 1e-9)
         {
             if let Some((t0, Some(m))) = self.in_flight.pop_front() {
-                self.fits.push_back((t0, m.q.clone()));
-                while self.fits.len() > self.config.velocity_fits.max(2) {
+                // The oldest fit's buffer holds the newest once the window is full.
+                let keep = self.config.velocity_fits.max(2);
+                while self.fits.len() > keep {
                     self.fits.pop_front();
                 }
+                let mut q = if self.fits.len() == keep {
+                    self.fits.pop_front().map(|(_, q)| q).unwrap_or_default()
+                } else {
+                    Vec::new()
+                };
+                q.clear();
+                q.extend_from_slice(&m.q);
+                self.fits.push_back((t0, q));
                 least_squares_velocity(&self.fits, &mut self.fit_qd);
                 self.latest = Some((t0, m));
             }
@@ -398,15 +407,17 @@ fn least_squares_velocity(fits: &VecDeque<(f64, Vec<f64>)>, qd: &mut [f64]) {
     let Some(&(newest, _)) = fits.back() else {
         return;
     };
-    // At most `velocity_fits` (8) entries, once per delivered fit.
-    let window: Vec<&(f64, Vec<f64>)> = fits
+    // The fits come in exposure order, so those within MAX_AGE_S of the newest are a suffix.
+    let start = fits
         .iter()
-        .filter(|(t, _)| newest - t <= MAX_AGE_S)
-        .collect();
-    match window[..] {
-        [] | [_] => {}
+        .position(|(t, _)| newest - t <= MAX_AGE_S)
+        .unwrap_or(fits.len());
+    let window = fits.range(start..);
+    match window.len() {
+        0 | 1 => {}
         // Two: their difference quotient, as written (bit for bit the same as before).
-        [(t1, q1), (t0, q0)] => {
+        2 => {
+            let ((t1, q1), (t0, q0)) = (&fits[start], &fits[start + 1]);
             let dt = t0 - t1;
             if dt > 1e-6 {
                 for ((v, a), b) in qd.iter_mut().zip(q0).zip(q1) {
@@ -416,15 +427,15 @@ fn least_squares_velocity(fits: &VecDeque<(f64, Vec<f64>)>, qd: &mut [f64]) {
         }
         _ => {
             let n = window.len() as f64;
-            let mean_t = window.iter().map(|(t, _)| t).sum::<f64>() / n;
-            let stt: f64 = window.iter().map(|(t, _)| (t - mean_t).powi(2)).sum();
+            let mean_t = window.clone().map(|(t, _)| t).sum::<f64>() / n;
+            let stt: f64 = window.clone().map(|(t, _)| (t - mean_t).powi(2)).sum();
             if stt < 1e-12 {
                 return;
             }
             for (j, v) in qd.iter_mut().enumerate() {
-                let mean_q = window.iter().map(|(_, q)| q[j]).sum::<f64>() / n;
+                let mean_q = window.clone().map(|(_, q)| q[j]).sum::<f64>() / n;
                 *v = window
-                    .iter()
+                    .clone()
                     .map(|(t, q)| (t - mean_t) * (q[j] - mean_q))
                     .sum::<f64>()
                     / stt;
