@@ -415,6 +415,12 @@ pub fn apply_overrides(text: &str, overrides: &[String], path: &Path) -> Result<
 /// The parts whose approach speeds an evaluation reports, in the order of
 /// [`EpisodeMetrics::peak_approach_by_part_m_s`] and of `metrics.csv`'s columns: the parts
 /// the safety filter guards (`HumanGeometry`), the arm's first (the order of earlier
+/// Per-part perception errors before any tick: none ([`EpisodeMetrics::perception_error_by_part_m`]).
+#[must_use]
+pub fn no_part_errors() -> Vec<f64> {
+    vec![f64::NAN; HumanPart::ALL.len()]
+}
+
 /// reports), then the head where the human model has one.
 pub const PFL_PARTS: [HumanPart; 4] = [
     HumanPart::UpperArm,
@@ -487,6 +493,11 @@ pub struct EpisodeMetrics {
     /// estimate, m.
     #[serde(with = "lossless::f64")]
     pub perception_error_m: f64,
+    /// The same per part, in [`HumanPart::ALL`]'s order (torso, upper arm, forearm, hand,
+    /// head), m: NaN for a part the human model lacks or no tick estimated. Where the mean
+    /// goes: a trunk turned wrong shows at the head, an arm fitted wrong at the hand.
+    #[serde(default = "no_part_errors", with = "lossless::vec")]
+    pub perception_error_by_part_m: Vec<f64>,
     #[serde(with = "lossless::f64")]
     pub simulated_s: f64,
     #[serde(with = "lossless::f64")]

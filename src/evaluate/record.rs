@@ -342,6 +342,16 @@ fn check_episode(m: &EpisodeMetrics, s: &RunSettings) -> std::result::Result<(),
             m.perception_error_m
         ));
     }
+    if m.perception_error_by_part_m.len() != workcell_safety::HumanPart::ALL.len()
+        || m.perception_error_by_part_m
+            .iter()
+            .any(|e| !(e.is_nan() || (e.is_finite() && *e >= 0.0)))
+    {
+        return Err(format!(
+            "perception_error_by_part_m = {:?}: one distance per part (or NaN)",
+            m.perception_error_by_part_m
+        ));
+    }
     // The separation: a number, or +inf when no pair ever came within range.
     let d = m.min_separation_m;
     if d.is_nan() || d == f64::NEG_INFINITY {

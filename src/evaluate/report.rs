@@ -4,6 +4,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use workcell_safety::HumanPart;
+
 use super::{EpisodeMetrics, EpisodeTrace};
 use crate::plot::{Panel, svg_panels, svg_to_png};
 
@@ -127,7 +129,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,simulated_s,wall_s";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,simulated_s,wall_s";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -142,7 +144,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.3},{:.3}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3}",
             e.episode,
             e.seed,
             e.filter,
@@ -171,11 +173,58 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             e.ticks_braking,
             reasons.join("; "),
             e.perception_error_m,
+            part_error(e, HumanPart::Torso),
+            part_error(e, HumanPart::UpperArm),
+            part_error(e, HumanPart::Forearm),
+            part_error(e, HumanPart::Hand),
+            part_error(e, HumanPart::Head),
             e.simulated_s,
             e.wall_s
         );
     }
     csv
+}
+
+/// An episode's mean perception error of `part`, m (NaN: the model lacks it, or no estimate).
+fn part_error(e: &EpisodeMetrics, part: HumanPart) -> f64 {
+    HumanPart::ALL
+        .iter()
+        .position(|&p| p == part)
+        .and_then(|i| e.perception_error_by_part_m.get(i))
+        .copied()
+        .unwrap_or(f64::NAN)
+}
+
+/// Where the perception error goes: each part's error in the median episode (of those that
+/// estimated it), or `None` when no episode had an estimate.
+fn part_error_line(episodes: &[EpisodeMetrics]) -> Option<String> {
+    let parts: Vec<String> = HumanPart::ALL
+        .iter()
+        .filter_map(|&part| {
+            let mut errors: Vec<f64> = episodes
+                .iter()
+                .map(|e| part_error(e, part))
+                .filter(|e| e.is_finite())
+                .collect();
+            if errors.is_empty() {
+                return None;
+            }
+            errors.sort_by(f64::total_cmp);
+            let n = errors.len();
+            let median = if n % 2 == 1 {
+                errors[n / 2]
+            } else {
+                0.5 * (errors[n / 2 - 1] + errors[n / 2])
+            };
+            Some(format!("{part} {:.1}", median * 1e3))
+        })
+        .collect();
+    (!parts.is_empty()).then(|| {
+        format!(
+            "Perception error per part, median episode (mm; the mean of its two end points' distances from the truth): {}.",
+            parts.join(", ")
+        )
+    })
 }
 
 /// What the summary needs besides the episodes.
@@ -301,6 +350,9 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         "Closed-loop speed: {:.1}x real time per core (physics, perception model, filter and metrics).\n",
         a.real_time_factor
     );
+    if let Some(line) = part_error_line(episodes) {
+        let _ = writeln!(md, "{line}\n");
+    }
     let _ = writeln!(md, "## Episodes\n");
     let _ = writeln!(
         md,
@@ -487,5 +539,52 @@ mod tests {
             "{line}"
         );
         assert!(!line.contains("NaN"), "{line}");
+    }
+
+    /// `metrics.csv`'s row has a field per header column, and each part's error lands under
+    /// its own name: a tick that saw the forearm 4 cm off and the hand 10 cm off, no head.
+    #[test]
+    fn each_parts_error_has_its_column() {
+        let mut tally = crate::evaluate::tally::Tally::new(0, 7, "qp".into(), 10.0);
+        tally.tick(
+            0.0,
+            Some((0.07, [Some(0.0), None, Some(0.04), Some(0.1), None])),
+            1.0,
+            0.0,
+            0.0,
+        );
+        let (metrics, _) = tally.finish(|_| String::new(), 1.0, std::time::Instant::now());
+        let csv = metrics_csv(std::slice::from_ref(&metrics));
+        let mut lines = csv.lines();
+        let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+        let row = lines.next().expect("row");
+        // Split on the commas outside quotes (the closest pair and the braking reasons).
+        let mut fields = vec![String::new()];
+        let mut quoted = false;
+        for c in row.chars() {
+            match c {
+                '"' => quoted = !quoted,
+                ',' if !quoted => fields.push(String::new()),
+                _ => fields.last_mut().expect("a field").push(c),
+            }
+        }
+        assert_eq!(header.len(), fields.len(), "{csv}");
+        let field = |name: &str| -> &str {
+            let i = header.iter().position(|h| *h == name).expect(name);
+            &fields[i]
+        };
+        assert_eq!(field("perception_error_m"), "0.07000");
+        assert_eq!(field("perception_error_torso_m"), "0.00000");
+        assert_eq!(field("perception_error_forearm_m"), "0.04000");
+        assert_eq!(field("perception_error_hand_m"), "0.10000");
+        assert_eq!(field("perception_error_upper_arm_m"), "NaN");
+        assert_eq!(field("perception_error_head_m"), "NaN");
+        assert_eq!(
+            part_error_line(&[metrics]).as_deref(),
+            Some(
+                "Perception error per part, median episode (mm; the mean of its two end points' distances from the truth): torso 0.0, forearm 40.0, hand 100.0."
+            )
+        );
+        assert_eq!(part_error_line(&[]), None);
     }
 }

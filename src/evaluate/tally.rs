@@ -30,6 +30,9 @@ pub struct Tally {
     braking: Vec<(BrakeReason, usize)>,
     error_sum: f64,
     error_ticks: usize,
+    /// Per part ([`HumanPart::ALL`]'s order): the error's sum and the ticks it was seen.
+    part_error_sum: [f64; HumanPart::ALL.len()],
+    part_error_ticks: [usize; HumanPart::ALL.len()],
 }
 
 impl Tally {
@@ -62,6 +65,7 @@ impl Tally {
                 ticks_braking: 0,
                 braking_reasons: Vec::new(),
                 perception_error_m: 0.0,
+                perception_error_by_part_m: super::no_part_errors(),
                 simulated_s: 0.0,
                 wall_s: 0.0,
             },
@@ -73,6 +77,8 @@ impl Tally {
             braking: Vec::new(),
             error_sum: 0.0,
             error_ticks: 0,
+            part_error_sum: [0.0; HumanPart::ALL.len()],
+            part_error_ticks: [0; HumanPart::ALL.len()],
         }
     }
 
@@ -198,19 +204,27 @@ impl Tally {
         }
     }
 
-    /// One tick's trace: its time, the perception error (none without an estimate), the
-    /// task's speed against its plan, and the norms of the nominal and the filtered command.
+    /// One tick's trace: its time, the perception error (none without an estimate; the mean
+    /// over parts and each part's, [`HumanPart::ALL`]'s order), the task's speed against its
+    /// plan, and the norms of the nominal and the filtered command.
     pub fn tick(
         &mut self,
         t: f64,
-        perception_error_m: Option<f64>,
+        perception_error: Option<(f64, [Option<f64>; HumanPart::ALL.len()])>,
         task_speed: f64,
         nominal_norm: f64,
         command_norm: f64,
     ) {
-        if let Some(e) = perception_error_m {
+        let perception_error_m = perception_error.map(|(e, _)| e);
+        if let Some((e, by_part)) = perception_error {
             self.error_sum += e;
             self.error_ticks += 1;
+            for (i, e) in by_part.iter().enumerate() {
+                if let Some(e) = e {
+                    self.part_error_sum[i] += e;
+                    self.part_error_ticks[i] += 1;
+                }
+            }
         }
         self.trace.t_s.push(t);
         self.trace.perception_error_m.push(perception_error_m);
@@ -251,6 +265,13 @@ impl Tally {
         } else {
             f64::NAN
         };
+        for (i, e) in metrics.perception_error_by_part_m.iter_mut().enumerate() {
+            *e = if self.part_error_ticks[i] > 0 {
+                self.part_error_sum[i] / self.part_error_ticks[i] as f64
+            } else {
+                f64::NAN
+            };
+        }
         metrics.simulated_s = simulated_s;
         metrics.wall_s = started.elapsed().as_secs_f64();
         (self.metrics, self.trace)

@@ -460,6 +460,43 @@ impl Renderer for CpuRenderer {
         Ok(())
     }
 
+    fn render_depth(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        depth_m: &mut Vec<f32>,
+    ) -> Result<()> {
+        camera.validate()?;
+        check_scene(scene)?;
+        let proj = Projection::new(camera);
+        let n = camera.width as usize * camera.height as usize;
+        self.inv_z.clear();
+        self.inv_z.resize(n, 0.0);
+        let X_CW = camera.X_WC.inverse();
+        let Self {
+            vertices, inv_z, ..
+        } = self;
+        for object in &scene.objects {
+            let X_CO = Affine::from_pose(&(X_CW * object.X_WO));
+            front_faces(&object.mesh, &X_CO, vertices, |t, _, _| {
+                proj.triangle(t, &mut |p, z| {
+                    if z > inv_z[p] {
+                        inv_z[p] = z;
+                    }
+                });
+            });
+        }
+        // A pixel a triangle drew has 1/z above the cleared 0 ([`Renderer::render`]'s
+        // object index is set by the same test).
+        depth_m.clear();
+        depth_m.extend(
+            inv_z
+                .iter()
+                .map(|&inv| if inv > 0.0 { 1.0 / inv } else { 0.0 }),
+        );
+        Ok(())
+    }
+
     fn render_masks(
         &mut self,
         mesh: &RenderMesh,

@@ -199,6 +199,25 @@ pub trait Renderer {
     /// [`RenderError::Gpu`] when the GPU fails.
     fn render(&mut self, scene: &Scene, camera: &Camera, frame: &mut Frame) -> Result<()>;
 
+    /// The depth image alone of `scene` seen by `camera` into `depth_m` (resized to the
+    /// camera's pixels, row-major): [`Frame::depth_m`] as [`Renderer::render`] draws it, 0
+    /// where nothing is seen, without the colours a render-and-compare search never reads.
+    /// By default from a whole render.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`].
+    fn render_depth(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        depth_m: &mut Vec<f32>,
+    ) -> Result<()> {
+        let mut frame = Frame::new();
+        self.render(scene, camera, &mut frame)?;
+        depth_m.clone_from(&frame.depth_m);
+        Ok(())
+    }
+
     /// Renders `mesh` alone at each pose `X_CO[k]` (object in the camera frame; the camera's
     /// own pose is not used) into mask `k` of `masks`.
     ///

@@ -113,26 +113,28 @@ fn the_nearer_object_wins_whatever_the_drawing_order() {
     }
 }
 
-#[test]
-fn a_floor_through_the_camera_is_clipped_at_the_near_plane_and_ends_at_the_horizon() {
-    // Camera 1.2 m above a floor that extends 50 m around it, looking horizontally: every
-    // pixel centre below the principal point sees the floor, every one above sees the sky.
-    let cam = Camera::look_at(
-        [0.0, 0.0, 1.2],
-        [1.0, 0.0, 1.2],
-        [0.0, 0.0, 1.0],
-        80,
-        60,
-        70.0,
-    )
-    .unwrap();
-    let mut scene = Scene::default();
-    scene.push(object(
+/// A floor 50 m around the origin, its top at z = 0.
+fn floor() -> SceneObject {
+    object(
         "floor",
         Class::Background,
         RenderMesh::cuboid([50.0, 50.0, 0.01], [0.5; 3]),
         Pose::from_translation(Vector::new(0.0, 0.0, -0.01)),
-    ));
+    )
+}
+
+/// An 80x60 camera of 70 degrees 1.2 m above the origin, looking at `target`.
+fn eye_height_camera(target: [f64; 3]) -> Camera {
+    Camera::look_at([0.0, 0.0, 1.2], target, [0.0, 0.0, 1.0], 80, 60, 70.0).unwrap()
+}
+
+#[test]
+fn a_floor_through_the_camera_is_clipped_at_the_near_plane_and_ends_at_the_horizon() {
+    // Camera 1.2 m above a floor that extends 50 m around it, looking horizontally: every
+    // pixel centre below the principal point sees the floor, every one above sees the sky.
+    let cam = eye_height_camera([1.0, 0.0, 1.2]);
+    let mut scene = Scene::default();
+    scene.push(floor());
     let mut frame = Frame::new();
     CpuRenderer::new().render(&scene, &cam, &mut frame).unwrap();
     for j in 0..60u32 {
@@ -151,6 +153,41 @@ fn a_floor_through_the_camera_is_clipped_at_the_near_plane_and_ends_at_the_horiz
         }
     }
     assert!(frame.depth_m.iter().all(|d| d.is_finite()));
+}
+
+/// The depth-only render (what the trunk's search compares) is the whole render's depth to
+/// the bit: objects hiding each other, a floor clipped at the near plane, sky.
+#[test]
+fn the_depth_alone_is_the_renders_depth() {
+    let cam = eye_height_camera([1.0, 0.1, 1.0]);
+    let mut scene = Scene::default();
+    scene.push(floor());
+    scene.push(object(
+        "box",
+        Class::Robot,
+        RenderMesh::cuboid([0.3, 0.4, 0.5], [0.8, 0.2, 0.2]),
+        Pose::from_translation(Vector::new(2.0, 0.2, 0.9)),
+    ));
+    scene.push(object(
+        "ball",
+        Class::Forearm,
+        RenderMesh::capsule(0.2, 0.1, [0.2, 0.8, 0.2]),
+        Pose::from_translation(Vector::new(1.5, 0.0, 1.0)),
+    ));
+    let mut renderer = CpuRenderer::new();
+    let mut frame = Frame::new();
+    renderer.render(&scene, &cam, &mut frame).unwrap();
+    let mut depth = vec![7.0; 3];
+    renderer.render_depth(&scene, &cam, &mut depth).unwrap();
+    assert_eq!(depth.len(), frame.depth_m.len());
+    for (p, (a, b)) in depth.iter().zip(&frame.depth_m).enumerate() {
+        assert_eq!(a.to_bits(), b.to_bits(), "pixel {p}: {a} against {b}");
+    }
+    // All three show, and the sky above the horizon.
+    for id in 1..=3u16 {
+        assert!(frame.count(id) > 0, "object {id} unseen");
+    }
+    assert!(depth.contains(&0.0));
 }
 
 #[test]

@@ -98,6 +98,19 @@ pub struct ProcNetConfig {
     /// other than the calibration's runs a fit its bound was not measured for (warned of).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fit_trunk: Option<bool>,
+    /// The arm's climb also starts from the best fit's forearm turned end for end
+    /// (`ArmFitConfig::reversed_start`). Default: the masks' calibration's, else false; as
+    /// `fit_trunk`, another value than the calibration's is warned of.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reversed_start: Option<bool>,
+    /// With depth, the arm's climb also starts from where the forearm's measured points put
+    /// it (`ArmFitConfig::depth_start`). Default: the masks' calibration's, else false.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_start: Option<bool>,
+    /// The global search runs beside the track when its best gain is below this, 0 to 1
+    /// (`ArmFitConfig::search_below_gain`). Default: the masks' calibration's, else 0.55.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub search_below_gain: Option<f64>,
     /// The factor on the fit's curvature uncertainty (`ArmFitConfig::uncertainty_scale`),
     /// in place of the one calibrated for the masks and depth chosen (the calibration file
     /// beside the weights, `workcell_perception::pose::Calibration::of_weights`), which is
@@ -180,6 +193,9 @@ impl PerceptionKind {
                 "depth",
                 "occlusion",
                 "fit_trunk",
+                "reversed_start",
+                "depth_start",
+                "search_below_gain",
                 "uncertainty_scale",
                 "uncertainty_floor_m",
                 "latency_s",
@@ -234,6 +250,9 @@ impl Default for ProcNetConfig {
             depth: false,
             occlusion: 0.0,
             fit_trunk: None,
+            reversed_start: None,
+            depth_start: None,
+            search_below_gain: None,
             uncertainty_scale: None,
             uncertainty_floor_m: None,
             latency_s: 0.05,
@@ -534,6 +553,9 @@ impl PerceptionConfig {
                         format!("out of range: {} (2 to 8)", c.velocity_fits),
                     ));
                 }
+                if let Some(g) = c.search_below_gain {
+                    check("search_below_gain", g, (0.0..=1.0).contains(&g))?;
+                }
                 check_optional("uncertainty_scale", c.uncertainty_scale)?;
                 check_optional("uncertainty_floor_m", c.uncertainty_floor_m)
             }
@@ -613,6 +635,9 @@ mod tests {
                 toml::Table::try_from(ProcNetConfig {
                     weights: Some("w.safetensors".into()),
                     fit_trunk: Some(true),
+                    reversed_start: Some(true),
+                    depth_start: Some(true),
+                    search_below_gain: Some(0.7),
                     uncertainty_scale: Some(1.0),
                     uncertainty_floor_m: Some(0.01),
                     camera_fails_at_s: Some(1.0),
@@ -718,6 +743,33 @@ mod tests {
                 assert!(e.to_string().contains("perception.velocity_fits"), "{e}");
             }
         }
+    }
+
+    /// The fit's search threshold is a gain, 0 to 1; the starts are booleans.
+    #[test]
+    fn the_fits_settings_are_checked() {
+        for (g, ok) in [
+            ("-0.1", false),
+            ("0.0", true),
+            ("0.7", true),
+            ("1.0", true),
+            ("1.5", false),
+            ("nan", false),
+        ] {
+            let config = parse(&format!(
+                "[perception]\nkind = \"procnet\"\nsearch_below_gain = {g}\ndepth_start = true\nreversed_start = false\n"
+            ))
+            .expect("reads");
+            let checked = config.validate();
+            assert_eq!(checked.is_ok(), ok, "{g}: {checked:?}");
+            if let Err(e) = checked {
+                assert!(
+                    e.to_string().contains("perception.search_below_gain"),
+                    "{e}"
+                );
+            }
+        }
+        assert!(parse("[perception]\nkind = \"procnet\"\ndepth_start = 1\n").is_err());
     }
 
     /// `--perception KIND` keeps the keys the new kind also takes and names the ones it

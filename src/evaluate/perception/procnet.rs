@@ -140,18 +140,23 @@ impl ProcNetCamera {
             config.uncertainty_floor_m,
         )
         .apply(ArmFitConfig::default());
-        // The fit the bound was measured with; a trunk setting of the scenario's own wins.
-        if let Some(fit_trunk) = config.fit_trunk {
-            fit.fit_trunk = fit_trunk;
-            if let Some(measured_fit) = measured.fit {
-                let differences = measured_fit.differences(&FitSettings::of(&fit));
-                if !differences.is_empty() {
-                    tracing::warn!(
-                        "perception.fit_trunk: the masks' bound was measured with another fit \
-                         ({}, measured vs this run): it may not hold",
-                        differences.join(", ")
-                    );
-                }
+        // The fit the bound was measured with; the scenario's own settings of it win.
+        let scenario = [
+            config.fit_trunk.map(|v| fit.fit_trunk = v),
+            config.reversed_start.map(|v| fit.reversed_start = v),
+            config.depth_start.map(|v| fit.depth_start = v),
+            config.search_below_gain.map(|v| fit.search_below_gain = v),
+        ];
+        if scenario.iter().any(Option::is_some)
+            && let Some(measured_fit) = measured.fit
+        {
+            let differences = measured_fit.differences(&FitSettings::of(&fit));
+            if !differences.is_empty() {
+                tracing::warn!(
+                    "perception: the masks' bound was measured with another fit ({}, measured \
+                     vs this run): it may not hold",
+                    differences.join(", ")
+                );
             }
         }
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;

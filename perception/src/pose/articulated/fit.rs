@@ -138,8 +138,8 @@ pub struct ArmFitter<R: Renderer> {
     pub(super) poses: Vec<Pose>,
     pub(super) renders: usize,
     pub(super) rng: ChaCha8Rng,
-    /// The trunk stage's depth renders.
-    pub(super) trunk_frame: workcell_render::Frame,
+    /// The trunk stage's depth renders (`Renderer::render_depth`).
+    pub(super) trunk_depth: Vec<f32>,
 }
 
 impl<R: Renderer> ArmFitter<R> {
@@ -156,7 +156,7 @@ impl<R: Renderer> ArmFitter<R> {
             poses: Vec::new(),
             renders: 0,
             rng: ChaCha8Rng::seed_from_u64(0),
-            trunk_frame: workcell_render::Frame::new(),
+            trunk_depth: Vec::new(),
         }
     }
 

@@ -425,12 +425,11 @@ impl<R: Renderer> ArmFitter<R> {
         let X_WT = *k.link_pose(trunk.torso);
         target.scene.objects[0].X_WO = X_WT;
         self.renderer
-            .render(&target.scene, camera, &mut self.trunk_frame)?;
+            .render_depth(&target.scene, camera, &mut self.trunk_depth)?;
         self.renders += 1;
         let rendered = mean(
             &mut self
-                .trunk_frame
-                .depth_m
+                .trunk_depth
                 .iter()
                 .enumerate()
                 .filter(|(p, z)| {
@@ -521,11 +520,9 @@ impl<R: Renderer> ArmFitter<R> {
         let sigma = self.config.depth_sigma_m.max(1e-4);
         target.scene.objects[0].X_WO = camera.X_WC * *X_CT;
         self.renderer
-            .render(&target.scene, camera, &mut self.trunk_frame)?;
+            .render_depth(&target.scene, camera, &mut self.trunk_depth)?;
         let (mut sum, mut n) = (0.0, 0usize);
-        for ((&rendered, &measured), &t) in
-            self.trunk_frame.depth_m.iter().zip(depth).zip(target.torso)
-        {
+        for ((&rendered, &measured), &t) in self.trunk_depth.iter().zip(depth).zip(target.torso) {
             if t > 0.5 && rendered > 0.0 && measured.is_finite() && measured > 0.0 {
                 sum += (f64::from(measured - rendered) / sigma).powi(2).min(9.0);
                 n += 1;
