@@ -15,12 +15,47 @@ const SUB: i64 = 1 << SUBPIXEL_BITS;
 const GUARD_PX: f32 = 8192.0;
 
 /// The software rasterizer: single-threaded per image, masks of a batch in parallel (rayon).
-/// It keeps its buffers between calls.
+/// It keeps its buffers between calls, and what [`Renderer::render`] needs to draw the next
+/// frame of the same view faster ([`FrameCache`]).
 #[derive(Debug, Clone, Default)]
 pub struct CpuRenderer {
     vertices: Vec<[f32; 3]>,
     inv_z: Vec<f32>,
     color: Vec<[f32; 3]>,
+    cache: FrameCache,
+}
+
+/// What a frame leaves for the next one of the same camera and light, so that a camera
+/// watching a cell redraws only what moved, with the same image to the bit:
+///
+/// - **the drawn prefix**: the z-buffer, object index and colour after the scene's first
+///   objects that have not moved since the frame before (the room, the table, the clutter:
+///   the scene lists them first). Objects are drawn in order and the depth test keeps the
+///   first of equal depths, so the state after the same objects at the same poses is the
+///   same; the next frame starts from it and draws the rest.
+/// - **the resolve**: each pixel's texture, sRGB and depth follow from its object, colour
+///   and 1/z alone (the camera, sky and textures being the same): a pixel whose three are
+///   those of the frame before keeps its output.
+#[derive(Debug, Clone, Default)]
+struct FrameCache {
+    /// The camera and light the buffers below were drawn with.
+    view: Option<(Camera, [f32; 3])>,
+    /// The last frame's objects: each mesh (held, so that its address names it) and pose.
+    objects: Vec<(std::sync::Arc<RenderMesh>, Pose)>,
+    /// How many of the scene's first objects the prefix buffers hold.
+    drawn: usize,
+    inv_z: Vec<f32>,
+    object: Vec<u16>,
+    color: Vec<[f32; 3]>,
+    /// The sky and each object's texture amplitude the last resolve used (with `view`'s
+    /// camera; none after the view changed).
+    resolved_with: Option<([f32; 3], Vec<f32>)>,
+    /// The last resolve's inputs and outputs per pixel.
+    last_object: Vec<u16>,
+    last_inv_z: Vec<f32>,
+    last_color: Vec<[f32; 3]>,
+    last_rgb: Vec<u8>,
+    last_depth: Vec<f32>,
 }
 
 impl CpuRenderer {
@@ -365,6 +400,45 @@ pub(crate) fn to_srgb(table: &[u8; 4096], l: f32) -> u8 {
     table[((l.clamp(0.0, 1.0) * 4095.0) as usize).min(4095)]
 }
 
+/// The buffers a shaded render draws into: 1/z, object index and linear colour per pixel.
+struct Shaded<'a> {
+    inv_z: &'a mut Vec<f32>,
+    object: &'a mut Vec<u16>,
+    color: &'a mut Vec<[f32; 3]>,
+}
+
+impl Shaded<'_> {
+    /// Draws `object`, the scene's `k`-th, where it is nearer than what is drawn.
+    fn draw(
+        &mut self,
+        proj: &Projection,
+        X_CW: &Pose,
+        light_C: [f32; 3],
+        k: usize,
+        object: &crate::SceneObject,
+        vertices: &mut Vec<[f32; 3]>,
+    ) {
+        let X_CO = Affine::from_pose(&(*X_CW * object.X_WO));
+        let id = (k + 1) as u16;
+        let Self {
+            inv_z,
+            object: ids,
+            color,
+        } = self;
+        front_faces(&object.mesh, &X_CO, vertices, |t, n, albedo| {
+            let s = shade(n, t[0], light_C);
+            let c = albedo.map(|a| a * s);
+            proj.triangle(t, &mut |p, z| {
+                if z > inv_z[p] {
+                    inv_z[p] = z;
+                    ids[p] = id;
+                    color[p] = c;
+                }
+            });
+        });
+    }
+}
+
 /// Checks the poses of a scene's objects.
 pub(crate) fn check_scene(scene: &Scene) -> Result<()> {
     if scene.objects.len() >= usize::from(u16::MAX) {
@@ -405,8 +479,6 @@ impl Renderer for CpuRenderer {
         let proj = Projection::new(camera);
         let n = camera.width as usize * camera.height as usize;
         frame.resize(camera.width, camera.height);
-        frame.object.fill(0);
-        self.inv_z.clear();
         self.inv_z.resize(n, 0.0);
         self.color.resize(n, [0.0; 3]);
         let X_CW = camera.X_WC.inverse();
@@ -415,29 +487,78 @@ impl Renderer for CpuRenderer {
             vertices,
             inv_z,
             color,
+            cache,
         } = self;
-        for (k, object) in scene.objects.iter().enumerate() {
-            let X_CO = Affine::from_pose(&(X_CW * object.X_WO));
-            let id = (k + 1) as u16;
-            front_faces(&object.mesh, &X_CO, vertices, |t, n, albedo| {
-                let s = shade(n, t[0], light_C);
-                let c = albedo.map(|a| a * s);
-                proj.triangle(t, &mut |p, z| {
-                    if z > inv_z[p] {
-                        inv_z[p] = z;
-                        frame.object[p] = id;
-                        color[p] = c;
-                    }
-                });
-            });
+        // The objects unchanged since the last frame of this view, and where to start.
+        let view = Some((*camera, scene.light_W));
+        if cache.view != view {
+            cache.drawn = 0;
+            cache.objects.clear();
+            // A pixel's texture and depth follow from where the camera puts it, too.
+            cache.resolved_with = None;
         }
-        // Resolve: texture, sRGB, depth.
+        let unchanged = scene
+            .objects
+            .iter()
+            .zip(&cache.objects)
+            .take_while(|(o, (mesh, X_WO))| {
+                std::sync::Arc::ptr_eq(&o.mesh, mesh) && o.X_WO == *X_WO
+            })
+            .count();
+        let mut start = 0;
+        if cache.drawn > 0 && cache.drawn <= unchanged {
+            inv_z.copy_from_slice(&cache.inv_z);
+            frame.object.copy_from_slice(&cache.object);
+            color.copy_from_slice(&cache.color);
+            start = cache.drawn;
+        } else {
+            inv_z.fill(0.0);
+            frame.object.fill(0);
+        }
+        let mut buffers = Shaded {
+            inv_z,
+            object: &mut frame.object,
+            color,
+        };
+        for (k, object) in scene.objects.iter().enumerate().take(unchanged).skip(start) {
+            buffers.draw(&proj, &X_CW, light_C, k, object, vertices);
+        }
+        if unchanged > start {
+            cache.inv_z.clone_from(buffers.inv_z);
+            cache.object.clone_from(buffers.object);
+            cache.color.clone_from(buffers.color);
+            cache.drawn = unchanged;
+        }
+        for (k, object) in scene.objects.iter().enumerate().skip(unchanged.max(start)) {
+            buffers.draw(&proj, &X_CW, light_C, k, object, vertices);
+        }
+        cache.view = view;
+        cache.objects.clear();
+        cache
+            .objects
+            .extend(scene.objects.iter().map(|o| (o.mesh.clone(), o.X_WO)));
+        // Resolve: texture, sRGB, depth; a pixel as the last frame's keeps its output.
+        let textures: Vec<f32> = scene.objects.iter().map(|o| o.texture).collect();
+        let reuse = cache
+            .resolved_with
+            .as_ref()
+            .is_some_and(|(sky, t)| *sky == scene.sky && *t == textures)
+            && cache.last_object.len() == n;
         let table = srgb_table();
         let X_WC = Affine::from_pose(&camera.X_WC);
         let (fx, fy, cx, cy) = (proj.fx, proj.fy, proj.cx, proj.cy);
         let w = camera.width as usize;
         for p in 0..n {
             let id = frame.object[p];
+            if reuse
+                && cache.last_object[p] == id
+                && cache.last_inv_z[p].to_bits() == inv_z[p].to_bits()
+                && cache.last_color[p].map(f32::to_bits) == color[p].map(f32::to_bits)
+            {
+                frame.depth_m[p] = cache.last_depth[p];
+                frame.rgb[3 * p..3 * p + 3].copy_from_slice(&cache.last_rgb[3 * p..3 * p + 3]);
+                continue;
+            }
             let (c, depth) = if id == 0 {
                 (scene.sky, 0.0)
             } else {
@@ -457,6 +578,12 @@ impl Renderer for CpuRenderer {
                 *out = to_srgb(table, v);
             }
         }
+        cache.resolved_with = Some((scene.sky, textures));
+        cache.last_object.clone_from(&frame.object);
+        cache.last_inv_z.clone_from(inv_z);
+        cache.last_color.clone_from(color);
+        cache.last_rgb.clone_from(&frame.rgb);
+        cache.last_depth.clone_from(&frame.depth_m);
         Ok(())
     }
 

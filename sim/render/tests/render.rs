@@ -190,6 +190,92 @@ fn the_depth_alone_is_the_renders_depth() {
     assert!(depth.contains(&0.0));
 }
 
+/// A renderer that keeps what the frame before drew gives the same frames, to the bit, as a
+/// new renderer each time: objects that move, one that stays but comes after one that
+/// moves, a box in the same place as the floor's first box (equal depths: the first drawn
+/// wins), a mesh swapped at the same pose, a texture changed, an object added, the light
+/// and the camera moved, and back.
+#[test]
+fn a_renderer_that_remembers_the_last_frame_draws_the_same_frames() {
+    let textured = |mut o: SceneObject, amplitude: f32| {
+        o.texture = amplitude;
+        o
+    };
+    let cube = |name: &str, class: Class, at: [f64; 3], colour: [f32; 3]| {
+        object(
+            name,
+            class,
+            RenderMesh::cuboid([0.1, 0.1, 0.1], colour),
+            Pose::from_translation(Vector::new(at[0], at[1], at[2])),
+        )
+    };
+    let mut scene = Scene::default();
+    scene.push(textured(floor(), 0.3));
+    scene.push(cube(
+        "box",
+        Class::Background,
+        [1.5, 0.0, 0.1],
+        [0.6, 0.5, 0.4],
+    ));
+    scene.push(cube("arm", Class::Robot, [1.2, 0.3, 0.5], [0.8, 0.2, 0.2]));
+    scene.push(cube(
+        "twin",
+        Class::Background,
+        [1.5, 0.0, 0.1],
+        [0.1, 0.9, 0.1],
+    ));
+    scene.push(cube(
+        "hand",
+        Class::Forearm,
+        [1.0, -0.2, 0.6],
+        [0.9, 0.7, 0.6],
+    ));
+    let near = eye_height_camera([1.0, 0.0, 0.4]);
+    let aside = eye_height_camera([1.0, 0.3, 0.5]);
+    let mut kept = CpuRenderer::new();
+    let mut frame = Frame::new();
+    for step in 0..12 {
+        let t = f64::from(step) * 0.05;
+        scene.objects[2].X_WO = Pose::from_translation(Vector::new(1.2, 0.3 - t, 0.5));
+        scene.objects[4].X_WO = Pose::from_translation(Vector::new(1.0 + t, -0.2, 0.6 - t));
+        let mut camera = near;
+        match step {
+            4 => {
+                scene.objects[1].mesh =
+                    RenderMesh::cuboid([0.12, 0.1, 0.1], [0.6, 0.5, 0.4]).into();
+            }
+            5 => scene.objects[0].texture = 0.1,
+            6 => {
+                scene.push(cube(
+                    "new",
+                    Class::Background,
+                    [1.8, 0.4, 0.2],
+                    [0.3, 0.3, 0.8],
+                ));
+            }
+            7 => scene.light_W = [0.0, 0.6, 0.8],
+            8 => camera = aside,
+            _ => {}
+        }
+        kept.render(&scene, &camera, &mut frame).unwrap();
+        let mut fresh = Frame::new();
+        CpuRenderer::new()
+            .render(&scene, &camera, &mut fresh)
+            .unwrap();
+        assert!(
+            frame == fresh,
+            "step {step}: the kept renderer's frame differs"
+        );
+        for id in 1..=scene.objects.len() as u16 {
+            if id != 4 {
+                assert!(fresh.count(id) > 0, "step {step}: object {id} unseen");
+            }
+        }
+        // The twin lies exactly where the box was drawn first.
+        assert_eq!(fresh.count(4), 0, "step {step}");
+    }
+}
+
 #[test]
 fn masks_match_the_index_render_of_the_object_alone() {
     let cam = camera(96, 80, 45.0);
