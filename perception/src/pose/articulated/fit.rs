@@ -466,7 +466,10 @@ impl<R: Renderer> ArmFitter<R> {
     /// The gain of configuration `q` in `masks`, all parts together and each part's share
     /// (as [`ArmFit::gain`] and [`ArmFit::part_gain`] score a fit); `None` when no part has
     /// support. What a perfect search would score: a fit below the truth's gain is the
-    /// search's failure, one above it the masks' ambiguity.
+    /// search's failure, one above it the masks' ambiguity. Only the arm's joints are read
+    /// from `q`: the trunk is the one the fitter holds (the trunk stage's last fit, or
+    /// [`Self::hold_trunk_at`]'s), so with a fitted trunk that is wrong the true arm scores
+    /// low; hold the true trunk first for the search's bound.
     ///
     /// # Errors
     /// As [`ArmFitter::fit`]; `q` (the model's configuration) of the wrong length or not
