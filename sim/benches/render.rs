@@ -1,4 +1,4 @@
-//! Renderer speed: frames of the default scene, forearm masks for render-and-compare, and
+//! Renderer speed: frames of the default scene (what moved, and all anew), forearm masks for render-and-compare, and
 //! PNG encoding of a dataset frame. `cargo bench -p workcell-sim --bench render`; with
 //! `--features gpu` the wgpu backend runs the same cases beside the CPU.
 
@@ -49,12 +49,39 @@ fn cases(
     let mut group = c.benchmark_group(format!("render/{name}"));
     group.throughput(Throughput::Elements(1));
     let mut frame = Frame::new();
+    // The robot and the human a centimetre apart in every other frame, as a camera watching
+    // the cell sees them: `frame_*` draws what moved (a renderer that keeps the last frame
+    // redraws only that), `frame_*_new_view` every frame anew (the camera alternates by a
+    // millimetre: nothing of the last frame is kept).
+    let mut moved = cell.scene.clone();
+    for k in cell
+        .robot_objects
+        .iter()
+        .chain(&cell.human_objects)
+        .flatten()
+    {
+        moved.objects[*k].X_WO.translation.y += 0.01;
+    }
+    let scenes = [&cell.scene, &moved];
     for (w, h) in [(128, 128), (320, 240)] {
         let cam = camera.resized(w, h).expect("size");
+        let mut beside = cam;
+        beside.X_WC.translation.x += 0.001;
+        let mut k = 0usize;
         group.bench_function(format!("frame_{w}x{h}"), |b| {
             b.iter(|| {
+                k += 1;
                 renderer
-                    .render(&cell.scene, &cam, &mut frame)
+                    .render(scenes[k % 2], &cam, &mut frame)
+                    .expect("render")
+            });
+        });
+        let cameras = [cam, beside];
+        group.bench_function(format!("frame_{w}x{h}_new_view"), |b| {
+            b.iter(|| {
+                k += 1;
+                renderer
+                    .render(&cell.scene, &cameras[k % 2], &mut frame)
                     .expect("render")
             });
         });
