@@ -424,17 +424,20 @@ fn perception_error(
     if estimate.parts.len() != truth.parts.len() || estimate.parts.is_empty() {
         return None;
     }
-    let mut by_part = [None; HumanPart::ALL.len()];
+    // Per part the sum and the count: a part the model has twice (two arms) counts as the
+    // mean of both.
+    let mut per_part = [(0.0, 0usize); HumanPart::ALL.len()];
     let mut sum = 0.0;
     for (e, t) in estimate.parts.iter().zip(&truth.parts) {
         let error = 0.5
             * ((e.capsule.a_W - t.capsule.a_W).length() + (e.capsule.b_W - t.capsule.b_W).length());
         sum += error;
         if let Some(i) = HumanPart::ALL.iter().position(|&p| p == t.part) {
-            // A part twice (two arms) counts as the mean of both.
-            by_part[i] = Some(by_part[i].map_or(error, |before: f64| 0.5 * (before + error)));
+            per_part[i].0 += error;
+            per_part[i].1 += 1;
         }
     }
+    let by_part = per_part.map(|(s, n)| (n > 0).then(|| s / n as f64));
     Some((sum / truth.parts.len() as f64, by_part))
 }
 

@@ -415,12 +415,6 @@ pub fn apply_overrides(text: &str, overrides: &[String], path: &Path) -> Result<
 /// The parts whose approach speeds an evaluation reports, in the order of
 /// [`EpisodeMetrics::peak_approach_by_part_m_s`] and of `metrics.csv`'s columns: the parts
 /// the safety filter guards (`HumanGeometry`), the arm's first (the order of earlier
-/// Per-part perception errors before any tick: none ([`EpisodeMetrics::perception_error_by_part_m`]).
-#[must_use]
-pub fn no_part_errors() -> Vec<f64> {
-    vec![f64::NAN; HumanPart::ALL.len()]
-}
-
 /// reports), then the head where the human model has one.
 pub const PFL_PARTS: [HumanPart; 4] = [
     HumanPart::UpperArm,
@@ -428,6 +422,13 @@ pub const PFL_PARTS: [HumanPart; 4] = [
     HumanPart::Hand,
     HumanPart::Head,
 ];
+
+/// Per-part perception errors before any tick: none
+/// ([`EpisodeMetrics::perception_error_by_part_m`]).
+#[must_use]
+pub fn no_part_errors() -> Vec<f64> {
+    vec![f64::NAN; HumanPart::ALL.len()]
+}
 
 /// What happened in one episode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

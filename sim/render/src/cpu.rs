@@ -50,7 +50,8 @@ struct FrameCache {
     /// The sky and each object's texture amplitude the last resolve used (with `view`'s
     /// camera; none after the view changed).
     resolved_with: Option<([f32; 3], Vec<f32>)>,
-    /// The last resolve's inputs and outputs per pixel.
+    /// The last resolve's inputs and outputs per pixel (a pixel resolved anew writes its
+    /// own; a kept one has them already).
     last_object: Vec<u16>,
     last_inv_z: Vec<f32>,
     last_color: Vec<[f32; 3]>,
@@ -533,17 +534,28 @@ impl Renderer for CpuRenderer {
             buffers.draw(&proj, &X_CW, light_C, k, object, vertices);
         }
         cache.view = view;
-        cache.objects.clear();
-        cache
-            .objects
-            .extend(scene.objects.iter().map(|o| (o.mesh.clone(), o.X_WO)));
-        // Resolve: texture, sRGB, depth; a pixel as the last frame's keeps its output.
-        let textures: Vec<f32> = scene.objects.iter().map(|o| o.texture).collect();
-        let reuse = cache
-            .resolved_with
-            .as_ref()
-            .is_some_and(|(sky, t)| *sky == scene.sky && *t == textures)
-            && cache.last_object.len() == n;
+        // The first `unchanged` are the scene's already.
+        cache.objects.truncate(unchanged);
+        cache.objects.extend(
+            scene.objects[unchanged..]
+                .iter()
+                .map(|o| (o.mesh.clone(), o.X_WO)),
+        );
+        // Resolve: texture, sRGB, depth; a pixel as the last frame's keeps its output, and
+        // one resolved anew is written to the cache as well.
+        let reuse = cache.resolved_with.as_ref().is_some_and(|(sky, t)| {
+            *sky == scene.sky
+                && t.len() == scene.objects.len()
+                && t.iter().zip(&scene.objects).all(|(a, o)| *a == o.texture)
+        }) && cache.last_object.len() == n;
+        if !reuse {
+            // Every pixel is resolved anew below and overwrites these.
+            cache.last_object.resize(n, 0);
+            cache.last_inv_z.resize(n, 0.0);
+            cache.last_color.resize(n, [0.0; 3]);
+            cache.last_rgb.resize(3 * n, 0);
+            cache.last_depth.resize(n, 0.0);
+        }
         let table = srgb_table();
         let X_WC = Affine::from_pose(&camera.X_WC);
         let (fx, fy, cx, cy) = (proj.fx, proj.fy, proj.cx, proj.cy);
@@ -577,13 +589,16 @@ impl Renderer for CpuRenderer {
             for (out, v) in frame.rgb[3 * p..3 * p + 3].iter_mut().zip(c) {
                 *out = to_srgb(table, v);
             }
+            cache.last_object[p] = id;
+            cache.last_inv_z[p] = inv_z[p];
+            cache.last_color[p] = color[p];
+            cache.last_depth[p] = depth;
+            cache.last_rgb[3 * p..3 * p + 3].copy_from_slice(&frame.rgb[3 * p..3 * p + 3]);
         }
-        cache.resolved_with = Some((scene.sky, textures));
-        cache.last_object.clone_from(&frame.object);
-        cache.last_inv_z.clone_from(inv_z);
-        cache.last_color.clone_from(color);
-        cache.last_rgb.clone_from(&frame.rgb);
-        cache.last_depth.clone_from(&frame.depth_m);
+        let (sky, textures) = cache.resolved_with.get_or_insert_with(Default::default);
+        *sky = scene.sky;
+        textures.clear();
+        textures.extend(scene.objects.iter().map(|o| o.texture));
         Ok(())
     }
 

@@ -141,15 +141,15 @@ impl ProcNetCamera {
         )
         .apply(ArmFitConfig::default());
         // The fit the bound was measured with; the scenario's own settings of it win.
-        let scenario = [
-            config.fit_trunk.map(|v| fit.fit_trunk = v),
-            config.reversed_start.map(|v| fit.reversed_start = v),
-            config.depth_start.map(|v| fit.depth_start = v),
-            config.search_below_gain.map(|v| fit.search_below_gain = v),
-        ];
-        if scenario.iter().any(Option::is_some)
-            && let Some(measured_fit) = measured.fit
-        {
+        fit.fit_trunk = config.fit_trunk.unwrap_or(fit.fit_trunk);
+        fit.reversed_start = config.reversed_start.unwrap_or(fit.reversed_start);
+        fit.depth_start = config.depth_start.unwrap_or(fit.depth_start);
+        fit.search_below_gain = config.search_below_gain.unwrap_or(fit.search_below_gain);
+        let overridden = config.fit_trunk.is_some()
+            || config.reversed_start.is_some()
+            || config.depth_start.is_some()
+            || config.search_below_gain.is_some();
+        if overridden && let Some(measured_fit) = measured.fit {
             let differences = measured_fit.differences(&FitSettings::of(&fit));
             if !differences.is_empty() {
                 tracing::warn!(
