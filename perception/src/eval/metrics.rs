@@ -109,6 +109,10 @@ pub struct FrameResult {
     /// The articulated fit's gain at the true joint positions: all parts, then the upper
     /// arm's, the forearm's and the hand's shares (NaN for the paper's method).
     pub truth_gain: [f64; 4],
+    /// The fitted trunk against the labels' ([`crate::pose::TrunkModel::error`]): the
+    /// largest revolute joint's error, rad, and the pelvis's offset, m; NaN without a pose,
+    /// for a torso that does not move and for the paper's method.
+    pub trunk_error: [f64; 2],
 }
 
 impl FrameResult {

@@ -180,6 +180,9 @@ struct Found {
     /// The articulated fit's [`crate::pose::ArmFit::hidden_share`] (NaN for the paper's).
     hidden_share: f64,
     renders: usize,
+    /// The fitted trunk's error against the labels' ([`crate::pose::TrunkModel::error`]:
+    /// rad, m); NaN without a trunk that moves or for the paper's method.
+    trunk_error: [f64; 2],
 }
 
 /// Tracks the forearm through every sequence of `split` with masks from `source`, by
@@ -270,6 +273,11 @@ pub fn evaluate_pose(
                     if outcome.is_err() && kept < NO_POSE_KEPT_PER_SEQUENCE {
                         read = Some(arm_parts_in(&masks, threshold));
                     }
+                    let trunk_error = match (&outcome, fitter.arm().trunk()) {
+                        (Ok(fit), Some(trunk)) => trunk.error(&fit.q, &labels.human_q),
+                        _ => None,
+                    }
+                    .unwrap_or([f64::NAN; 2]);
                     let found = outcome.map(|fit| Found {
                         X_CO: fit.X_CO(),
                         reacquired: fit.reacquired,
@@ -281,6 +289,7 @@ pub fn evaluate_pose(
                         spread_m: fit.spread_m,
                         hidden_share: fit.hidden_share,
                         renders: fit.renders,
+                        trunk_error,
                     });
                     (found, mask_ms, pose_ms)
                 }
@@ -319,6 +328,7 @@ pub fn evaluate_pose(
                         spread_m: f64::NAN,
                         hidden_share: f64::NAN,
                         renders: e.renders,
+                        trunk_error: [f64::NAN; 2],
                     });
                     (found, mask_ms, pose_ms)
                 }
@@ -336,6 +346,7 @@ pub fn evaluate_pose(
             let (mut reacquired, mut confirmed, mut fm, mut gain, mut unc, mut renders) =
                 (false, false, 0.0, 0.0, 0.0, 0);
             let (mut sigma_m, mut spread_m, mut hidden_share) = (f64::NAN, f64::NAN, f64::NAN);
+            let mut trunk_error = [f64::NAN; 2];
             let outcome = found.map(|e| {
                 (reacquired, confirmed, fm, gain, unc, renders) = (
                     e.reacquired,
@@ -346,6 +357,7 @@ pub fn evaluate_pose(
                     e.renders,
                 );
                 (sigma_m, spread_m, hidden_share) = (e.sigma_m, e.spread_m, e.hidden_share);
+                trunk_error = e.trunk_error;
                 // The hand tells the articulated fit's wrist from its elbow: no twin.
                 pose_error_with(
                     &model,
@@ -389,6 +401,7 @@ pub fn evaluate_pose(
                 mask_ms,
                 renders,
                 truth_gain,
+                trunk_error,
             });
         }
         progress(k + 1, entries.len());

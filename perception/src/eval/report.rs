@@ -410,7 +410,7 @@ impl PoseEvaluation {
     #[must_use]
     pub fn to_csv(&self) -> String {
         let mut csv = String::from(
-            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm,truth_gain,sigma_m,spread_m,truth_gain_upper_arm,truth_gain_forearm,truth_gain_hand,hidden_share,confirmed,recorded\n",
+            "sequence,frame,distance_class,occlusion_level,distance_m,occlusion,no_pose,position_cm,yaw_deg,pitch_deg,roll_deg,axis_deg,spin_deg,flipped,reacquired,f_m,gain,uncertainty_m,mask_ms,pose_ms,renders,ends_cm,truth_gain,sigma_m,spread_m,truth_gain_upper_arm,truth_gain_forearm,truth_gain_hand,hidden_share,confirmed,recorded,trunk_error_deg,pelvis_error_cm\n",
         );
         for f in &self.frames {
             let (no_pose, e) = match &f.outcome {
@@ -420,7 +420,7 @@ impl PoseEvaluation {
             let v = |g: fn(&PoseError) -> f64| e.map_or(String::new(), |e| format!("{:.4}", g(e)));
             let _ = writeln!(
                 csv,
-                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{},{:.4},{:.5},{:.5},{:.4},{:.4},{:.4},{:.4},{},{}",
+                "{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{},{},{},{:.6},{:.4},{:.4},{:.3},{:.3},{},{},{:.4},{:.5},{:.5},{:.4},{:.4},{:.4},{:.4},{},{},{:.2},{:.2}",
                 f.sequence,
                 f.frame,
                 workcell_procnet::eval::csv_field(&f.distance_class),
@@ -451,7 +451,9 @@ impl PoseEvaluation {
                 f.truth_gain[3],
                 f.hidden_share,
                 f.confirmed,
-                f.recorded
+                f.recorded,
+                f.trunk_error[0].to_degrees(),
+                100.0 * f.trunk_error[1]
             );
         }
         csv

@@ -29,6 +29,7 @@ fn frame_result(
         mask_ms: 0.0,
         renders: 0,
         truth_gain: [f64::NAN; 4],
+        trunk_error: [f64::NAN; 2],
     }
 }
 

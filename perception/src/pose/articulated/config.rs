@@ -109,8 +109,13 @@ pub struct ArmFitConfig {
     /// well. Default false.
     pub reversed_start: bool,
     /// With a depth image, climb from the forearm where its measured points put it (their
-    /// principal axis, both ways round: [`ArmFitter`]'s depth start) as well. Default false.
+    /// principal axis; the end nearer the upper arm's points and farther from the hand's
+    /// the elbow, both ways round where they do not tell) as well. Default false.
     pub depth_start: bool,
+    /// With a depth image, the trunk's stage also starts from the trunk that lays the
+    /// torso's spine along the principal axis of its depth points (at each turn of its
+    /// grid): leans beyond the grid's range. Default true.
+    pub spine_start: bool,
 }
 
 impl Default for ArmFitConfig {
@@ -149,6 +154,7 @@ impl Default for ArmFitConfig {
             fit_trunk: false,
             reversed_start: false,
             depth_start: false,
+            spine_start: true,
         }
     }
 }

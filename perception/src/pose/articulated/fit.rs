@@ -266,9 +266,9 @@ impl<R: Renderer> ArmFitter<R> {
             Some(target.supersampled(c.climb_supersample)?)
         };
         let coarse = coarse_owned.as_ref().unwrap_or(&target);
-        let mut climbs: Vec<(Climb, Vec<Vec<f64>>)> = Vec::new();
+        let mut climbs: Vec<Tracked> = Vec::new();
         // Fits from `confirm_min_gain` up to `min_gain`, each with its track.
-        let mut faint: Vec<(Climb, Vec<Vec<f64>>)> = Vec::new();
+        let mut faint: Vec<Tracked> = Vec::new();
         for track in self.tracks.clone() {
             let Some(last) = track.last() else { continue };
             let mut predicted = last.clone();
@@ -279,11 +279,7 @@ impl<R: Renderer> ArmFitter<R> {
             }
             self.arm.clamp(&mut predicted);
             let climb = self.climb(coarse, predicted.clone(), Some(&predicted))?;
-            if climb.score.gain >= c.min_gain {
-                climbs.push((climb, track));
-            } else if climb.score.gain >= c.confirm_min_gain {
-                faint.push((climb, track));
-            }
+            sort_climb(&c, climb, track, &mut climbs, &mut faint);
         }
         // The global search when the track is lost, and when the tracked fits explain the
         // masks this poorly (the track has likely followed a wrong optimum).
@@ -294,16 +290,13 @@ impl<R: Renderer> ArmFitter<R> {
         let reacquired = climbs.is_empty() || tracked_gain < c.search_below_gain;
         if reacquired {
             for climb in self.search(coarse)? {
-                if climb.score.gain >= c.min_gain {
-                    climbs.push((climb, Vec::new()));
-                } else if climb.score.gain >= c.confirm_min_gain {
-                    faint.push((climb, Vec::new()));
-                }
+                sort_climb(&c, climb, Vec::new(), &mut climbs, &mut faint);
             }
         }
         // Starts that neither the track nor the grid gives: the best fit's forearm end for
         // end (the masks and the depth of a forearm read the same both ways, and a climb
-        // rarely crosses over), and the forearm where its measured points put it.
+        // rarely crosses over), and the forearm where its measured points put it (the
+        // upper arm's and the hand's points tell which end is which where they show).
         let mut starts = Vec::new();
         let best = climbs
             .iter()
@@ -315,8 +308,10 @@ impl<R: Renderer> ArmFitter<R> {
         {
             starts.push(self.arm.reversed_forearm(best)?);
         }
+        let hidden_below_m = (self.arm.nearest_depth_m(&camera.X_WC) - HIDDEN_MARGIN_M) as f32;
         if c.depth_start
-            && let Some([a, b]) = measured_forearm(camera, masks, self.arm.forearm())
+            && let Some(measured) =
+                measured_forearm(camera, masks, self.arm.forearm(), hidden_below_m)
         {
             // Where the best fit already has the forearm there, that end order needs no
             // climb of its own.
@@ -325,7 +320,7 @@ impl<R: Renderer> ArmFitter<R> {
                 .map(|q| self.arm.forearm_ends(q))
                 .transpose()?;
             let from: Vec<&[f64]> = best.iter().map(Vec::as_slice).collect();
-            for goal in [[a, b], [b, a]] {
+            for goal in measured.goals() {
                 let agrees = best_ends.is_some_and(|ends| {
                     ends.iter()
                         .zip(&goal)
@@ -338,11 +333,7 @@ impl<R: Renderer> ArmFitter<R> {
         }
         for start in starts {
             let climb = self.climb(coarse, start, None)?;
-            if climb.score.gain >= c.min_gain {
-                climbs.push((climb, Vec::new()));
-            } else if climb.score.gain >= c.confirm_min_gain {
-                faint.push((climb, Vec::new()));
-            }
+            sort_climb(&c, climb, Vec::new(), &mut climbs, &mut faint);
         }
         // Nothing reaches `min_gain`: the best fainter fit is a pose only where the frame
         // before put the forearm within `confirm_m` of it. Unconfirmed, it is tracked as a
@@ -1020,64 +1011,126 @@ impl<R: Renderer> ArmFitter<R> {
     }
 }
 
+/// A climb and the track it continues (empty for a fresh start).
+type Tracked = (Climb, Vec<Vec<f64>>);
+
+/// A climb and its track into the fits that reach [`ArmFitConfig::min_gain`] or, from
+/// [`ArmFitConfig::confirm_min_gain`], the faint ones; below both it is dropped.
+fn sort_climb(
+    c: &ArmFitConfig,
+    climb: Climb,
+    track: Vec<Vec<f64>>,
+    climbs: &mut Vec<Tracked>,
+    faint: &mut Vec<Tracked>,
+) {
+    if climb.score.gain >= c.min_gain {
+        climbs.push((climb, track));
+    } else if climb.score.gain >= c.confirm_min_gain {
+        faint.push((climb, track));
+    }
+}
+
 /// How near the best fit's forearm ends must lie to the measured ones
 /// ([`measured_forearm`], one order) for the depth start of that order to be skipped, m.
 pub(super) const DEPTH_START_AGREES_M: f64 = 0.05;
 
-/// Forearm mask pixels with depth below which [`measured_forearm`] gives no axis.
+/// Forearm mask pixels with depth below which [`measured_forearm`] gives no axis; the
+/// upper arm's and the hand's pixels below which their points tell nothing of the order.
 pub(super) const MEASURED_FOREARM_MIN_PIXELS: usize = 24;
 
-/// The forearm's two ends (world, either order) where the depth image puts it: the points
-/// its mask's pixels show (probability at least a half, a depth), pushed back along their
-/// rays by the `forearm` model's half width from its surface to its axis; their mean and
-/// principal axis, the ends half the forearm's length either way. `None` without a depth image,
-/// with fewer than [`MEASURED_FOREARM_MIN_PIXELS`] such pixels, or where the points show no
-/// axis (as long across as along).
-pub(super) fn measured_forearm(
-    camera: &Camera,
-    masks: &ArmMasks,
-    forearm: &RigidModel,
-) -> Option<[Vector; 2]> {
-    let depth = masks.depth_m.as_ref()?;
+/// How much nearer, summed over the upper arm's and the hand's points, one end order must
+/// put the elbow to the upper arm and the wrist to the hand than the other for
+/// [`measured_forearm`] to keep that order alone, m.
+pub(super) const MEASURED_ORDER_MARGIN_M: f64 = 0.08;
+
+/// Where the depth image puts the forearm: its two ends (world), and whether the upper
+/// arm's and the hand's points tell which is the elbow.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct MeasuredForearm {
+    /// The ends; `[elbow, wrist]` where `ordered`.
+    pub(super) ends: [Vector; 2],
+    pub(super) ordered: bool,
+}
+
+impl MeasuredForearm {
+    /// The end orders a start should try: `[elbow, wrist]` alone where the order is known,
+    /// else both.
+    pub(super) fn goals(&self) -> Vec<[Vector; 2]> {
+        let [a, b] = self.ends;
+        if self.ordered {
+            vec![[a, b]]
+        } else {
+            vec![[a, b], [b, a]]
+        }
+    }
+}
+
+/// The world points a part's mask shows (probability at least a half) where the depth image
+/// has a depth of at least `hidden_below_m` (nearer pixels show something in front of the
+/// arm, such as an occluder, not the part).
+fn part_points(camera: &Camera, masks: &ArmMasks, part: usize, hidden_below_m: f32) -> Vec<Vector> {
+    let (Some(depth), Some(plane)) = (masks.depth_m.as_ref(), masks.parts.get(part)) else {
+        return Vec::new();
+    };
     let w = masks.width;
-    let points: Vec<Vector> = masks.parts[1]
+    plane
         .iter()
         .zip(depth)
         .enumerate()
-        .filter(|(_, (m, z))| **m >= 0.5 && z.is_finite() && **z > 0.0)
+        .filter(|(_, (m, z))| **m >= 0.5 && z.is_finite() && **z > 0.0 && **z >= hidden_below_m)
         .map(|(p, (_, &z))| {
             let surface = camera.point_at((p % w) as f64 + 0.5, (p / w) as f64 + 0.5, f64::from(z));
             camera.X_WC.transform_point(surface)
         })
-        .collect();
+        .collect()
+}
+
+/// The forearm's two ends (world) where the depth image puts it: the points its mask's
+/// pixels show ([`part_points`]: nothing nearer than `hidden_below_m`), pushed back along
+/// their rays by the `forearm` model's half width from its surface to its axis; their mean
+/// and principal axis, the ends half the forearm's length either way. The elbow is the end
+/// nearer the upper arm's points and farther from the hand's, where that differs by
+/// [`MEASURED_ORDER_MARGIN_M`]. `None` without a depth image, with fewer than
+/// [`MEASURED_FOREARM_MIN_PIXELS`] forearm points, or where they show no axis (as long
+/// across as along).
+pub(super) fn measured_forearm(
+    camera: &Camera,
+    masks: &ArmMasks,
+    forearm: &RigidModel,
+    hidden_below_m: f32,
+) -> Option<MeasuredForearm> {
+    let points = part_points(camera, masks, 1, hidden_below_m);
     if points.len() < MEASURED_FOREARM_MIN_PIXELS {
         return None;
     }
-    let n = points.len() as f64;
-    let mean = points.iter().fold(Vector::ZERO, |s, p| s + *p) / n;
-    let mut covariance = vec![vec![0.0; 3]; 3];
-    for p in &points {
-        let d = *p - mean;
-        let d = [d.x, d.y, d.z];
-        for (i, row) in covariance.iter_mut().enumerate() {
-            for (j, c) in row.iter_mut().enumerate() {
-                *c += d[i] * d[j] / n;
-            }
-        }
-    }
-    let (values, vectors) = symmetric_eigen(covariance);
-    let mut order = [0, 1, 2];
-    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    let (centroid, covariance) = mean_and_covariance(points.iter().copied())?;
+    let (axis, elongation) = principal_axis(covariance)?;
     // A forearm seen end on, or a blob: no axis to start from.
-    if values[order[0]].is_nan() || values[order[0]] <= 4.0 * values[order[1]].max(0.0) {
+    if elongation <= 4.0 {
         return None;
     }
-    let v = &vectors[order[0]];
-    let axis = Vector::new(v[0], v[1], v[2]).normalize();
     let eye = camera.X_WC.translation;
-    let centre = mean + forearm.half_width_m * (mean - eye).normalize();
+    let centre = centroid + forearm.half_width_m * (centroid - eye).normalize();
     let half = 0.5 * forearm.length_m * axis;
-    Some([centre - half, centre + half])
+    let [a, b] = [centre - half, centre + half];
+    // How much nearer [a, b] puts the elbow to the upper arm and the wrist to the hand than
+    // [b, a] does.
+    let mut lead = 0.0;
+    for (part, sign) in [(0, 1.0), (2, -1.0)] {
+        let points = part_points(camera, masks, part, hidden_below_m);
+        if points.len() >= MEASURED_FOREARM_MIN_PIXELS
+            && let Some((c, _)) = mean_and_covariance(points.iter().copied())
+        {
+            lead += sign * ((b - c).length() - (a - c).length());
+        }
+    }
+    Some(if lead >= MEASURED_ORDER_MARGIN_M {
+        MeasuredForearm { ends: [a, b], ordered: true }
+    } else if lead <= -MEASURED_ORDER_MARGIN_M {
+        MeasuredForearm { ends: [b, a], ordered: true }
+    } else {
+        MeasuredForearm { ends: [a, b], ordered: false }
+    })
 }
 
 /// Joints the global search's grid spans at most.

@@ -1,6 +1,8 @@
 //! Numerics of the search: row sums of the masks, a symmetric eigensolver, a distance
 //! transform, grids.
 
+use workcell_robots::math::Vector;
+
 /// The grid over joints whose values are `axes` (one list per joint, in order): every
 /// combination, the last joint varying fastest.
 pub(super) fn grid_product(axes: &[Vec<f64>]) -> Vec<Vec<f64>> {
@@ -74,6 +76,46 @@ impl RowSums {
         }
         total
     }
+}
+
+/// The mean of `points` and their covariance (divided by their number); `None` for none.
+pub(super) fn mean_and_covariance(
+    points: impl Iterator<Item = Vector> + Clone,
+) -> Option<(Vector, Vec<Vec<f64>>)> {
+    let (sum, n) = points.clone().fold((Vector::ZERO, 0usize), |(s, n), p| (s + p, n + 1));
+    if n == 0 {
+        return None;
+    }
+    let n = n as f64;
+    let mean = sum / n;
+    let mut covariance = vec![vec![0.0; 3]; 3];
+    for p in points {
+        let d = p - mean;
+        let d = [d.x, d.y, d.z];
+        for (i, row) in covariance.iter_mut().enumerate() {
+            for (j, c) in row.iter_mut().enumerate() {
+                *c += d[i] * d[j] / n;
+            }
+        }
+    }
+    Some((mean, covariance))
+}
+
+/// The unit eigenvector of a 3x3 covariance's largest eigenvalue (its sign open) and how
+/// many times that eigenvalue is the next one (infinite where the next is 0); `None` where
+/// the largest is not a positive number.
+pub(super) fn principal_axis(covariance: Vec<Vec<f64>>) -> Option<(Vector, f64)> {
+    let (values, vectors) = symmetric_eigen(covariance);
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    let largest = values[order[0]];
+    if !(largest > 0.0) {
+        return None;
+    }
+    let v = &vectors[order[0]];
+    let next = values[order[1]].max(0.0);
+    let ratio = if next > 0.0 { largest / next } else { f64::INFINITY };
+    Some((Vector::new(v[0], v[1], v[2]).normalize(), ratio))
 }
 
 /// Eigenvalues and unit eigenvectors of a small symmetric matrix (cyclic Jacobi rotations).
