@@ -803,7 +803,9 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
                     "truth_gain_hand",
                     "hidden_share",
                     "confirmed",
-                    "recorded"
+                    "recorded",
+                    "trunk_error_deg",
+                    "pelvis_error_cm"
                 ]),
             "{csv}"
         );

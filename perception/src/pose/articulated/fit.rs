@@ -1125,11 +1125,20 @@ pub(super) fn measured_forearm(
         }
     }
     Some(if lead >= MEASURED_ORDER_MARGIN_M {
-        MeasuredForearm { ends: [a, b], ordered: true }
+        MeasuredForearm {
+            ends: [a, b],
+            ordered: true,
+        }
     } else if lead <= -MEASURED_ORDER_MARGIN_M {
-        MeasuredForearm { ends: [b, a], ordered: true }
+        MeasuredForearm {
+            ends: [b, a],
+            ordered: true,
+        }
     } else {
-        MeasuredForearm { ends: [a, b], ordered: false }
+        MeasuredForearm {
+            ends: [a, b],
+            ordered: false,
+        }
     })
 }
 

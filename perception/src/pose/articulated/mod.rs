@@ -46,15 +46,15 @@
 //! ranges and climbs the best few distinct cells ([`ArmFit::reacquired`]); the tracked
 //! climbs compete with them. With a depth image ([`ArmFitConfig::depth_start`]) a climb
 //! also starts from where the depth points put the forearm (its mask's points, less any
-//! nearer than the arm can reach, their principal axis; the elbow at the end the upper arm's
-//! points are nearer, the wrist where the hand's are), unless the best fit already has it
-//! there. With true masks and the trunk held at the labels,
-//! on the recorded people of a validation split (2,958 frames), it took the frames whose
-//! forearm has an end more than 10 cm off from 629 to 171 and the time per frame from
-//! 15 to 27 ms (`workcell eval pose --masks gt --depth --trunk truth --depth-start`). A track that explains the masks poorly has often followed a
-//! wrong optimum on masks the network misread: on the validation split with ProcNet's masks
-//! and depth, searching below a gain of 0.55 (6 % of frames) took the 99th percentile of the
-//! forearm's error from 6.0 to 4.9 cm.
+//! nearer than the arm can reach, their principal axis; the elbow at the end the upper
+//! arm's points are nearer, the wrist where the hand's are), unless the best fit already
+//! has it there. With true masks and the trunk held at the labels, on the recorded people
+//! of a validation split (2,958 frames), it took the frames whose forearm has an end more
+//! than 10 cm off from 629 to 171 and the time per frame from 15 to 27 ms (`workcell eval
+//! pose --masks gt --depth --trunk truth --depth-start`). A track that explains the masks
+//! poorly has often followed a wrong optimum on masks the network misread: on the
+//! validation split with ProcNet's masks and depth, searching below a gain of 0.55 (6 % of
+//! frames) took the 99th percentile of the forearm's error from 6.0 to 4.9 cm.
 //!
 //! **Acceptance.** A fit is a pose when its gain reaches [`ArmFitConfig::min_gain`] (0.3).
 //! Below it, down to [`ArmFitConfig::confirm_min_gain`], the best fit is a pose only when the

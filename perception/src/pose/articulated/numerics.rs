@@ -82,7 +82,9 @@ impl RowSums {
 pub(super) fn mean_and_covariance(
     points: impl Iterator<Item = Vector> + Clone,
 ) -> Option<(Vector, Vec<Vec<f64>>)> {
-    let (sum, n) = points.clone().fold((Vector::ZERO, 0usize), |(s, n), p| (s + p, n + 1));
+    let (sum, n) = points
+        .clone()
+        .fold((Vector::ZERO, 0usize), |(s, n), p| (s + p, n + 1));
     if n == 0 {
         return None;
     }
@@ -109,12 +111,16 @@ pub(super) fn principal_axis(covariance: Vec<Vec<f64>>) -> Option<(Vector, f64)>
     let mut order = [0, 1, 2];
     order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
     let largest = values[order[0]];
-    if !(largest > 0.0) {
+    if largest.is_nan() || largest <= 0.0 {
         return None;
     }
     let v = &vectors[order[0]];
     let next = values[order[1]].max(0.0);
-    let ratio = if next > 0.0 { largest / next } else { f64::INFINITY };
+    let ratio = if next > 0.0 {
+        largest / next
+    } else {
+        f64::INFINITY
+    };
     Some((Vector::new(v[0], v[1], v[2]).normalize(), ratio))
 }
 

@@ -340,7 +340,9 @@ fn the_trunks_error_is_its_largest_joint_and_the_pelvis() {
     q[trunk.slides[0]] += 0.03;
     q[trunk.slides[1]] -= 0.04;
     // An arm joint moves no trunk error.
-    let arm_joint = (0..human.dof()).find(|i| !trunk.all.contains(i)).expect("an arm joint");
+    let arm_joint = (0..human.dof())
+        .find(|i| !trunk.all.contains(i))
+        .expect("an arm joint");
     q[arm_joint] += 1.0;
     let [angle, slide] = trunk.error(&q, &truth).expect("an error");
     assert!((angle - 0.3).abs() < 1e-12, "{angle}");
@@ -666,7 +668,10 @@ fn the_torsos_depth_points_lay_the_spine_beyond_the_grid() {
         });
         worst_without = worst_without.max((without[lean_joint] - lean).abs());
     }
-    assert!(worst_without > 0.15, "without the spine: {worst_without:.3} rad at worst");
+    assert!(
+        worst_without > 0.15,
+        "without the spine: {worst_without:.3} rad at worst"
+    );
 }
 
 /// Where the person stands: a person 25 cm nearer the camera and 15 cm to the side of where
@@ -920,7 +925,10 @@ fn the_depth_image_measures_where_the_forearm_is() {
         let moved = |m: MeasuredForearm| (m.ends[0] - a).length().max((m.ends[1] - b).length());
         assert!(moved(kept) < 0.02, "{truth:?}: {} m", moved(kept));
         let read = measured_forearm(&camera, &screened, arm.forearm(), all);
-        assert!(read.is_none_or(|m| moved(m) > 0.1), "{truth:?}: the screen was read");
+        assert!(
+            read.is_none_or(|m| moved(m) > 0.1),
+            "{truth:?}: the screen was read"
+        );
         // The axis's direction and the line it lies on come from the whole visible surface,
         // which tapers from the elbow's radius to the wrist's (4.46 to 3.01 cm over 25.6 cm
         // in human_arm.urdf, 3.3 degrees): the direction within that and 2 degrees of
@@ -965,7 +973,10 @@ fn the_depth_image_measures_where_the_forearm_is() {
             .map(|(p, &z)| if p % 64 == 0 { z } else { 0.0 })
             .collect(),
     );
-    assert_eq!(measured_forearm(&camera, &masks, arm.forearm(), f32::NEG_INFINITY), None);
+    assert_eq!(
+        measured_forearm(&camera, &masks, arm.forearm(), f32::NEG_INFINITY),
+        None
+    );
 }
 
 /// Every point of every part lies within the reach of the shoulder, whatever the
