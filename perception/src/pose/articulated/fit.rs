@@ -1067,20 +1067,35 @@ impl MeasuredForearm {
 
 /// The world points a part's mask shows (probability at least a half) where the depth image
 /// has a depth of at least `hidden_below_m` (nearer pixels show something in front of the
-/// arm, such as an occluder, not the part).
+/// arm, such as an occluder, not the part); none without a depth image.
 fn part_points(camera: &Camera, masks: &ArmMasks, part: usize, hidden_below_m: f32) -> Vec<Vector> {
-    let (Some(depth), Some(plane)) = (masks.depth_m.as_ref(), masks.parts.get(part)) else {
-        return Vec::new();
-    };
-    let w = masks.width;
+    match (masks.depth_m.as_ref(), masks.parts.get(part)) {
+        (Some(depth), Some(plane)) => {
+            plane_points(camera, masks.width, plane, depth, hidden_below_m)
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// The world points of the pixels of `plane` (row-major, `width` wide) of probability at
+/// least a half, back-projected at their `depth`, where that is at least `hidden_below_m`.
+pub(super) fn plane_points(
+    camera: &Camera,
+    width: usize,
+    plane: &[f32],
+    depth: &[f32],
+    hidden_below_m: f32,
+) -> Vec<Vector> {
     plane
         .iter()
         .zip(depth)
         .enumerate()
         .filter(|(_, (m, z))| **m >= 0.5 && z.is_finite() && **z > 0.0 && **z >= hidden_below_m)
         .map(|(p, (_, &z))| {
-            let surface = camera.point_at((p % w) as f64 + 0.5, (p / w) as f64 + 0.5, f64::from(z));
-            camera.X_WC.transform_point(surface)
+            let (x, y) = ((p % width) as f64 + 0.5, (p / width) as f64 + 0.5);
+            camera
+                .X_WC
+                .transform_point(camera.point_at(x, y, f64::from(z)))
         })
         .collect()
 }
@@ -1118,9 +1133,8 @@ pub(super) fn measured_forearm(
     let mut lead = 0.0;
     for (part, sign) in [(0, 1.0), (2, -1.0)] {
         let points = part_points(camera, masks, part, hidden_below_m);
-        if points.len() >= MEASURED_FOREARM_MIN_PIXELS
-            && let Some((c, _)) = mean_and_covariance(points.iter().copied())
-        {
+        if points.len() >= MEASURED_FOREARM_MIN_PIXELS {
+            let c = points.iter().fold(Vector::ZERO, |s, p| s + *p) / points.len() as f64;
             lead += sign * ((b - c).length() - (a - c).length());
         }
     }

@@ -56,6 +56,7 @@ use workcell_render::{Camera, RenderMesh, Renderer};
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{JointKind, LinkId, RobotModel, Shape};
 
+use super::fit::plane_points;
 use super::*;
 use crate::error::Result;
 use crate::pose::POSE_MESH_SEGMENTS;
@@ -709,18 +710,7 @@ pub(super) fn measured_spine(
     depth: &[f32],
     hidden_below_m: f32,
 ) -> Option<Vector> {
-    let w = masks.width;
-    let points: Vec<Vector> = masks
-        .torso
-        .iter()
-        .zip(depth)
-        .enumerate()
-        .filter(|(_, (m, z))| **m >= 0.5 && z.is_finite() && **z > 0.0 && **z >= hidden_below_m)
-        .map(|(p, (_, &z))| {
-            let surface = camera.point_at((p % w) as f64 + 0.5, (p / w) as f64 + 0.5, f64::from(z));
-            camera.X_WC.transform_point(surface)
-        })
-        .collect();
+    let points = plane_points(camera, masks.width, &masks.torso, depth, hidden_below_m);
     if points.len() < SPINE_MIN_PIXELS {
         return None;
     }
