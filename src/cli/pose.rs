@@ -73,8 +73,10 @@ pub struct EvalPoseArgs {
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub reversed_start: Option<bool>,
     /// With --method articulated and --depth: climb from the forearm where its mask's depth
-    /// points put it as well, both ways round (ArmFitConfig::depth_start; on where the masks'
-    /// calibration was measured with it; `--depth-start false` turns it off).
+    /// points put it as well, the elbow at the end the upper arm's points are nearer (both ways
+    /// round where they and the hand's do not tell; ArmFitConfig::depth_start; on where the
+    /// masks' calibration was measured with it, as the shipped procnet-depth-human's;
+    /// `--depth-start false` turns it off).
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub depth_start: Option<bool>,
     /// With --method articulated: a fit whose gain is below this is no pose (0 to 1; default

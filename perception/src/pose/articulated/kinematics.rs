@@ -347,7 +347,7 @@ impl ArticulatedArm {
     /// joints and their summed squared residual.
     fn gauss_newton(
         &self,
-        residual: &dyn Fn(&[f64]) -> Result<[f64; 6]>,
+        mut residual: impl FnMut(&[f64]) -> Result<[f64; 6]>,
         start: &[f64],
     ) -> Result<(f64, Vec<f64>)> {
         const ITERATIONS: usize = 40;
@@ -362,26 +362,8 @@ impl ArticulatedArm {
             if cost < IK_DONE_M * IK_DONE_M {
                 break;
             }
-            let mut jacobian = vec![[0.0; 6]; n];
-            for (i, column) in jacobian.iter_mut().enumerate() {
-                let mut v = q.clone();
-                v[i] += STEP_RAD;
-                let rv = residual(&v)?;
-                for (c, (a, b)) in column.iter_mut().zip(rv.iter().zip(&r)) {
-                    *c = (a - b) / STEP_RAD;
-                }
-            }
-            // (J^T J + damping I) dq = -J^T r
-            let mut normal = vec![vec![0.0; n]; n];
-            let mut rhs = vec![0.0; n];
-            for i in 0..n {
-                for j in 0..n {
-                    normal[i][j] = (0..6).map(|k| jacobian[i][k] * jacobian[j][k]).sum();
-                }
-                normal[i][i] += damping;
-                rhs[i] = -(0..6).map(|k| jacobian[i][k] * r[k]).sum::<f64>();
-            }
-            let Some(dq) = super::numerics::solve(normal, rhs) else {
+            let Some(dq) = gauss_newton_step(&mut residual, &q, &r, 0..n, STEP_RAD, damping)?
+            else {
                 break;
             };
             let mut next = q.clone();

@@ -78,6 +78,43 @@ impl RowSums {
     }
 }
 
+/// One damped Gauss-Newton step for the variables `free` of `x`: the Jacobian of
+/// `residual` by forward differences of `step`, from `r` (the residual at `x`), and the
+/// solution of `(J^T J + damping I) dx = -J^T r`, one entry per free variable. `Ok(None)`
+/// where that system is singular.
+///
+/// # Errors
+/// `residual`'s.
+pub(super) fn gauss_newton_step<const N: usize, E>(
+    residual: &mut impl FnMut(&[f64]) -> Result<[f64; N], E>,
+    x: &[f64],
+    r: &[f64; N],
+    free: std::ops::Range<usize>,
+    step: f64,
+    damping: f64,
+) -> Result<Option<Vec<f64>>, E> {
+    let n = free.len();
+    let mut jacobian = vec![[0.0; N]; n];
+    for (column, i) in jacobian.iter_mut().zip(free) {
+        let mut v = x.to_vec();
+        v[i] += step;
+        let rv = residual(&v)?;
+        for (c, (a, b)) in column.iter_mut().zip(rv.iter().zip(r)) {
+            *c = (a - b) / step;
+        }
+    }
+    let mut normal = vec![vec![0.0; n]; n];
+    let mut rhs = vec![0.0; n];
+    for i in 0..n {
+        for j in 0..n {
+            normal[i][j] = (0..N).map(|k| jacobian[i][k] * jacobian[j][k]).sum();
+        }
+        normal[i][i] += damping;
+        rhs[i] = -(0..N).map(|k| jacobian[i][k] * r[k]).sum::<f64>();
+    }
+    Ok(solve(normal, rhs))
+}
+
 /// The mean of `points` and their covariance (divided by their number); `None` for none.
 pub(super) fn mean_and_covariance(
     points: impl Iterator<Item = Vector> + Clone,

@@ -504,27 +504,11 @@ impl<R: Renderer> ArmFitter<R> {
         let mut r = residual(&x)?;
         let mut cost: f64 = r.iter().map(|v| v * v).sum();
         for _ in 0..ITERATIONS {
-            // The joints after the turn: columns of the Jacobian by forward differences.
-            let free = n_rev - 1;
-            let mut jacobian = vec![[0.0; 3]; free];
-            for (c, column) in jacobian.iter_mut().enumerate() {
-                let mut v = x.clone();
-                v[c + 1] += STEP_RAD;
-                let rv = residual(&v)?;
-                for (e, (a, b)) in column.iter_mut().zip(rv.iter().zip(&r)) {
-                    *e = (a - b) / STEP_RAD;
-                }
-            }
-            let mut normal = vec![vec![0.0; free]; free];
-            let mut rhs = vec![0.0; free];
-            for i in 0..free {
-                for j in 0..free {
-                    normal[i][j] = (0..3).map(|k| jacobian[i][k] * jacobian[j][k]).sum();
-                }
-                normal[i][i] += 1e-3;
-                rhs[i] = -(0..3).map(|k| jacobian[i][k] * r[k]).sum::<f64>();
-            }
-            let Some(dx) = solve(normal, rhs) else { break };
+            // The joints after the turn.
+            let Some(dx) = gauss_newton_step(&mut residual, &x, &r, 1..n_rev, STEP_RAD, 1e-3)?
+            else {
+                break;
+            };
             let mut next = x.clone();
             for (j, d) in dx.iter().enumerate() {
                 let [lo, hi] = trunk.limits[j + 1];
