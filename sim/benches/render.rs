@@ -1,11 +1,14 @@
-//! Renderer speed: frames of the default scene (what moved, and all anew), forearm masks for render-and-compare, and
+//! Renderer speed: frames of the default scene (what moved, and all anew), forearm masks for render-and-compare, the
+//! whole body's forearm as row spans (its pieces, and its hull, as the fit renders them), and
 //! PNG encoding of a dataset frame. `cargo bench -p workcell-sim --bench render`; with
 //! `--features gpu` the wgpu backend runs the same cases beside the CPU.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use workcell_robots::math::{Pose, Rotation, Vector};
 use workcell_sim::render::image::{PixelKind, encode_png};
-use workcell_sim::render::{Camera, CpuRenderer, Frame, MaskBatch, RenderMesh, Renderer};
+use workcell_sim::render::{
+    Camera, CpuRenderer, Frame, MaskBatch, RenderMesh, Renderer, SpanBatch,
+};
 use workcell_sim::{CellModel, CellScene, CellState, RobotCommand, step};
 
 fn default_cell() -> (CellScene, Camera) {
@@ -120,6 +123,60 @@ fn cases(
     group.finish();
 }
 
+/// The whole body's forearm as the articulated fit renders it (6 segments around round
+/// shapes): its visuals' outside pieces, and their convex hull.
+fn body_forearm() -> (RenderMesh, RenderMesh) {
+    let human = workcell_robots::RobotModel::from_catalogue("human").expect("human");
+    let link = human.link_id("forearm").expect("forearm");
+    let pieces: Vec<(RenderMesh, bool)> = human.links()[link]
+        .visuals
+        .iter()
+        .map(|g| {
+            let convex = !matches!(g.shape, workcell_robots::Shape::Mesh { .. });
+            (RenderMesh::from_geometry_with(g, [0.5; 3], 6), convex)
+        })
+        .collect();
+    let mut all = RenderMesh::default();
+    for (piece, _) in &pieces {
+        all.append(piece, &Pose::IDENTITY);
+    }
+    (
+        RenderMesh::outer_union(&pieces),
+        all.convex_hull().expect("a hull"),
+    )
+}
+
+/// Row spans of the whole body's forearm at 256 poses in a 128x128 crop, one thread: what
+/// each candidate of the fit's search costs.
+fn spans(c: &mut Criterion) {
+    let (pieces, hull) = body_forearm();
+    eprintln!(
+        "the whole body's forearm: {} triangles as pieces, {} as their hull",
+        pieces.len(),
+        hull.len()
+    );
+    let cam = Camera::look_at([0.0; 3], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0], 128, 128, 40.0)
+        .expect("camera");
+    let poses = mask_poses();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
+    let mut renderer = CpuRenderer::new();
+    let mut spans = SpanBatch::new();
+    let mut group = c.benchmark_group("render/spans_1_thread");
+    group.throughput(Throughput::Elements(poses.len() as u64));
+    for (name, mesh) in [("pieces", &pieces), ("hull", &hull)] {
+        group.bench_function(format!("body_forearm_{name}_128x128_x256"), |b| {
+            b.iter(|| {
+                pool.install(|| renderer.render_spans(mesh, &cam, &poses, &mut spans))
+                    .expect("spans")
+            });
+        });
+    }
+    group.finish();
+}
+
 fn cpu(c: &mut Criterion) {
     eprintln!(
         "default scene: {} triangles",
@@ -165,5 +222,5 @@ fn png(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, cpu, gpu, png);
+criterion_group!(benches, cpu, gpu, spans, png);
 criterion_main!(benches);

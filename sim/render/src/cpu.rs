@@ -125,6 +125,14 @@ pub(crate) struct Projection {
     planes: [([f32; 3], f32); 5],
 }
 
+/// A vertex as the rasterizer takes it ([`Projection::snap`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Snapped {
+    x: i64,
+    y: i64,
+    iz: f32,
+}
+
 /// One image row's run of pixel centres that a triangle covers, `first..=last`, with the
 /// triangle's edge functions at `first` and their step per pixel (for interpolation).
 pub(crate) struct RowSpan {
@@ -183,12 +191,7 @@ impl Projection {
     /// image row's run of covered pixel centres (the same pixels as [`Projection::triangle`]).
     #[inline]
     pub(crate) fn triangle_rows(&self, t: [[f32; 3]; 3], row: &mut impl FnMut(&RowSpan)) {
-        let inside = |p: [f32; 3], (n, d): ([f32; 3], f32)| dot(n, p) + d >= 0.0;
-        if self
-            .planes
-            .iter()
-            .all(|&pl| t.iter().all(|&p| inside(p, pl)))
-        {
+        if t.iter().all(|&p| self.inside(p)) {
             self.raster(t, row);
             return;
         }
@@ -228,15 +231,34 @@ impl Projection {
     /// row's run of covered pixels.
     #[inline]
     fn raster(&self, t: [[f32; 3]; 3], row_span: &mut impl FnMut(&RowSpan)) {
-        let mut x = [0i64; 3];
-        let mut y = [0i64; 3];
-        let mut iz = [0f32; 3];
-        for k in 0..3 {
-            let [px, py, pz] = t[k];
-            iz[k] = 1.0 / pz;
-            x[k] = round_to_int((self.fx * px * iz[k] + self.cx) * SUB as f32);
-            y[k] = round_to_int((self.fy * py * iz[k] + self.cy) * SUB as f32);
+        self.raster_snapped(t.map(|p| self.snap(p)), row_span);
+    }
+
+    /// A camera-frame point in front of the near plane as the rasterizer takes it: its
+    /// image position in 1/256 px, and `1/z`.
+    #[inline]
+    pub(crate) fn snap(&self, [px, py, pz]: [f32; 3]) -> Snapped {
+        let iz = 1.0 / pz;
+        Snapped {
+            x: round_to_int((self.fx * px * iz + self.cx) * SUB as f32),
+            y: round_to_int((self.fy * py * iz + self.cy) * SUB as f32),
+            iz,
         }
+    }
+
+    /// Whether a camera-frame point is inside every clip plane: a triangle of three such
+    /// points is rasterized unclipped.
+    #[inline]
+    pub(crate) fn inside(&self, p: [f32; 3]) -> bool {
+        self.planes.iter().all(|&(n, d)| dot(n, p) + d >= 0.0)
+    }
+
+    /// [`Projection::raster`] of a triangle whose vertices are snapped already.
+    #[inline]
+    pub(crate) fn raster_snapped(&self, v: [Snapped; 3], row_span: &mut impl FnMut(&RowSpan)) {
+        let mut x = v.map(|v| v.x);
+        let mut y = v.map(|v| v.y);
+        let mut iz = v.map(|v| v.iz);
         let mut area = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]);
         if area == 0 {
             return;
@@ -280,17 +302,27 @@ impl Projection {
         // Weights: E_1 (edge b-c) for vertex a, E_2 for b, E_0 for c.
         let (wa, wb, wc) = (iz[0] * inv_area, iz[1] * inv_area, iz[2] * inv_area);
         let stride = self.width as usize;
+        // The row's span: E_k(i0 + t) = row_k + t step_k >= 0 for every edge, solved for t
+        // exactly in integers (the same pixels as testing each one of the bounding box): a
+        // floor division by the edge's step, carried from row to row without dividing.
+        let mut bounds = [0, 1, 2].map(|k| {
+            let (r, s, dr) = (row[k], step_x[k], step_y[k]);
+            match s.cmp(&0) {
+                // t >= ceil(-r / s) = floor((s - 1 - r) / s).
+                std::cmp::Ordering::Greater => Some((true, RowFloor::new(s - 1 - r, -dr, s))),
+                // t <= floor(r / -s).
+                std::cmp::Ordering::Less => Some((false, RowFloor::new(r, dr, -s))),
+                std::cmp::Ordering::Equal => None,
+            }
+        });
         for j in j0..=j1 {
-            // The row's span: E_k(i0 + t) = row_k + t step_k >= 0 for every edge, solved for
-            // t exactly in integers (the same pixels as testing each one of the bounding box).
             let (mut lo, mut hi) = (0i64, i1 - i0);
-            for k in 0..3 {
-                let (r, s) = (row[k], step_x[k]);
-                match s.cmp(&0) {
-                    std::cmp::Ordering::Greater => lo = lo.max((s - 1 - r).div_euclid(s)),
-                    std::cmp::Ordering::Less => hi = hi.min(r.div_euclid(-s)),
-                    std::cmp::Ordering::Equal if r < 0 => hi = -1,
-                    std::cmp::Ordering::Equal => {}
+            for (k, bound) in bounds.iter_mut().enumerate() {
+                match bound {
+                    Some((true, b)) => lo = lo.max(b.next()),
+                    Some((false, b)) => hi = hi.min(b.next()),
+                    None if row[k] < 0 => hi = -1,
+                    None => {}
                 }
             }
             if lo <= hi {
@@ -308,6 +340,43 @@ impl Projection {
             row[1] += step_y[1];
             row[2] += step_y[2];
         }
+    }
+}
+
+/// `floor(n / d)` for `n` growing by `dn` a row (`d > 0`), one row after another: the
+/// quotient and the remainder carried, two divisions in all.
+#[derive(Debug, Clone, Copy)]
+struct RowFloor {
+    q: i64,
+    m: i64,
+    dq: i64,
+    dm: i64,
+    d: i64,
+}
+
+impl RowFloor {
+    #[inline]
+    fn new(n: i64, dn: i64, d: i64) -> Self {
+        Self {
+            q: n.div_euclid(d),
+            m: n.rem_euclid(d),
+            dq: dn.div_euclid(d),
+            dm: dn.rem_euclid(d),
+            d,
+        }
+    }
+
+    /// This row's `floor(n / d)`; then steps to the next row.
+    #[inline]
+    fn next(&mut self) -> i64 {
+        let q = self.q;
+        self.q += self.dq;
+        self.m += self.dm;
+        if self.m >= self.d {
+            self.m -= self.d;
+            self.q += 1;
+        }
+        q
     }
 }
 
@@ -677,29 +746,51 @@ impl Renderer for CpuRenderer {
             .spans
             .par_chunks_mut((camera.height as usize).max(1))
             .zip(X_CO.par_iter())
-            .for_each_init(Vec::new, |vertices, (rows, X)| {
-                draw_spans(&proj, mesh, &Affine::from_pose(X), vertices, rows);
-            });
+            .for_each_init(
+                || (Vec::new(), Vec::new()),
+                |(vertices, snapped), (rows, X)| {
+                    draw_spans(&proj, mesh, &Affine::from_pose(X), vertices, snapped, rows);
+                },
+            );
         Ok(())
     }
 }
 
 /// Covers the pixels of `mesh` at `X_CO` in `spans` (one a row, [`SpanBatch::EMPTY`]
 /// before): each row's first and last covered pixel, as [`draw_mask`] would cover them.
+/// Each vertex inside the view is snapped once (`snapped`, scratch), not once a triangle;
+/// triangles with a vertex outside are clipped as [`Projection::triangle_rows`] clips them.
 pub(crate) fn draw_spans(
     proj: &Projection,
     mesh: &RenderMesh,
     X_CO: &Affine,
     vertices: &mut Vec<[f32; 3]>,
+    snapped: &mut Vec<Option<Snapped>>,
     spans: &mut [[u32; 2]],
 ) {
-    front_faces(mesh, X_CO, vertices, |t, _, _| {
-        proj.triangle_rows(t, &mut |run: &RowSpan| {
-            let span = &mut spans[run.row];
-            span[0] = span[0].min(run.first as u32);
-            span[1] = span[1].max(run.last as u32);
-        });
-    });
+    let mut cover = |run: &RowSpan| {
+        let span = &mut spans[run.row];
+        span[0] = span[0].min(run.first as u32);
+        span[1] = span[1].max(run.last as u32);
+    };
+    vertices.clear();
+    vertices.extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
+    snapped.clear();
+    snapped.extend(
+        vertices
+            .iter()
+            .map(|&p| (p.iter().all(|v| v.is_finite()) && proj.inside(p)).then(|| proj.snap(p))),
+    );
+    for tri in &mesh.triangles {
+        let t = tri.map(|i| vertices.get(i as usize).copied().unwrap_or([f32::NAN; 3]));
+        if facing(mesh, t).is_none() {
+            continue;
+        }
+        match tri.map(|i| snapped.get(i as usize).copied().flatten()) {
+            [Some(a), Some(b), Some(c)] => proj.raster_snapped([a, b, c], &mut cover),
+            _ => proj.triangle_rows(t, &mut cover),
+        }
+    }
 }
 
 /// The triangles of `mesh` at `X_CO` as both backends draw them: camera-frame vertices
@@ -717,15 +808,21 @@ pub(crate) fn front_faces(
     vertices.extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
     for (tri, &albedo) in mesh.triangles.iter().zip(&mesh.colors) {
         let t = tri.map(|i| vertices.get(i as usize).copied().unwrap_or([f32::NAN; 3]));
-        if !t.iter().flatten().all(|v| v.is_finite()) {
-            continue;
+        if let Some(n) = facing(mesh, t) {
+            face(t, n, albedo);
         }
-        let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
-        if mesh.closed && dot(n, t[0]) >= 0.0 {
-            continue;
-        }
-        face(t, n, albedo);
     }
+}
+
+/// The unnormalised normal of camera-frame triangle `t` of `mesh` where it is drawn: its
+/// vertices finite and, for a closed mesh, turned to the camera.
+#[inline]
+fn facing(mesh: &RenderMesh, t: [[f32; 3]; 3]) -> Option<[f32; 3]> {
+    if !t.iter().flatten().all(|v| v.is_finite()) {
+        return None;
+    }
+    let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+    (!(mesh.closed && dot(n, t[0]) >= 0.0)).then_some(n)
 }
 
 /// Covers the pixels of `mesh` at `X_CO` in `mask`.
@@ -743,6 +840,32 @@ pub(crate) fn draw_mask(
 
 #[cfg(test)]
 mod tests {
+    use super::RowFloor;
+
+    #[test]
+    fn the_carried_floor_is_the_floor_division_of_every_row() {
+        // Numerators and steps of either sign, divisors from 1 up: every row's quotient as
+        // `div_euclid` gives it.
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut draw = |range: i64| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state % (2 * range as u64 + 1)) as i64 - range
+        };
+        for _ in 0..2000 {
+            let (n, dn, d) = (draw(1 << 34), draw(1 << 20), draw(1 << 16).abs() + 1);
+            let mut carried = RowFloor::new(n, dn, d);
+            for row in 0..64 {
+                assert_eq!(
+                    carried.next(),
+                    (n + row * dn).div_euclid(d),
+                    "{n} {dn} {d} {row}"
+                );
+            }
+        }
+    }
+
     use super::*;
     use rand::{Rng, SeedableRng};
 

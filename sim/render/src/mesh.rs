@@ -104,6 +104,50 @@ impl RenderMesh {
         out
     }
 
+    /// The convex hull of the mesh's vertices: a closed mesh wound counter-clockwise seen
+    /// from outside, in the first triangle's colour. Its silhouette from any view holds the
+    /// mesh's, and is the same where the mesh is convex; a search that renders a limb's
+    /// outline thousands of times renders its hull from fewer triangles (the whole body's
+    /// forearm at 6 segments: 276 triangles, 108 on its hull). `None` where the vertices
+    /// span no volume (fewer than four, or all in a plane).
+    #[must_use]
+    pub fn convex_hull(&self) -> Option<Self> {
+        use parry3d_f64::math::Vector as Point;
+        let points: Vec<Point> = self
+            .positions
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+            .map(|p| Point::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])))
+            .collect();
+        if points.len() < 4 {
+            return None;
+        }
+        let (vertices, mut triangles) =
+            parry3d_f64::transformation::try_convex_hull(&points).ok()?;
+        let positions: Vec<[f32; 3]> = vertices
+            .iter()
+            .map(|v| [v.x as f32, v.y as f32, v.z as f32])
+            .collect();
+        // Six times the signed volume: positive where the faces turn outwards.
+        let volume: f64 = triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| vertices[i as usize]);
+                a.dot(b.cross(c))
+            })
+            .sum();
+        if volume.is_nan() || volume.abs() <= 1e-15 || triangles.len() < 4 {
+            return None;
+        }
+        if volume < 0.0 {
+            for t in &mut triangles {
+                t.swap(1, 2);
+            }
+        }
+        let color = self.colors.first().copied().unwrap_or([0.5; 3]);
+        Some(Self::solid(positions, triangles, color))
+    }
+
     /// The corners of triangle `t`; `None` when an index is out of range.
     fn corners(&self, t: &[u32; 3]) -> Option<[[f32; 3]; 3]> {
         let corner = |c: usize| self.positions.get(t[c] as usize).copied();

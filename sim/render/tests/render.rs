@@ -606,3 +606,75 @@ fn a_pixels_point_at_a_depth_projects_back_onto_the_pixel() {
     let side = cam.point_at(cam.cx + cam.fx, cam.cy, 2.0);
     assert_relative_eq!(side.x, 2.0, epsilon = 1e-12);
 }
+
+#[test]
+fn a_convex_hull_is_closed_outward_and_renders_a_convex_mesh_the_same() {
+    // Two unit cubes 3 m apart along x: their hull is the 4 x 1 x 1 box between them.
+    let mut dumbbell = RenderMesh::cuboid([0.5; 3], [0.5; 3]);
+    dumbbell.append(
+        &RenderMesh::cuboid([0.5; 3], [0.5; 3]),
+        &Pose::from_translation(Vector::new(3.0, 0.0, 0.0)),
+    );
+    let hull = dumbbell.convex_hull().expect("a hull");
+    assert!(hull.closed);
+    assert_eq!(hull.positions.len(), 8);
+    let volume: f64 = hull
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| {
+                let p = hull.positions[i as usize];
+                Vector::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+            });
+            a.dot(b.cross(c)) / 6.0
+        })
+        .sum();
+    assert_relative_eq!(volume, 4.0, epsilon = 1e-6);
+    // Seen side on (poses in the camera's frame, z ahead), the hull covers the gap between
+    // the cubes; the cubes do not.
+    let cam = camera(120, 60, 60.0);
+    let side_on = [Pose::from_translation(Vector::new(-1.5, 0.0, 5.0))];
+    let mut renderer = CpuRenderer::new();
+    let (mut a, mut b) = (MaskBatch::new(), MaskBatch::new());
+    renderer
+        .render_masks(&dumbbell, &cam, &side_on, &mut a)
+        .unwrap();
+    renderer
+        .render_masks(&hull, &cam, &side_on, &mut b)
+        .unwrap();
+    let covered = |m: &MaskBatch| m.data.iter().filter(|&&v| v > 0).count();
+    assert!(
+        a.data.iter().zip(&b.data).all(|(a, b)| *a <= *b),
+        "the hull holds the mesh"
+    );
+    assert!(
+        covered(&b) as f64 > 1.3 * covered(&a) as f64,
+        "{} {}",
+        covered(&a),
+        covered(&b)
+    );
+    // A convex mesh: the same spans from every view (the same silhouette, triangulated
+    // otherwise).
+    let cam = camera(96, 80, 45.0);
+    let poses = poses_ahead(24);
+    for mesh in [
+        RenderMesh::capsule_with(0.05, 0.3, [0.5; 3], 6),
+        RenderMesh::cylinder_with(0.04, 0.25, [0.5; 3], 6),
+    ] {
+        let hull = mesh.convex_hull().expect("a hull");
+        assert!(hull.len() <= mesh.len());
+        let (mut want, mut got) = (SpanBatch::new(), SpanBatch::new());
+        renderer
+            .render_spans(&mesh, &cam, &poses, &mut want)
+            .unwrap();
+        renderer
+            .render_spans(&hull, &cam, &poses, &mut got)
+            .unwrap();
+        assert_eq!(got, want);
+    }
+    // Nothing to hold: a flat square, and too few points.
+    let mut flat = RenderMesh::cuboid([0.5, 0.5, 0.0], [0.5; 3]);
+    assert!(flat.convex_hull().is_none());
+    flat.positions.truncate(3);
+    assert!(flat.convex_hull().is_none());
+}

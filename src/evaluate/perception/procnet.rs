@@ -240,7 +240,7 @@ impl ProcNetCamera {
             Ok(estimate) => {
                 self.counts.estimates += 1;
                 if tracing::enabled!(tracing::Level::TRACE) {
-                    self.trace_fit(input, &estimate.fit.q);
+                    self.trace_fit(input, &estimate.fit);
                 }
                 Some(Measured {
                     reacquired: estimate.fit.reacquired,
@@ -259,13 +259,14 @@ impl ProcNetCamera {
         })
     }
 
-    /// The fit's error per part against the truth at exposure (trace level: where the
-    /// closed loop's error comes from, the fit or its ageing).
-    fn trace_fit(&mut self, input: &PerceptionInput<'_>, q: &[f64]) {
+    /// The fit's error per part against the truth at exposure, with its gain, bound and
+    /// whether the search found it (trace level: where the closed loop's error comes from,
+    /// the fit or its ageing, and whether the bound covered it).
+    fn trace_fit(&mut self, input: &PerceptionInput<'_>, fit: &workcell_perception::pose::ArmFit) {
         if input
             .model
             .human
-            .forward_kinematics(q, &mut self.kinematics)
+            .forward_kinematics(&fit.q, &mut self.kinematics)
             .is_err()
         {
             return;
@@ -276,6 +277,9 @@ impl ProcNetCamera {
         tracing::trace!(
             t = input.t_s,
             parts = %part_errors(&fitted, input.truth),
+            gain = fit.gain,
+            bound_m = fit.uncertainty_m,
+            reacquired = fit.reacquired,
             "fit error"
         );
     }
@@ -581,6 +585,9 @@ pub struct FrameTiming {
     pub reacquired: bool,
     /// The frame gave an estimate.
     pub estimate: bool,
+    /// Part renders of the fit (each candidate pose renders each part once); 0 without an
+    /// estimate.
+    pub renders: usize,
 }
 
 /// Times perception on `frames` frames of the cell's camera at its rate, from the start of
@@ -642,6 +649,7 @@ pub fn bench_tracker(
             fit_ms: ms(t2, t3),
             reacquired: outcome.as_ref().is_ok_and(|e| e.fit.reacquired),
             estimate: outcome.is_ok(),
+            renders: outcome.as_ref().map_or(0, |e| e.fit.renders),
         });
         progress(k + 1);
     }
