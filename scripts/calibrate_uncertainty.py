@@ -22,6 +22,7 @@ the first.
 
     scripts/calibrate_uncertainty.py VALIDATION.csv [TEST.csv] [--target 0.99]
         [--pool VALIDATION2.csv TEST2.csv]... [--tracked-floors] [--confident-gain G]
+        [--confident-bands N]
         [--write WEIGHTS --depth|--no-depth]
 
 `--write WEIGHTS` puts the chosen calibration into the calibration file beside the weights
@@ -38,7 +39,10 @@ a fit that kept its track is rarely far off, and one floor for both is set by th
 `--confident-gain G` gives the fits whose gain is at least G floors of their own (each band
 for the target of its own frames), before any other floors: a fit that explains the masks
 that well is rarely far off, on recorded people as on the generator's motion, and one floor
-for every fit is set by the poor ones. Where the CSVs have the `recorded` column, the coverage
+for every fit is set by the poor ones. `--confident-bands N` keeps those floors to the first
+N bands of the hidden share (no band, then from 25, 50, 75 %): in the bands from the N-th on
+a fit of that gain takes the floor any fit of the band takes, where that is larger (with
+three quarters of the forearm hidden, the gain reads a quarter of it). Where the CSVs have the `recorded` column, the coverage
 of recorded people's frames and of the generator's is reported apart: a bound fitted on a mix
 can hold for one and not the other.
 
@@ -206,12 +210,14 @@ def coverage(frames, calibration):
     return sum(1 for f in frames if f[0] <= radius(f, calibration)) / len(frames)
 
 
-def calibrate(frames, target, tracked_floors=False, confident_gain=None):
+def calibrate(frames, target, tracked_floors=False, confident_gain=None, confident_bands=None):
     """Per scale, (scale, floor, hidden floors[, tracked floors[, confident]]) and its mean
     radius; and the row of smallest mean radius. With `tracked_floors`, the frames that kept
     their track and the re-acquired ones each get floors for `target` of their own; with
     `confident_gain`, the frames of that gain or more get floors of their own first
-    (confident: (gain, floors)), and the others are calibrated as before."""
+    (confident: (gain, floors)), and the others are calibrated as before; with
+    `confident_bands` N, the confident floors of the bands from the N-th on are at least the
+    others' of the band."""
     rows = []
     sure = [] if confident_gain is None else [f for f in frames if gain_of(f) >= confident_gain]
     if confident_gain is not None and not sure:
@@ -225,7 +231,12 @@ def calibrate(frames, target, tracked_floors=False, confident_gain=None):
         if confident_gain is not None:
             calibration = calibration[:3] + (tracked_floors_of(calibration),)
             _, floor, hidden = band_floors(sure, a, target)
-            calibration = calibration + ((confident_gain, (floor,) + tuple(hidden)),)
+            floors = [floor] + list(hidden)
+            if confident_bands is not None:
+                anyone = [calibration[1]] + list(calibration[2])
+                for b in range(confident_bands, len(floors)):
+                    floors[b] = max(floors[b], anyone[b])
+            calibration = calibration + ((confident_gain, tuple(floors)),)
         rows.append((calibration, statistics.mean(radius(f, calibration) for f in frames)))
     return rows, min(rows, key=lambda r: r[1])
 
@@ -249,6 +260,8 @@ def toml_value(v):
 
 
 FIT_KEYS = {"fit_trunk", "search_below_gain", "reversed_start", "depth_start"}
+# Settings that runs before them do not write (the fit then ran as their defaults say).
+OPTIONAL_FIT_KEYS = {"hull_outlines"}
 
 
 def fit_settings(csv_path):
@@ -265,8 +278,11 @@ def fit_settings(csv_path):
             doc = tomllib.load(f)
     except (OSError, tomllib.TOMLDecodeError) as e:
         sys.exit(f"{path}: {e}")
-    if set(doc) != FIT_KEYS:
-        sys.exit(f"{path}: not the fit's settings (keys {sorted(doc)}, expected {sorted(FIT_KEYS)})")
+    if not FIT_KEYS <= set(doc) <= FIT_KEYS | OPTIONAL_FIT_KEYS:
+        sys.exit(
+            f"{path}: not the fit's settings (keys {sorted(doc)}, expected "
+            f"{sorted(FIT_KEYS)} and any of {sorted(OPTIONAL_FIT_KEYS)})"
+        )
     return doc
 
 
@@ -364,6 +380,9 @@ def main():
                         help="floors of their own for the fits that kept their track")
     parser.add_argument("--confident-gain", type=float, default=None, metavar="G",
                         help="floors of their own for the fits of gain G or more")
+    parser.add_argument("--confident-bands", type=int, default=None, metavar="N",
+                        help="with --confident-gain: their own floors in the first N bands "
+                             "of the hidden share only (1 to 4)")
     parser.add_argument("--write", metavar="WEIGHTS", help="write the calibration beside WEIGHTS")
     depth = parser.add_mutually_exclusive_group()
     depth.add_argument("--depth", dest="depth", action="store_true", default=None,
@@ -415,7 +434,13 @@ def main():
                 print(f"{name}: {kept} of {len(frames)} frames with a pose kept their track")
     if args.confident_gain is not None and not 0.0 <= args.confident_gain <= 1.0:
         sys.exit("--confident-gain is a gain from 0 to 1")
-    rows, best = calibrate(val, args.target, args.tracked_floors, args.confident_gain)
+    if args.confident_bands is not None and (
+        args.confident_gain is None or not 1 <= args.confident_bands <= len(HIDDEN_BANDS) + 1
+    ):
+        sys.exit(f"--confident-bands is 1 to {len(HIDDEN_BANDS) + 1}, with --confident-gain")
+    rows, best = calibrate(
+        val, args.target, args.tracked_floors, args.confident_gain, args.confident_bands
+    )
     print(
         "| scale | floor (cm) | floors hidden 25/50/75 % (cm) | mean radius (cm) "
         "| 95th pct radius (cm) | validation coverage |" + (" test coverage |" if test else "")

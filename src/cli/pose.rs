@@ -79,6 +79,10 @@ pub struct EvalPoseArgs {
     /// `--depth-start false` turns it off).
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub depth_start: Option<bool>,
+    /// With --method articulated: render each part's convex hull, not its pieces
+    /// (ArmFitConfig::hull_outlines; default: the masks' calibration's, else off).
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    pub hull_outlines: Option<bool>,
     /// With --method articulated: a fit whose gain is below this is no pose (0 to 1; default
     /// ArmFitConfig's 0.3).
     #[arg(long)]
@@ -244,14 +248,15 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 || args.search_below_gain.is_some()
                 || args.reversed_start.is_some()
                 || args.depth_start.is_some()
+                || args.hull_outlines.is_some()
                 || args.min_gain.is_some()
                 || args.confirm_min_gain.is_some()
                 || args.trunk.is_some() =>
         {
             anyhow::bail!(
                 "--search-starts, --search-below-gain, --reversed-start, --depth-start, \
-                 --min-gain, --confirm-min-gain and --trunk are settings of --method \
-                 articulated"
+                 --hull-outlines, --min-gain, --confirm-min-gain and --trunk are settings of \
+                 --method articulated"
             )
         }
         "paper" if args.depth => {
@@ -320,6 +325,9 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 }
                 if let Some(on) = args.depth_start {
                     config.depth_start = on;
+                }
+                if let Some(on) = args.hull_outlines {
+                    config.hull_outlines = on;
                 }
                 if let Some(measured) = calibration.and_then(|c| c.fit) {
                     let differences = measured.differences(&FitSettings::of(&config));

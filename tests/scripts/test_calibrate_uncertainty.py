@@ -154,6 +154,28 @@ class Calibrate(unittest.TestCase):
         self.assertAlmostEqual(pooled[0][1], 0.485)
         self.assertLess(best[1], pooled[1])
 
+    def test_confident_floors_can_stop_short_of_the_most_hidden_band(self):
+        # Confident fits (gain 0.8) with the forearm in view, errors up to 2 cm, and with
+        # three quarters of it hidden, up to 4 cm; poor fits (gain 0.5) that hidden, up to
+        # 60 cm.
+        seen = [(k / 10_000.0, 0.0, 0.0, 0.0, False, 0.8) for k in range(1, 201)]
+        hidden = [(k / 5_000.0, 0.0, 0.0, 0.8, False, 0.8) for k in range(1, 201)]
+        poor = [(k * 0.003, 0.0, 0.0, 0.8, False, 0.5) for k in range(1, 201)]
+        frames = seen + hidden + poor
+        calibrate = calibrate_uncertainty.calibrate
+        _, own = calibrate(frames, 0.99, confident_gain=0.7)
+        _, kept = calibrate(frames, 0.99, confident_gain=0.7, confident_bands=3)
+        # Index int(0.99 * 200) = 198 of each set's sorted errors: the 199th.
+        self.assertAlmostEqual(own[0][4][1][0], 0.0199)
+        self.assertAlmostEqual(own[0][4][1][3], 0.0398)
+        self.assertAlmostEqual(kept[0][4][1][0], 0.0199)
+        self.assertAlmostEqual(kept[0][4][1][3], 0.597)
+        radius = calibrate_uncertainty.radius
+        confident_hidden = (0.0, 0.0, 0.0, 0.8, False, 0.8)
+        self.assertAlmostEqual(radius(confident_hidden, own[0]), 0.0398)
+        self.assertAlmostEqual(radius(confident_hidden, kept[0]), 0.597)
+        self.assertAlmostEqual(radius((0.0, 0.0, 0.0, 0.0, False, 0.8), kept[0]), 0.0199)
+
     def test_confident_fits_get_floors_of_their_own(self):
         # 200 frames of gain 0.8 with errors up to 2 cm, 200 of gain 0.5 with errors up to
         # 60 cm; the recorded people among them are the poor fits.

@@ -102,6 +102,9 @@ pub struct FitSettings {
     pub reversed_start: bool,
     /// [`ArmFitConfig::depth_start`].
     pub depth_start: bool,
+    /// [`ArmFitConfig::hull_outlines`] (false where a file leaves it out).
+    #[serde(default)]
+    pub hull_outlines: bool,
 }
 
 impl FitSettings {
@@ -113,6 +116,7 @@ impl FitSettings {
             search_below_gain: config.search_below_gain,
             reversed_start: config.reversed_start,
             depth_start: config.depth_start,
+            hull_outlines: config.hull_outlines,
         }
     }
 
@@ -124,6 +128,7 @@ impl FitSettings {
             search_below_gain: self.search_below_gain,
             reversed_start: self.reversed_start,
             depth_start: self.depth_start,
+            hull_outlines: self.hull_outlines,
             ..config
         }
     }
@@ -138,6 +143,7 @@ impl FitSettings {
                 ("search_below_gain", f.search_below_gain.to_string()),
                 ("reversed_start", f.reversed_start.to_string()),
                 ("depth_start", f.depth_start.to_string()),
+                ("hull_outlines", f.hull_outlines.to_string()),
             ]
         };
         settings(self)

@@ -755,7 +755,12 @@ impl<R: Renderer> ArmFitter<R> {
         let ss = target.ss;
         let per_sample = 1.0 / (ss * ss) as f64;
         for p in 0..3 {
-            let Some(mesh) = self.arm.meshes[p].clone() else {
+            let outlines = if self.config.hull_outlines {
+                &self.arm.hulls
+            } else {
+                &self.arm.meshes
+            };
+            let Some(mesh) = outlines[p].clone() else {
                 continue;
             };
             self.poses.clear();

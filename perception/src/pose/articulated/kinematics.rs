@@ -23,7 +23,11 @@ pub struct ArticulatedArm {
     pub(super) human: RobotModel,
     pub(super) X_WH: Pose,
     pub(super) links: [LinkId; 3],
+    /// What the fit renders of each part: its visuals' outside pieces.
     pub(super) meshes: [Option<Arc<RenderMesh>>; 3],
+    /// Or their convex hull ([`ArmFitConfig::hull_outlines`]): a limb's outline from fewer
+    /// triangles (the pieces where they span no volume).
+    pub(super) hulls: [Option<Arc<RenderMesh>>; 3],
     /// Each part's box axis and size, for the depth term.
     pub(super) models: [Option<RigidModel>; 3],
     /// The fitted joints' ranges (clamped to +-pi), in [`ArticulatedArm::fitted`] order.
@@ -59,6 +63,7 @@ impl ArticulatedArm {
         }
         let mut links = [0; 3];
         let mut meshes: [Option<Arc<RenderMesh>>; 3] = [None, None, None];
+        let mut hulls: [Option<Arc<RenderMesh>>; 3] = [None, None, None];
         let mut models: [Option<RigidModel>; 3] = [None, None, None];
         for (i, part) in FITTED_PARTS.into_iter().enumerate() {
             let link = human
@@ -79,9 +84,12 @@ impl ArticulatedArm {
             }
             links[i] = link;
             if !mesh.is_empty() {
-                // The parts' geometry from every visual; their renders from the outside ones.
+                // The parts' geometry from every visual; their renders from the outside ones,
+                // or from their hull.
+                let outer = Arc::new(RenderMesh::outer_union(&pieces));
+                hulls[i] = Some(mesh.convex_hull().map_or_else(|| outer.clone(), Arc::new));
                 models[i] = Some(RigidModel::new(Arc::new(mesh))?);
-                meshes[i] = Some(Arc::new(RenderMesh::outer_union(&pieces)));
+                meshes[i] = Some(outer);
             }
         }
         let forearm = models[1]
@@ -148,6 +156,7 @@ impl ArticulatedArm {
             X_WH: *X_WH,
             links,
             meshes,
+            hulls,
             models,
             limits,
             fitted,
