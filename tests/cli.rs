@@ -934,8 +934,9 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "--dataset",
             data_s,
         ],
-        "--search-starts, --search-below-gain, --reversed-start, --depth-start, --min-gain, \
-         --confirm-min-gain and --trunk are settings of --method articulated",
+        "--search-starts, --search-below-gain, --reversed-start, --depth-start, \
+         --hull-outlines, --min-gain, --confirm-min-gain and --trunk are settings of --method \
+         articulated",
     );
     refused(
         &[
@@ -945,6 +946,18 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
             "paper",
             "--trunk",
             "fit",
+            "--dataset",
+            data_s,
+        ],
+        "are settings of --method articulated",
+    );
+    refused(
+        &[
+            "eval",
+            "pose",
+            "--method",
+            "paper",
+            "--hull-outlines",
             "--dataset",
             data_s,
         ],
