@@ -1,5 +1,6 @@
 //! The search ([`ArmFitter`]): hypotheses, the climb, the Newton steps, the bound.
 
+use std::collections::HashMap;
 use std::sync::Arc;
 
 use rand::{Rng, SeedableRng};
@@ -763,13 +764,27 @@ impl<R: Renderer> ArmFitter<R> {
             let Some(mesh) = outlines[p].clone() else {
                 continue;
             };
+            // Each distinct pose of the part rendered once: candidates that move only the
+            // joints below a part (the search's grid, the climb's steps of the elbow) leave
+            // it where it was, to the bit.
             self.poses.clear();
-            self.poses.extend(all.iter().map(|x| x[p]));
+            let mut seen: HashMap<[u64; 7], usize> = HashMap::with_capacity(qs.len());
+            let rendered: Vec<usize> = all
+                .iter()
+                .map(|x| {
+                    let (t, r) = (x[p].translation, x[p].rotation);
+                    let key = [t.x, t.y, t.z, r.x, r.y, r.z, r.w].map(f64::to_bits);
+                    *seen.entry(key).or_insert_with(|| {
+                        self.poses.push(x[p]);
+                        self.poses.len() - 1
+                    })
+                })
+                .collect();
             self.renderer
                 .render_spans(&mesh, &target.fine, &self.poses, &mut self.spans)?;
-            self.renders += qs.len();
+            self.renders += self.poses.len();
             let sums = &target.sums[p];
-            for (k, score) in scores.iter_mut().enumerate() {
+            for (score, &k) in scores.iter_mut().zip(&rendered) {
                 let [value, signed] = sums.over(self.spans.spans(k), ss);
                 let (value, signed) = (value * per_sample, signed * per_sample);
                 score.objective += value;

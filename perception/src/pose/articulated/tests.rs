@@ -1253,3 +1253,33 @@ fn bad_masks_are_no_pose_not_errors() {
     let small = ArmMasks { width: 64, ..empty };
     assert!(fitter.fit(&camera, &small).is_err());
 }
+
+/// A batch of candidates renders each part's distinct poses once: bending the elbow four
+/// ways leaves the upper arm where it was (one render) and moves the forearm and the hand
+/// (four each); each candidate scores as it does alone.
+#[test]
+fn a_part_that_does_not_move_is_rendered_once() {
+    let (arm, camera) = setup();
+    let masks =
+        ArmMasks::from_classes(&classes(&arm, &camera, &[0.5, 0.9, 1.0]), 128, 128).expect("masks");
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm, ArmFitConfig::default());
+    let target = fitter
+        .target(&camera, &masks, 1)
+        .expect("target")
+        .expect("a target");
+    let qs: Vec<Vec<f64>> = (0..4)
+        .map(|k| vec![0.5, 0.9, 1.0 + 0.1 * f64::from(k)])
+        .collect();
+    fitter.renders = 0;
+    let together = fitter.score(&target, &qs, None).expect("scores");
+    assert_eq!(fitter.renders, 1 + 4 + 4);
+    for (q, score) in qs.iter().zip(&together) {
+        let alone = fitter
+            .score(&target, std::slice::from_ref(q), None)
+            .expect("score")[0];
+        assert_eq!(
+            (alone.objective, alone.gain, alone.part_gain),
+            (score.objective, score.gain, score.part_gain)
+        );
+    }
+}
