@@ -42,9 +42,9 @@ that well is rarely far off, on recorded people as on the generator's motion, an
 for every fit is set by the poor ones. `--confident-bands N` keeps those floors to the first
 N bands of the hidden share (no band, then from 25, 50, 75 %): in the bands from the N-th on
 a fit of that gain takes the floor any fit of the band takes, where that is larger (with
-three quarters of the forearm hidden, the gain reads a quarter of it). Where the CSVs have the `recorded` column, the coverage
-of recorded people's frames and of the generator's is reported apart: a bound fitted on a mix
-can hold for one and not the other.
+three quarters of the forearm hidden, the gain reads a quarter of it). Where the CSVs have
+the `recorded` column, the coverage of recorded people's frames and of the generator's is
+reported apart: a bound fitted on a mix can hold for one and not the other.
 
 `--write` also records the fit's settings the CSVs were measured with (`fit.toml`, which
 `workcell eval pose` writes beside `pose_frames.csv`) as the section's `fit` table, so that

@@ -692,15 +692,15 @@ pub fn bench_perception(args: &BenchPerceptionArgs) -> Result<ExitCode> {
         );
     };
     // Each stage's time, and the fit's renders where the stage is the fit's.
-    let pick = |f: &dyn Fn(&workcell::evaluate::procnet::FrameTiming) -> Option<f64>| -> Vec<(f64, Option<usize>)> {
-        timings.iter().filter_map(|t| f(t).map(|ms| (ms, None))).collect()
-    };
-    let fits = |f: &dyn Fn(&workcell::evaluate::procnet::FrameTiming) -> Option<f64>| -> Vec<(f64, Option<usize>)> {
+    type Stage<'a> = &'a dyn Fn(&workcell::evaluate::procnet::FrameTiming) -> Option<f64>;
+    let stage = |f: Stage, fit: bool| -> Vec<(f64, Option<usize>)> {
         timings
             .iter()
-            .filter_map(|t| f(t).map(|ms| (ms, t.estimate.then_some(t.renders))))
+            .filter_map(|t| f(t).map(|ms| (ms, (fit && t.estimate).then_some(t.renders))))
             .collect()
     };
+    let pick = |f: Stage| stage(f, false);
+    let fits = |f: Stage| stage(f, true);
     row(
         "render (the simulator's camera)",
         pick(&|t| Some(t.render_ms)),

@@ -840,32 +840,6 @@ pub(crate) fn draw_mask(
 
 #[cfg(test)]
 mod tests {
-    use super::RowFloor;
-
-    #[test]
-    fn the_carried_floor_is_the_floor_division_of_every_row() {
-        // Numerators and steps of either sign, divisors from 1 up: every row's quotient as
-        // `div_euclid` gives it.
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut draw = |range: i64| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state % (2 * range as u64 + 1)) as i64 - range
-        };
-        for _ in 0..2000 {
-            let (n, dn, d) = (draw(1 << 34), draw(1 << 20), draw(1 << 16).abs() + 1);
-            let mut carried = RowFloor::new(n, dn, d);
-            for row in 0..64 {
-                assert_eq!(
-                    carried.next(),
-                    (n + row * dn).div_euclid(d),
-                    "{n} {dn} {d} {row}"
-                );
-            }
-        }
-    }
-
     use super::*;
     use rand::{Rng, SeedableRng};
 
@@ -950,5 +924,29 @@ mod tests {
             }
         }
         assert!(hits.iter().all(|&h| h == 1), "{hits:?}");
+    }
+
+    #[test]
+    fn the_carried_floor_is_the_floor_division_of_every_row() {
+        // Numerators and steps of either sign, divisors from 1 up: every row's quotient as
+        // `div_euclid` gives it.
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut draw = |range: i64| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state % (2 * range as u64 + 1)) as i64 - range
+        };
+        for _ in 0..2000 {
+            let (n, dn, d) = (draw(1 << 34), draw(1 << 20), draw(1 << 16).abs() + 1);
+            let mut carried = RowFloor::new(n, dn, d);
+            for row in 0..64 {
+                assert_eq!(
+                    carried.next(),
+                    (n + row * dn).div_euclid(d),
+                    "{n} {dn} {d} {row}"
+                );
+            }
+        }
     }
 }

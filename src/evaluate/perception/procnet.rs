@@ -7,8 +7,9 @@
 //! fit on: a fit of the global search may have jumped from a wrong optimum to the truth, and
 //! a velocity across that jump carried the wrong arm's error forward; on the tuning clips
 //! 1-12 with true masks, starting the window there took the perception error 3.2 mm lower,
-//! 95 % -6.1 to -1.1, lower in 9 of 12). A frame without a pose delivers nothing: the last estimate ages (its uncertainty grows); without
-//! one, or once it is older than [`MAX_AGE_S`], the filter sees no human and brakes.
+//! 95 % -6.1 to -1.1, lower in 9 of 12). A frame without a pose delivers nothing: the last
+//! estimate ages (its uncertainty grows); without one, or once it is older than
+//! [`MAX_AGE_S`], the filter sees no human and brakes.
 
 use std::collections::VecDeque;
 
@@ -404,9 +405,6 @@ impl HumanPerception for ProcNetCamera {
     }
 }
 
-/// The joints' velocity through `fits` (exposure time, joints; newest last) into `qd`: the
-/// least-squares slope of each joint against time over the fits within [`MAX_AGE_S`] of the
-/// newest (of two, their difference quotient); zero with fewer than two.
 /// Adds the fit `q` exposed at `t0` to `fits`, keeping the last `window`; a `reacquired` fit
 /// (the global search's, not the track's) starts the window anew: no velocity across the
 /// jump. The oldest fit's buffer holds the newest once the window is full.
@@ -431,6 +429,9 @@ fn push_fit(
     fits.push_back((t0, buffer));
 }
 
+/// The joints' velocity through `fits` (exposure time, joints; newest last) into `qd`: the
+/// least-squares slope of each joint against time over the fits within [`MAX_AGE_S`] of the
+/// newest (of two, their difference quotient); zero with fewer than two.
 fn least_squares_velocity(fits: &VecDeque<(f64, Vec<f64>)>, qd: &mut [f64]) {
     qd.iter_mut().for_each(|v| *v = 0.0);
     let Some(&(newest, _)) = fits.back() else {
@@ -585,8 +586,8 @@ pub struct FrameTiming {
     pub reacquired: bool,
     /// The frame gave an estimate.
     pub estimate: bool,
-    /// Part renders of the fit (each candidate pose renders each part once); 0 without an
-    /// estimate.
+    /// Part renders of the fit (each distinct pose of a part in a batch of candidates
+    /// renders once); 0 without an estimate.
     pub renders: usize,
 }
 

@@ -137,6 +137,10 @@ pub struct ArmFitter<R: Renderer> {
     pub(super) batch: MaskBatch,
     pub(super) spans: SpanBatch,
     pub(super) poses: Vec<Pose>,
+    /// Scratch of [`Self::score`]: each distinct part pose's index in `poses` (by its bits),
+    /// and each candidate's.
+    distinct: HashMap<[u64; 7], usize>,
+    rendered: Vec<usize>,
     pub(super) renders: usize,
     pub(super) rng: ChaCha8Rng,
     /// The trunk stage's depth renders (`Renderer::render_depth`).
@@ -155,6 +159,8 @@ impl<R: Renderer> ArmFitter<R> {
             batch: MaskBatch::new(),
             spans: SpanBatch::new(),
             poses: Vec::new(),
+            distinct: HashMap::new(),
+            rendered: Vec::new(),
             renders: 0,
             rng: ChaCha8Rng::seed_from_u64(0),
             trunk_depth: Vec::new(),
@@ -768,23 +774,22 @@ impl<R: Renderer> ArmFitter<R> {
             // joints below a part (the search's grid, the climb's steps of the elbow) leave
             // it where it was, to the bit.
             self.poses.clear();
-            let mut seen: HashMap<[u64; 7], usize> = HashMap::with_capacity(qs.len());
-            let rendered: Vec<usize> = all
-                .iter()
-                .map(|x| {
-                    let (t, r) = (x[p].translation, x[p].rotation);
-                    let key = [t.x, t.y, t.z, r.x, r.y, r.z, r.w].map(f64::to_bits);
-                    *seen.entry(key).or_insert_with(|| {
-                        self.poses.push(x[p]);
-                        self.poses.len() - 1
-                    })
-                })
-                .collect();
+            self.distinct.clear();
+            self.rendered.clear();
+            for x in &all {
+                let (t, r) = (x[p].translation, x[p].rotation);
+                let key = [t.x, t.y, t.z, r.x, r.y, r.z, r.w].map(f64::to_bits);
+                let k = *self.distinct.entry(key).or_insert_with(|| {
+                    self.poses.push(x[p]);
+                    self.poses.len() - 1
+                });
+                self.rendered.push(k);
+            }
             self.renderer
                 .render_spans(&mesh, &target.fine, &self.poses, &mut self.spans)?;
             self.renders += self.poses.len();
             let sums = &target.sums[p];
-            for (score, &k) in scores.iter_mut().zip(&rendered) {
+            for (score, &k) in scores.iter_mut().zip(&self.rendered) {
                 let [value, signed] = sums.over(self.spans.spans(k), ss);
                 let (value, signed) = (value * per_sample, signed * per_sample);
                 score.objective += value;
