@@ -147,7 +147,8 @@ fn body_forearm() -> (RenderMesh, RenderMesh) {
 }
 
 /// Row spans of the whole body's forearm at 256 poses in a 128x128 crop, one thread: what
-/// each candidate of the fit's search costs.
+/// each candidate of the fit's search costs. Its pieces, their hull drawn triangle by
+/// triangle, and the hull drawn from its outline polygon (a convex mesh's path).
 fn spans(c: &mut Criterion) {
     let (pieces, hull) = body_forearm();
     eprintln!(
@@ -164,9 +165,18 @@ fn spans(c: &mut Criterion) {
         .expect("pool");
     let mut renderer = CpuRenderer::new();
     let mut spans = SpanBatch::new();
+    // The hull drawn triangle by triangle, as a mesh not known to be convex is.
+    let hull_triangles = RenderMesh {
+        convex: false,
+        ..hull.clone()
+    };
     let mut group = c.benchmark_group("render/spans_1_thread");
     group.throughput(Throughput::Elements(poses.len() as u64));
-    for (name, mesh) in [("pieces", &pieces), ("hull", &hull)] {
+    for (name, mesh) in [
+        ("pieces", &pieces),
+        ("hull_triangles", &hull_triangles),
+        ("hull", &hull),
+    ] {
         group.bench_function(format!("body_forearm_{name}_128x128_x256"), |b| {
             b.iter(|| {
                 pool.install(|| renderer.render_spans(mesh, &cam, &poses, &mut spans))

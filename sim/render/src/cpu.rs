@@ -23,6 +23,7 @@ pub struct CpuRenderer {
     inv_z: Vec<f32>,
     color: Vec<[f32; 3]>,
     cache: FrameCache,
+    scratch: SpanScratch,
 }
 
 /// What a frame leaves for the next one of the same camera and light, so that a camera
@@ -147,6 +148,23 @@ pub(crate) struct RowSpan {
     pub(crate) w: [f32; 3],
 }
 
+impl RowSpan {
+    /// Calls `pixel(index, 1/z)` for each of the run's pixels, `1/z` interpolated as the
+    /// edge functions step.
+    #[inline]
+    pub(crate) fn pixels(&self, mut pixel: impl FnMut(usize, f32)) {
+        let mut e = self.e;
+        for i in self.first..=self.last {
+            debug_assert!((e[0] | e[1] | e[2]) >= 0, "a pixel outside the span");
+            let z = e[1] as f32 * self.w[0] + e[2] as f32 * self.w[1] + e[0] as f32 * self.w[2];
+            pixel(self.base + i, z);
+            for (e, step) in e.iter_mut().zip(self.step) {
+                *e += step;
+            }
+        }
+    }
+}
+
 impl Projection {
     pub(crate) fn new(c: &Camera) -> Self {
         let (fx, fy, cx, cy) = (c.fx as f32, c.fy as f32, c.cx as f32, c.cy as f32);
@@ -174,17 +192,7 @@ impl Projection {
     /// calling `pixel(index, 1/z)` for every covered pixel centre.
     #[inline]
     pub(crate) fn triangle(&self, t: [[f32; 3]; 3], pixel: &mut impl FnMut(usize, f32)) {
-        self.triangle_rows(t, &mut |span: &RowSpan| {
-            let mut e = span.e;
-            for i in span.first..=span.last {
-                debug_assert!((e[0] | e[1] | e[2]) >= 0, "a pixel outside the span");
-                let z = e[1] as f32 * span.w[0] + e[2] as f32 * span.w[1] + e[0] as f32 * span.w[2];
-                pixel(span.base + i, z);
-                for (e, step) in e.iter_mut().zip(span.step) {
-                    *e += step;
-                }
-            }
-        });
+        self.triangle_rows(t, &mut |span: &RowSpan| span.pixels(&mut *pixel));
     }
 
     /// Clips triangle `(a, b, c)` (camera frame) to the view and calls `row` with each
@@ -343,6 +351,201 @@ impl Projection {
     }
 }
 
+impl Projection {
+    /// `mesh`'s vertices at `X_CO` snapped into `points` (x and y as [`Projection::snap`]
+    /// gives them, packed by [`pack_point`]) where every one is finite and inside the view;
+    /// false where one is not.
+    #[inline]
+    pub(crate) fn snap_points(
+        &self,
+        mesh: &RenderMesh,
+        X_CO: &Affine,
+        points: &mut Vec<u64>,
+    ) -> bool {
+        points.clear();
+        points.reserve(mesh.positions.len());
+        // No early exit, and the snapping in 32-bit lanes, so that the loop vectorizes:
+        // inside the guard band a snapped coordinate is below 2^31 and `round_to_int`'s.
+        let mut inside = true;
+        for &p in &mesh.positions {
+            let p = X_CO.apply(p);
+            inside &= p[0].is_finite() & p[1].is_finite() & p[2].is_finite() & self.inside(p);
+            let iz = 1.0 / p[2];
+            let x = round_to_i32((self.fx * p[0] * iz + self.cx) * SUB as f32);
+            let y = round_to_i32((self.fy * p[1] * iz + self.cy) * SUB as f32);
+            points.push(pack_point(x, y));
+        }
+        inside
+    }
+
+    /// The rows of the convex polygon around `points` (snapped vertices packed by
+    /// [`pack_point`], sorted and deduplicated in place), as [`Projection::raster_snapped`] covers the triangles that
+    /// tile it: `row(j, first, last)` for each image row `j` whose pixel centres
+    /// `first..=last` it covers, by the same edge functions and the same top-left rule on
+    /// the polygon's edges. Nothing where the points span no area.
+    ///
+    /// The polygon's two chains from its first vertex to its last in `(y, x)` order are
+    /// built in `chains` (Andrew's monotone chain, collinear points dropped): the left
+    /// chain's edges bound each row from below, the right chain's from above. Each edge's
+    /// bound is carried from row to row ([`RowFloor`]).
+    pub(crate) fn convex_rows(
+        &self,
+        points: &mut Vec<u64>,
+        chains: &mut [Vec<[i64; 2]>; 2],
+        mut row: impl FnMut(usize, usize, usize),
+    ) {
+        points.sort_unstable();
+        points.dedup();
+        let cross = |o: [i64; 2], a: [i64; 2], b: [i64; 2]| {
+            (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+        };
+        let [left, right] = chains;
+        left.clear();
+        right.clear();
+        for p in points.iter().map(|&p| unpack_point(p)) {
+            while left.len() >= 2 && cross(left[left.len() - 2], left[left.len() - 1], p) >= 0 {
+                left.pop();
+            }
+            left.push(p);
+            while right.len() >= 2 && cross(right[right.len() - 2], right[right.len() - 1], p) <= 0
+            {
+                right.pop();
+            }
+            right.push(p);
+        }
+        let (Some(top), Some(bottom)) = (left.first(), left.last()) else {
+            return;
+        };
+        if left.len() + right.len() < 5 {
+            // Both chains are the segment from the top to the bottom (or a point): no area.
+            return;
+        }
+        let (w, h) = (i64::from(self.width), i64::from(self.height));
+        let first = |lo: i64| (lo - SUB / 2 + SUB - 1).div_euclid(SUB).max(0);
+        let last = |hi: i64, n: i64| (hi - SUB / 2).div_euclid(SUB).min(n - 1);
+        let (j0, j1) = (first(top[1]), last(bottom[1], h));
+        let mut sides = [
+            ChainBound::new(left, true, j0),
+            ChainBound::new(right, false, j0),
+        ];
+        for j in j0..=j1 {
+            let yc = j * SUB + SUB / 2;
+            let (mut lo, mut hi) = (0, w - 1);
+            for side in &mut sides {
+                side.bound(yc, &mut lo, &mut hi);
+            }
+            if lo <= hi {
+                row(j as usize, lo as usize, hi as usize);
+            }
+        }
+    }
+}
+
+/// One chain of [`Projection::convex_rows`]'s polygon walked down row by row: the edge that
+/// crosses the row and its bound on the row's pixels, carried from row to row.
+struct ChainBound<'a> {
+    /// The chain's vertices by y.
+    chain: &'a [[i64; 2]],
+    /// The left chain's edges are oriented upward, the right chain's downward: the
+    /// polygon's inside is where an edge function is not negative.
+    upward: bool,
+    /// The edge (from `chain[at]` to `chain[at + 1]`) whose bound `floor` carries.
+    at: usize,
+    floor: Option<(bool, RowFloor)>,
+    /// The row `floor` is at next.
+    row: i64,
+}
+
+impl<'a> ChainBound<'a> {
+    fn new(chain: &'a [[i64; 2]], upward: bool, row: i64) -> Self {
+        Self {
+            chain,
+            upward,
+            at: usize::MAX,
+            floor: None,
+            row,
+        }
+    }
+
+    /// Edge `k`'s bound on row `j`'s pixel indices: `(true, n)` for `i >= n`, `(false, n)`
+    /// for `i <= n`, carried to the rows after; `None` for a horizontal edge (`empty`: it
+    /// leaves no pixel of the row).
+    fn edge(&self, k: usize, j: i64) -> Result<(bool, RowFloor), bool> {
+        let (a, b) = if self.upward {
+            (self.chain[k + 1], self.chain[k])
+        } else {
+            (self.chain[k], self.chain[k + 1])
+        };
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let top_left = dy < 0 || (dy == 0 && dx > 0);
+        // E(i) = dx (yc - a.y) - dy (i SUB + SUB/2 - a.x) - bias = r + s i, yc = j SUB + SUB/2.
+        let yc = j * SUB + SUB / 2;
+        let r = dx * (yc - a[1]) - dy * (SUB / 2 - a[0]) - i64::from(!top_left);
+        let s = -dy * SUB;
+        let dr = dx * SUB;
+        match s.cmp(&0) {
+            // i >= ceil(-r / s) = floor((s - 1 - r) / s).
+            std::cmp::Ordering::Greater => Ok((true, RowFloor::new(s - 1 - r, -dr, s))),
+            // i <= floor(r / -s).
+            std::cmp::Ordering::Less => Ok((false, RowFloor::new(r, dr, -s))),
+            std::cmp::Ordering::Equal => Err(r < 0),
+        }
+    }
+
+    /// Narrows `lo..=hi` to the pixels of the row at centre `yc` (the row after the last
+    /// call's) inside every edge of the chain that the row crosses.
+    fn bound(&mut self, yc: i64, lo: &mut i64, hi: &mut i64) {
+        let j = self.row;
+        self.row += 1;
+        let chain = self.chain;
+        let apply = |(lower, mut f): (bool, RowFloor), lo: &mut i64, hi: &mut i64| {
+            let n = f.next();
+            if lower {
+                *lo = (*lo).max(n);
+            } else {
+                *hi = (*hi).min(n);
+            }
+            f
+        };
+        // The first edge that reaches down to the row.
+        let mut k = if self.at == usize::MAX { 0 } else { self.at };
+        while k + 2 < chain.len() && chain[k + 1][1] < yc {
+            k += 1;
+        }
+        if k != self.at {
+            self.at = k;
+            self.floor = None;
+        }
+        if chain[k][1].min(chain[k + 1][1]) <= yc {
+            match self.floor {
+                Some(f) => self.floor = Some((f.0, apply(f, lo, hi))),
+                None => match self.edge(k, j) {
+                    Ok(f) => self.floor = Some((f.0, apply(f, lo, hi))),
+                    Err(true) => *hi = -1,
+                    Err(false) => {}
+                },
+            }
+        } else {
+            self.floor = None;
+        }
+        // Further edges through the row: it passes a vertex exactly, or runs along a
+        // horizontal edge. Rare; their bound is not carried.
+        let mut k = k + 1;
+        while k + 1 < chain.len() && chain[k][1] <= yc {
+            if chain[k + 1][1] >= yc {
+                match self.edge(k, j) {
+                    Ok(f) => {
+                        apply(f, lo, hi);
+                    }
+                    Err(true) => *hi = -1,
+                    Err(false) => {}
+                }
+            }
+            k += 1;
+        }
+    }
+}
+
 /// `floor(n / d)` for `n` growing by `dn` a row (`d > 0`), one row after another: the
 /// quotient and the remainder carried, two divisions in all.
 #[derive(Debug, Clone, Copy)]
@@ -407,6 +610,31 @@ pub(crate) fn round_to_int(v: f32) -> i64 {
     } else {
         i
     }
+}
+
+/// A snapped point as one key whose order is the `(y, x)` order (each offset by 2^31).
+#[inline]
+pub(crate) fn pack_point(x: i32, y: i32) -> u64 {
+    let offset = |v: i32| u64::from(v.wrapping_sub(i32::MIN) as u32);
+    (offset(y) << 32) | offset(x)
+}
+
+/// The `[x, y]` of [`pack_point`]'s key.
+#[inline]
+pub(crate) fn unpack_point(key: u64) -> [i64; 2] {
+    let back = |v: u64| i64::from((v as u32).wrapping_add(i32::MIN as u32) as i32);
+    [back(key), back(key >> 32)]
+}
+
+/// [`round_to_int`] in 32 bits, for `|v| < 2^31` (larger values saturate): branch-free, so
+/// that a loop of them vectorizes.
+#[inline]
+pub(crate) fn round_to_i32(v: f32) -> i32 {
+    let i = v as i32;
+    // Exact: below 2^23 the fraction is representable, above it every f32 is an integer.
+    let f = v - i as f32;
+    i.saturating_add(i32::from(f >= 0.5))
+        .saturating_sub(i32::from(f <= -0.5))
 }
 
 /// A hash of an integer lattice point to [0, 1), the texture's value noise.
@@ -558,6 +786,7 @@ impl Renderer for CpuRenderer {
             inv_z,
             color,
             cache,
+            ..
         } = self;
         // The objects unchanged since the last frame of this view, and where to start.
         let view = Some((*camera, scene.light_W));
@@ -684,13 +913,15 @@ impl Renderer for CpuRenderer {
         self.inv_z.clear();
         self.inv_z.resize(n, 0.0);
         let X_CW = camera.X_WC.inverse();
-        let Self {
-            vertices, inv_z, ..
-        } = self;
+        let Self { inv_z, scratch, .. } = self;
+        let SpanScratch {
+            vertices, snapped, ..
+        } = scratch;
         for object in &scene.objects {
             let X_CO = Affine::from_pose(&(X_CW * object.X_WO));
-            front_faces(&object.mesh, &X_CO, vertices, |t, _, _| {
-                proj.triangle(t, &mut |p, z| {
+            snap_vertices(&proj, &object.mesh, &X_CO, vertices, snapped);
+            triangle_rows(&proj, &object.mesh, vertices, snapped, |run| {
+                run.pixels(|p, z| {
                     if z > inv_z[p] {
                         inv_z[p] = z;
                     }
@@ -719,15 +950,12 @@ impl Renderer for CpuRenderer {
         check_poses(X_CO)?;
         let proj = Projection::new(camera);
         masks.resize(camera.width, camera.height, X_CO.len());
-        let n = camera.width as usize * camera.height as usize;
-        masks
-            .data
-            .par_chunks_mut(n.max(1))
-            .zip(X_CO.par_iter())
-            .for_each_init(Vec::new, |vertices, (mask, X)| {
-                mask.fill(0);
-                draw_mask(&proj, mesh, &Affine::from_pose(X), vertices, mask);
-            });
+        let n = (camera.width as usize * camera.height as usize).max(1);
+        let draw = |scratch: &mut SpanScratch, (mask, X): (&mut [u8], &Pose)| {
+            mask.fill(0);
+            draw_mask(&proj, mesh, &Affine::from_pose(X), scratch, mask);
+        };
+        each_pose(&mut self.scratch, &mut masks.data, n, X_CO, draw);
         Ok(())
     }
 
@@ -742,18 +970,52 @@ impl Renderer for CpuRenderer {
         check_poses(X_CO)?;
         let proj = Projection::new(camera);
         spans.resize(camera.width, camera.height, X_CO.len());
-        spans
-            .spans
-            .par_chunks_mut((camera.height as usize).max(1))
-            .zip(X_CO.par_iter())
-            .for_each_init(
-                || (Vec::new(), Vec::new()),
-                |(vertices, snapped), (rows, X)| {
-                    draw_spans(&proj, mesh, &Affine::from_pose(X), vertices, snapped, rows);
-                },
-            );
+        let rows = (camera.height as usize).max(1);
+        let draw = |scratch: &mut SpanScratch, (rows, X): (&mut [[u32; 2]], &Pose)| {
+            draw_spans(&proj, mesh, &Affine::from_pose(X), scratch, rows);
+        };
+        each_pose(&mut self.scratch, &mut spans.spans, rows, X_CO, draw);
         Ok(())
     }
+}
+
+/// Batches of fewer poses than this are drawn on the caller's thread
+/// ([`Renderer::render_spans`], [`Renderer::render_masks`]).
+const PARALLEL_MIN_POSES: usize = 64;
+
+/// Calls `draw` with each pose of a batch and its `chunk` of `out`: on the caller's thread
+/// with `scratch` for fewer than [`PARALLEL_MIN_POSES`] (a climb's steps: handing them to the
+/// pool and waiting costs more than drawing them), else in parallel, each thread with
+/// scratch of its own.
+fn each_pose<T: Send>(
+    scratch: &mut SpanScratch,
+    out: &mut [T],
+    chunk: usize,
+    X_CO: &[Pose],
+    draw: impl Fn(&mut SpanScratch, (&mut [T], &Pose)) + Sync + Send,
+) {
+    if X_CO.len() < PARALLEL_MIN_POSES {
+        for job in out.chunks_mut(chunk).zip(X_CO) {
+            draw(scratch, job);
+        }
+    } else {
+        out.par_chunks_mut(chunk)
+            .zip(X_CO.par_iter())
+            .for_each_init(SpanScratch::default, draw);
+    }
+}
+
+/// The scratch of [`draw_spans`], kept between renders.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct SpanScratch {
+    /// The mesh's vertices in the camera frame.
+    vertices: Vec<[f32; 3]>,
+    /// Each vertex snapped, `None` outside the view.
+    snapped: Vec<Option<Snapped>>,
+    /// A convex mesh's snapped vertices, then the left and right chains of the polygon
+    /// around them ([`Projection::convex_rows`]).
+    points: Vec<u64>,
+    chains: [Vec<[i64; 2]>; 2],
 }
 
 /// Covers the pixels of `mesh` at `X_CO` in `spans` (one a row, [`SpanBatch::EMPTY`]
@@ -764,15 +1026,40 @@ pub(crate) fn draw_spans(
     proj: &Projection,
     mesh: &RenderMesh,
     X_CO: &Affine,
-    vertices: &mut Vec<[f32; 3]>,
-    snapped: &mut Vec<Option<Snapped>>,
+    scratch: &mut SpanScratch,
     spans: &mut [[u32; 2]],
 ) {
-    let mut cover = |run: &RowSpan| {
-        let span = &mut spans[run.row];
-        span[0] = span[0].min(run.first as u32);
-        span[1] = span[1].max(run.last as u32);
+    let SpanScratch {
+        vertices,
+        snapped,
+        points,
+        chains,
+    } = scratch;
+    let mut cover = |row: usize, first: usize, last: usize| {
+        let span = &mut spans[row];
+        span[0] = span[0].min(first as u32);
+        span[1] = span[1].max(last as u32);
     };
+    // A convex solid wholly in view: its outline is the polygon around its vertices.
+    if mesh.convex && mesh.closed && proj.snap_points(mesh, X_CO, points) {
+        proj.convex_rows(points, chains, &mut cover);
+        return;
+    }
+    snap_vertices(proj, mesh, X_CO, vertices, snapped);
+    triangle_rows(proj, mesh, vertices, snapped, |run| {
+        cover(run.row, run.first, run.last);
+    });
+}
+
+/// Snaps `mesh`'s vertices at `X_CO` once each: `vertices` gets them in the camera frame,
+/// `snapped` each one snapped where it is finite and inside the view.
+fn snap_vertices(
+    proj: &Projection,
+    mesh: &RenderMesh,
+    X_CO: &Affine,
+    vertices: &mut Vec<[f32; 3]>,
+    snapped: &mut Vec<Option<Snapped>>,
+) {
     vertices.clear();
     vertices.extend(mesh.positions.iter().map(|&p| X_CO.apply(p)));
     snapped.clear();
@@ -781,14 +1068,27 @@ pub(crate) fn draw_spans(
             .iter()
             .map(|&p| (p.iter().all(|v| v.is_finite()) && proj.inside(p)).then(|| proj.snap(p))),
     );
+}
+
+/// The covered rows of each triangle of `mesh` that both backends draw ([`front_faces`]),
+/// from its vertices as [`snap_vertices`] left them: a triangle of snapped vertices is
+/// rasterized as they are (the same pixels as [`Projection::triangle_rows`], which snaps
+/// each triangle's own), one with a vertex outside the view is clipped.
+fn triangle_rows(
+    proj: &Projection,
+    mesh: &RenderMesh,
+    vertices: &[[f32; 3]],
+    snapped: &[Option<Snapped>],
+    mut row: impl FnMut(&RowSpan),
+) {
     for tri in &mesh.triangles {
         let t = tri.map(|i| vertices.get(i as usize).copied().unwrap_or([f32::NAN; 3]));
         if facing(mesh, t).is_none() {
             continue;
         }
         match tri.map(|i| snapped.get(i as usize).copied().flatten()) {
-            [Some(a), Some(b), Some(c)] => proj.raster_snapped([a, b, c], &mut cover),
-            _ => proj.triangle_rows(t, &mut cover),
+            [Some(a), Some(b), Some(c)] => proj.raster_snapped([a, b, c], &mut row),
+            _ => proj.triangle_rows(t, &mut row),
         }
     }
 }
@@ -825,16 +1125,20 @@ fn facing(mesh: &RenderMesh, t: [[f32; 3]; 3]) -> Option<[f32; 3]> {
     (!(mesh.closed && dot(n, t[0]) >= 0.0)).then_some(n)
 }
 
-/// Covers the pixels of `mesh` at `X_CO` in `mask`.
+/// Covers the pixels of `mesh` at `X_CO` in `mask`, a row's run at a time.
 pub(crate) fn draw_mask(
     proj: &Projection,
     mesh: &RenderMesh,
     X_CO: &Affine,
-    vertices: &mut Vec<[f32; 3]>,
+    scratch: &mut SpanScratch,
     mask: &mut [u8],
 ) {
-    front_faces(mesh, X_CO, vertices, |t, _, _| {
-        proj.triangle(t, &mut |p, _| mask[p] = 1);
+    let SpanScratch {
+        vertices, snapped, ..
+    } = scratch;
+    snap_vertices(proj, mesh, X_CO, vertices, snapped);
+    triangle_rows(proj, mesh, vertices, snapped, |run| {
+        mask[run.base + run.first..=run.base + run.last].fill(1);
     });
 }
 
@@ -924,6 +1228,48 @@ mod tests {
             }
         }
         assert!(hits.iter().all(|&h| h == 1), "{hits:?}");
+    }
+
+    #[test]
+    fn a_packed_point_unpacks_and_sorts_by_row_then_column() {
+        let values = [i32::MIN, -70_000, -1, 0, 1, 255, 256, 70_000, i32::MAX];
+        let mut points = Vec::new();
+        for &y in &values {
+            for &x in &values {
+                let key = pack_point(x, y);
+                assert_eq!(unpack_point(key), [i64::from(x), i64::from(y)]);
+                points.push((key, (y, x)));
+            }
+        }
+        let by_key = {
+            let mut p = points.clone();
+            p.sort_by_key(|&(key, _)| key);
+            p
+        };
+        points.sort_by_key(|&(_, yx)| yx);
+        assert_eq!(by_key, points);
+    }
+
+    #[test]
+    fn rounding_in_32_bits_is_rounding_in_64() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..100_000 {
+            let v = (rng.random::<f32>() - 0.5) * 2.0f32.powi(rng.random_range(-2..31));
+            assert_eq!(i64::from(round_to_i32(v)), round_to_int(v), "{v}");
+        }
+        for v in [
+            0.5f32,
+            -0.5,
+            1.5,
+            -1.5,
+            0.49999997,
+            -0.49999997,
+            2.5e9,
+            -2.5e9,
+        ] {
+            let want = round_to_int(v).clamp(i64::from(i32::MIN), i64::from(i32::MAX));
+            assert_eq!(i64::from(round_to_i32(v)), want, "{v}");
+        }
     }
 
     #[test]

@@ -21,6 +21,13 @@ pub struct RenderMesh {
     /// Whether every triangle is wound counter-clockwise seen from outside a closed surface,
     /// so that back faces may be culled. False for meshes of unknown orientation.
     pub closed: bool,
+    /// Whether the mesh is the closed boundary of a convex solid (as
+    /// [`RenderMesh::convex_hull`] makes it): its outline from any view inside the image is
+    /// then the convex polygon around its projected vertices, and
+    /// [`Renderer::render_spans`](crate::Renderer::render_spans) draws it from that polygon
+    /// instead of from its triangles. Whoever sets it vouches for it; [`RenderMesh::append`]
+    /// clears it.
+    pub convex: bool,
 }
 
 /// A triangle's normal (unnormalised), out of its counter-clockwise side.
@@ -58,6 +65,7 @@ impl RenderMesh {
             .extend(other.triangles.iter().map(|t| t.map(|i| i + base)));
         self.colors.extend_from_slice(&other.colors);
         self.closed = other.closed && (was_empty || self.closed);
+        self.convex = false;
     }
 
     /// The union of `pieces` (each with whether it is convex) for silhouettes and masks:
@@ -145,7 +153,10 @@ impl RenderMesh {
             }
         }
         let color = self.colors.first().copied().unwrap_or([0.5; 3]);
-        Some(Self::solid(positions, triangles, color))
+        Some(Self {
+            convex: true,
+            ..Self::solid(positions, triangles, color)
+        })
     }
 
     /// The corners of triangle `t`; `None` when an index is out of range.
@@ -302,6 +313,7 @@ impl RenderMesh {
             triangles,
             colors,
             closed: true,
+            convex: false,
         }
     }
 
@@ -360,6 +372,7 @@ impl RenderMesh {
             triangles,
             colors,
             closed,
+            convex: false,
         }
     }
 }
