@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use workcell_render::RenderMesh;
 use workcell_robots::math::{Pose, Vector};
-use workcell_robots::{LinkId, RobotModel, Shape};
+use workcell_robots::{Coordinate, LinkId, RobotModel, Shape};
 
 use super::*;
 use crate::error::{PerceptionError, Result};
@@ -45,6 +45,12 @@ pub struct ArticulatedArm {
     /// The trunk's stage, where revolute joints move the torso ([`TrunkModel`]).
     /// Shared: the fitter holds it across a frame's stage while it moves the arm.
     pub(super) trunk: Option<Arc<TrunkModel>>,
+    /// Every link's world pose at `held` (the fitted joints at `held`'s values too): the
+    /// links above the fitted joints stay there whatever the fit moves.
+    held_poses: Vec<Pose>,
+    /// The joints to the three parts that the fitted joints move (theirs and those below
+    /// them), in the model's (topological) order: all that [`Self::part_poses`] recomputes.
+    moving: Vec<usize>,
 }
 
 impl ArticulatedArm {
@@ -150,7 +156,11 @@ impl ArticulatedArm {
             }
         }
         let trunk = TrunkModel::of(human, &held, &all_limits)?.map(Arc::new);
+        let moving = moving_joints(human, &links, &fitted);
+        let held_poses = human.fk(*X_WH, &held)?.link_poses().to_vec();
         Ok(Self {
+            held_poses,
+            moving,
             trunk,
             human: human.clone(),
             X_WH: *X_WH,
@@ -192,6 +202,8 @@ impl ArticulatedArm {
         }
         let k = self.human.fk(self.X_WH, &self.held)?;
         self.shoulder_W = k.link_pose(self.links[0]).translation;
+        self.held_poses.clear();
+        self.held_poses.extend_from_slice(k.link_poses());
         Ok(())
     }
 
@@ -258,9 +270,28 @@ impl ArticulatedArm {
     /// # Errors
     /// `q` has the wrong length or a value that is not finite.
     pub fn part_poses(&self, q: &[f64], X_WC: &Pose) -> Result<[Pose; 3]> {
-        let k = self.human.fk(self.X_WH, q)?;
         let X_CW = X_WC.inverse();
-        Ok(self.links.map(|l| X_CW * *k.link_pose(l)))
+        // Where `q` holds every joint above the fitted ones where the fit holds them, only
+        // the joints below move: the same products in the same order as a whole forward
+        // kinematics pass, so the same poses to the bit.
+        let above_held = self
+            .human
+            .actuated_joints()
+            .iter()
+            .enumerate()
+            .all(|(i, _)| self.fitted.contains(&i) || q.get(i) == self.held.get(i));
+        if !above_held || self.held_poses.len() != self.human.links().len() {
+            let k = self.human.fk(self.X_WH, q)?;
+            return Ok(self.links.map(|l| X_CW * *k.link_pose(l)));
+        }
+        self.human.check_configuration(q)?;
+        let mut X_WL = self.held_poses.clone();
+        let joints = self.human.joints();
+        for &j in &self.moving {
+            let joint = &joints[j];
+            X_WL[joint.child] = X_WL[joint.parent] * joint.child_pose_in_parent(joint.position(q));
+        }
+        Ok(self.links.map(|l| X_CW * X_WL[l]))
     }
 
     /// [`ArticulatedArm::part_poses`] at fitted joints `q_fit`.
@@ -400,4 +431,34 @@ impl ArticulatedArm {
             *v = v.clamp(*lo, *hi);
         }
     }
+}
+
+/// The joints on the paths from `human`'s root to the `parts` that a fitted coordinate (an
+/// index into the configuration) moves, itself or through a joint above it, in the model's
+/// joint order.
+fn moving_joints(human: &RobotModel, parts: &[LinkId; 3], fitted: &[usize]) -> Vec<usize> {
+    let joints = human.joints();
+    let mut needed = vec![false; joints.len()];
+    for &part in parts {
+        let mut link = part;
+        while let Some(j) = human.links()[link].parent_joint {
+            needed[j] = true;
+            link = joints[j].parent;
+        }
+    }
+    let mut moved_link = vec![false; human.links().len()];
+    let mut moving = Vec::new();
+    for (j, joint) in joints.iter().enumerate() {
+        let own = match joint.coordinate {
+            Coordinate::None => false,
+            Coordinate::Own { index } | Coordinate::Mimic { index, .. } => fitted.contains(&index),
+        };
+        if own || moved_link[joint.parent] {
+            moved_link[joint.child] = true;
+            if needed[j] {
+                moving.push(j);
+            }
+        }
+    }
+    moving
 }

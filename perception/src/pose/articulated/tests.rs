@@ -1283,3 +1283,54 @@ fn a_part_that_does_not_move_is_rendered_once() {
         );
     }
 }
+
+#[test]
+fn the_parts_poses_below_a_held_trunk_are_forward_kinematics_to_the_bit() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let X_WH = Pose::from_translation(Vector::new(0.4, -0.3, 0.1));
+    let X_WC = Pose::from_translation(Vector::new(1.0, 2.0, 1.5));
+    for name in ["human", "human_arm"] {
+        let human = RobotModel::from_catalogue(name).expect("catalogue human");
+        let arm = ArticulatedArm::new(&human, &X_WH).expect("arm");
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm, ArmFitConfig::default());
+        let limits = human.position_limits();
+        for round in 0..40 {
+            // A new trunk to hold every tenth round (the paper's arm has none).
+            if round % 10 == 0 {
+                let q: Vec<f64> = limits
+                    .iter()
+                    .map(|[lo, hi]| rng.random_range(lo.max(-1.0)..=hi.min(1.0)))
+                    .collect();
+                fitter.hold_trunk_at(&q).expect("a trunk or none");
+            }
+            let arm = fitter.arm();
+            let q_fit: Vec<f64> = arm
+                .limits()
+                .iter()
+                .map(|[lo, hi]| rng.random_range(*lo..=*hi))
+                .collect();
+            let q = arm.configuration(&q_fit);
+            let k = human.fk(X_WH, &q).expect("fk");
+            let X_CW = X_WC.inverse();
+            let want = arm.links.map(|l| X_CW * *k.link_pose(l));
+            let got = arm.part_poses(&q, &X_WC).expect("poses");
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(g.translation, w.translation, "{name}");
+                assert_eq!(g.rotation, w.rotation, "{name}");
+            }
+            // Another trunk than the held one: a whole pass, the same answer.
+            let mut other = q.clone();
+            if let Some(trunk) = arm.trunk() {
+                other[trunk.all[0]] += 0.1;
+                let k = human.fk(X_WH, &other).expect("fk");
+                let want = arm.links.map(|l| X_CW * *k.link_pose(l));
+                assert_eq!(arm.part_poses(&other, &X_WC).expect("poses"), want);
+            }
+        }
+        // A value that is not finite is refused either way.
+        let arm = fitter.arm();
+        let mut q = arm.configuration(&vec![0.0; arm.dof()]);
+        q[arm.fitted()[0]] = f64::NAN;
+        assert!(arm.part_poses(&q, &X_WC).is_err());
+    }
+}

@@ -293,6 +293,9 @@ struct TorsoTarget<'a> {
     torso: &'a [f32],
     background: &'a [f32],
     depth: Option<&'a [f32]>,
+    /// The pixels the depth term reads, in order: the torso mask's (above a half) where the
+    /// depth image has a depth.
+    depth_pixels: Vec<usize>,
     /// The torso alone, posed per candidate for its depth render.
     scene: workcell_render::Scene,
 }
@@ -328,6 +331,17 @@ impl<R: Renderer> ArmFitter<R> {
             torso: &masks.torso,
             background: &masks.background,
             depth: masks.depth_m.as_deref().filter(|d| d.len() == w * h),
+            depth_pixels: masks
+                .depth_m
+                .as_deref()
+                .filter(|d| d.len() == w * h)
+                .map(|depth| {
+                    (depth.iter().zip(&masks.torso).enumerate())
+                        .filter(|(_, (z, t))| **t > 0.5 && z.is_finite() && **z > 0.0)
+                        .map(|(p, _)| p)
+                        .collect()
+                })
+                .unwrap_or_default(),
             scene: workcell_render::Scene {
                 objects: vec![workcell_render::SceneObject {
                     name: "torso".into(),
@@ -626,11 +640,12 @@ impl<R: Renderer> ArmFitter<R> {
         let mut scores: Vec<f64> = (0..candidates.len())
             .map(|k| {
                 let mask = self.batch.mask(k);
+                // The covered pixels' sum without a branch: an uncovered one adds -0, which
+                // leaves any sum as it was, to the bit.
                 let sum: f64 = mask
                     .iter()
                     .zip(&target.s)
-                    .filter(|(m, _)| **m > 0)
-                    .map(|(_, v)| f64::from(*v))
+                    .map(|(&m, &v)| if m > 0 { f64::from(v) } else { -0.0 })
                     .sum();
                 sum / target.mass
             })
@@ -667,8 +682,9 @@ impl<R: Renderer> ArmFitter<R> {
         self.renderer
             .render_depth(&target.scene, camera, &mut self.trunk_depth)?;
         let (mut sum, mut n) = (0.0, 0usize);
-        for ((&rendered, &measured), &t) in self.trunk_depth.iter().zip(depth).zip(target.torso) {
-            if t > 0.5 && rendered > 0.0 && measured.is_finite() && measured > 0.0 {
+        for &p in &target.depth_pixels {
+            let (rendered, measured) = (self.trunk_depth[p], depth[p]);
+            if rendered > 0.0 {
                 sum += (f64::from(measured - rendered) / sigma).powi(2).min(9.0);
                 n += 1;
             }
