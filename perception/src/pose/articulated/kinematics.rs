@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use workcell_render::RenderMesh;
 use workcell_robots::math::{Pose, Vector};
-use workcell_robots::{Coordinate, LinkId, RobotModel, Shape};
+use workcell_robots::{Coordinate, Joint, LinkId, RobotModel, Shape};
 
 use super::*;
 use crate::error::{PerceptionError, Result};
@@ -50,8 +50,31 @@ pub struct ArticulatedArm {
     held_poses: Vec<Pose>,
     /// The joints to the three parts that the fitted joints move (theirs and those below
     /// them), in the model's (topological) order: all that [`Self::part_poses`] recomputes.
-    moving: Vec<usize>,
+    moving: Vec<MovingJoint>,
+    /// Where each part's pose comes from: a held link's, or a moving joint's child's.
+    part_from: [PoseOf; 3],
+    /// Each configuration coordinate's place among the fitted joints, where it is one.
+    fitted_slot: Vec<Option<usize>>,
 }
+
+/// A joint that the fitted joints move, as [`ArticulatedArm::part_poses`] poses its child.
+#[derive(Debug, Clone, Copy)]
+struct MovingJoint {
+    joint: usize,
+    parent: PoseOf,
+}
+
+/// A link's world pose: a held link's (index into the held poses), or the child's of the
+/// moving joint at this index.
+#[derive(Debug, Clone, Copy)]
+enum PoseOf {
+    Held(LinkId),
+    Moved(usize),
+}
+
+/// Joints [`ArticulatedArm::part_poses`] poses on the stack; a model with more moving
+/// joints to the parts takes a whole forward kinematics pass.
+const MAX_MOVING: usize = 16;
 
 impl ArticulatedArm {
     /// The arm of `human` (in the look it is seen in: its visuals are what is rendered)
@@ -156,11 +179,17 @@ impl ArticulatedArm {
             }
         }
         let trunk = TrunkModel::of(human, &held, &all_limits)?.map(Arc::new);
-        let moving = moving_joints(human, &links, &fitted);
+        let (moving, part_from) = moving_joints(human, &links, &fitted);
         let held_poses = human.fk(*X_WH, &held)?.link_poses().to_vec();
+        let mut fitted_slot = vec![None; human.dof()];
+        for (slot, &i) in fitted.iter().enumerate() {
+            fitted_slot[i] = Some(slot);
+        }
         Ok(Self {
             held_poses,
             moving,
+            part_from,
+            fitted_slot,
             trunk,
             human: human.clone(),
             X_WH: *X_WH,
@@ -280,18 +309,34 @@ impl ArticulatedArm {
             .iter()
             .enumerate()
             .all(|(i, _)| self.fitted.contains(&i) || q.get(i) == self.held.get(i));
-        if !above_held || self.held_poses.len() != self.human.links().len() {
+        if !above_held || !self.poses_below_held() {
             let k = self.human.fk(self.X_WH, q)?;
             return Ok(self.links.map(|l| X_CW * *k.link_pose(l)));
         }
         self.human.check_configuration(q)?;
-        let mut X_WL = self.held_poses.clone();
+        Ok(self.poses_below(|joint| joint.position(q), &X_CW))
+    }
+
+    /// Whether [`Self::poses_below`] can pose the parts (the held poses are the model's,
+    /// and few enough joints move).
+    fn poses_below_held(&self) -> bool {
+        self.held_poses.len() == self.human.links().len() && self.moving.len() <= MAX_MOVING
+    }
+
+    /// The parts' poses in the camera frame (`X_CW`) with the moving joints at `position`
+    /// and the rest where they are held.
+    fn poses_below(&self, position: impl Fn(&Joint) -> f64, X_CW: &Pose) -> [Pose; 3] {
+        let mut moved = [Pose::IDENTITY; MAX_MOVING];
         let joints = self.human.joints();
-        for &j in &self.moving {
-            let joint = &joints[j];
-            X_WL[joint.child] = X_WL[joint.parent] * joint.child_pose_in_parent(joint.position(q));
+        let pose_of = |from: PoseOf, moved: &[Pose; MAX_MOVING]| match from {
+            PoseOf::Held(link) => self.held_poses[link],
+            PoseOf::Moved(k) => moved[k],
+        };
+        for (k, m) in self.moving.iter().enumerate() {
+            let joint = &joints[m.joint];
+            moved[k] = pose_of(m.parent, &moved) * joint.child_pose_in_parent(position(joint));
         }
-        Ok(self.links.map(|l| X_CW * X_WL[l]))
+        self.part_from.map(|from| *X_CW * pose_of(from, &moved))
     }
 
     /// [`ArticulatedArm::part_poses`] at fitted joints `q_fit`.
@@ -305,7 +350,29 @@ impl ArticulatedArm {
                 ),
             });
         }
-        self.part_poses(&self.configuration(q_fit), X_WC)
+        if !self.poses_below_held() {
+            return self.part_poses(&self.configuration(q_fit), X_WC);
+        }
+        if let Some(i) = q_fit.iter().position(|v| !v.is_finite()) {
+            return Err(PerceptionError::Input {
+                message: format!("fitted joint {i} is {}", q_fit[i]),
+            });
+        }
+        // A coordinate's value: the fitted one's where the fit moves it, else the held.
+        let value = |index: usize| match self.fitted_slot.get(index).copied().flatten() {
+            Some(slot) => q_fit[slot],
+            None => self.held[index],
+        };
+        let position = |joint: &Joint| match joint.coordinate {
+            Coordinate::None => 0.0,
+            Coordinate::Own { index } => value(index),
+            Coordinate::Mimic {
+                index,
+                multiplier,
+                offset,
+            } => multiplier * value(index) + offset,
+        };
+        Ok(self.poses_below(position, &X_WC.inverse()))
     }
 
     /// The forearm's ends in the world at fitted joints `q_fit`: the elbow's (the end nearer
@@ -435,8 +502,12 @@ impl ArticulatedArm {
 
 /// The joints on the paths from `human`'s root to the `parts` that a fitted coordinate (an
 /// index into the configuration) moves, itself or through a joint above it, in the model's
-/// joint order.
-fn moving_joints(human: &RobotModel, parts: &[LinkId; 3], fitted: &[usize]) -> Vec<usize> {
+/// joint order, each with where its parent's pose comes from; and where each part's does.
+fn moving_joints(
+    human: &RobotModel,
+    parts: &[LinkId; 3],
+    fitted: &[usize],
+) -> (Vec<MovingJoint>, [PoseOf; 3]) {
     let joints = human.joints();
     let mut needed = vec![false; joints.len()];
     for &part in parts {
@@ -446,19 +517,26 @@ fn moving_joints(human: &RobotModel, parts: &[LinkId; 3], fitted: &[usize]) -> V
             link = joints[j].parent;
         }
     }
-    let mut moved_link = vec![false; human.links().len()];
+    // Per link: the moving joint (its index among them) whose child it is.
+    let mut moved_by: Vec<Option<usize>> = vec![None; human.links().len()];
     let mut moving = Vec::new();
     for (j, joint) in joints.iter().enumerate() {
         let own = match joint.coordinate {
             Coordinate::None => false,
             Coordinate::Own { index } | Coordinate::Mimic { index, .. } => fitted.contains(&index),
         };
-        if own || moved_link[joint.parent] {
-            moved_link[joint.child] = true;
-            if needed[j] {
-                moving.push(j);
-            }
+        let parent = match moved_by[joint.parent] {
+            Some(k) => PoseOf::Moved(k),
+            None => PoseOf::Held(joint.parent),
+        };
+        if (own || matches!(parent, PoseOf::Moved(_))) && needed[j] {
+            moved_by[joint.child] = Some(moving.len());
+            moving.push(MovingJoint { joint: j, parent });
         }
     }
-    moving
+    let part_from = parts.map(|l| match moved_by[l] {
+        Some(k) => PoseOf::Moved(k),
+        None => PoseOf::Held(l),
+    });
+    (moving, part_from)
 }

@@ -1314,7 +1314,8 @@ fn the_parts_poses_below_a_held_trunk_are_forward_kinematics_to_the_bit() {
             let X_CW = X_WC.inverse();
             let want = arm.links.map(|l| X_CW * *k.link_pose(l));
             let got = arm.part_poses(&q, &X_WC).expect("poses");
-            for (g, w) in got.iter().zip(&want) {
+            let fitted = arm.fitted_part_poses(&q_fit, &X_WC).expect("poses");
+            for (g, w) in got.iter().chain(&fitted).zip(want.iter().cycle()) {
                 assert_eq!(g.translation, w.translation, "{name}");
                 assert_eq!(g.rotation, w.rotation, "{name}");
             }
@@ -1332,5 +1333,6 @@ fn the_parts_poses_below_a_held_trunk_are_forward_kinematics_to_the_bit() {
         let mut q = arm.configuration(&vec![0.0; arm.dof()]);
         q[arm.fitted()[0]] = f64::NAN;
         assert!(arm.part_poses(&q, &X_WC).is_err());
+        assert!(arm.fitted_part_poses(&arm.fitted_of(&q), &X_WC).is_err());
     }
 }
