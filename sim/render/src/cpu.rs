@@ -1020,8 +1020,10 @@ pub(crate) struct SpanScratch {
 
 /// Covers the pixels of `mesh` at `X_CO` in `spans` (one a row, [`SpanBatch::EMPTY`]
 /// before): each row's first and last covered pixel, as [`draw_mask`] would cover them.
-/// Each vertex inside the view is snapped once (`snapped`, scratch), not once a triangle;
-/// triangles with a vertex outside are clipped as [`Projection::triangle_rows`] clips them.
+/// A mesh marked [`RenderMesh::convex`] with every vertex in view is drawn from the polygon
+/// around its snapped vertices ([`Projection::convex_rows`]); any other, triangle by
+/// triangle, each vertex inside the view snapped once (scratch), not once a triangle, and
+/// triangles with a vertex outside clipped as [`Projection::triangle_rows`] clips them.
 pub(crate) fn draw_spans(
     proj: &Projection,
     mesh: &RenderMesh,

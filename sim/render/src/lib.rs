@@ -232,7 +232,9 @@ pub trait Renderer {
     ) -> Result<()>;
 
     /// Renders `mesh` alone at each pose `X_CO[k]` as [`Renderer::render_masks`] does, into
-    /// silhouette `k` of `spans` as row spans. By default from the masks.
+    /// silhouette `k` of `spans` as row spans. By default from the masks; the CPU renderer
+    /// draws a mesh marked [`RenderMesh::convex`] from its outline polygon (the masks' pixels
+    /// but where snapping leaves the triangles' outline a hair short of convex).
     ///
     /// # Errors
     /// As [`Renderer::render`].
