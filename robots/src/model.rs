@@ -264,14 +264,22 @@ impl Joint {
     #[must_use]
     #[inline]
     pub fn position(&self, q: &[f64]) -> f64 {
+        self.position_of(|index| q[index])
+    }
+
+    /// The joint position with configuration coordinate `index` at `coordinate(index)` (0
+    /// for fixed joints): [`Joint::position`] where the configuration is not one slice.
+    #[must_use]
+    #[inline]
+    pub fn position_of(&self, coordinate: impl Fn(usize) -> f64) -> f64 {
         match self.coordinate {
             Coordinate::None => 0.0,
-            Coordinate::Own { index } => q[index],
+            Coordinate::Own { index } => coordinate(index),
             Coordinate::Mimic {
                 index,
                 multiplier,
                 offset,
-            } => multiplier * q[index] + offset,
+            } => multiplier * coordinate(index) + offset,
         }
     }
 

@@ -429,10 +429,9 @@ impl Projection {
             ChainBound::new(right, false, j0),
         ];
         for j in j0..=j1 {
-            let yc = j * SUB + SUB / 2;
             let (mut lo, mut hi) = (0, w - 1);
             for side in &mut sides {
-                side.bound(yc, &mut lo, &mut hi);
+                side.bound(&mut lo, &mut hi);
             }
             if lo <= hi {
                 row(j as usize, lo as usize, hi as usize);
@@ -449,10 +448,11 @@ struct ChainBound<'a> {
     /// The left chain's edges are oriented upward, the right chain's downward: the
     /// polygon's inside is where an edge function is not negative.
     upward: bool,
-    /// The edge (from `chain[at]` to `chain[at + 1]`) whose bound `floor` carries.
+    /// The edge (from `chain[at]` to `chain[at + 1]`) whose bound `floor` carries, once
+    /// a row has read it.
     at: usize,
     floor: Option<(bool, RowFloor)>,
-    /// The row `floor` is at next.
+    /// The row [`ChainBound::bound`] narrows next.
     row: i64,
 }
 
@@ -461,15 +461,15 @@ impl<'a> ChainBound<'a> {
         Self {
             chain,
             upward,
-            at: usize::MAX,
+            at: 0,
             floor: None,
             row,
         }
     }
 
-    /// Edge `k`'s bound on row `j`'s pixel indices: `(true, n)` for `i >= n`, `(false, n)`
-    /// for `i <= n`, carried to the rows after; `None` for a horizontal edge (`empty`: it
-    /// leaves no pixel of the row).
+    /// Edge `k`'s bound on row `j`'s pixel indices, carried to the rows after: `(true, _)`
+    /// bounds them from below, `(false, _)` from above. A horizontal edge has none: `Err`
+    /// with whether it leaves no pixel of the row.
     fn edge(&self, k: usize, j: i64) -> Result<(bool, RowFloor), bool> {
         let (a, b) = if self.upward {
             (self.chain[k + 1], self.chain[k])
@@ -492,11 +492,12 @@ impl<'a> ChainBound<'a> {
         }
     }
 
-    /// Narrows `lo..=hi` to the pixels of the row at centre `yc` (the row after the last
-    /// call's) inside every edge of the chain that the row crosses.
-    fn bound(&mut self, yc: i64, lo: &mut i64, hi: &mut i64) {
+    /// Narrows `lo..=hi` to the pixels of the next row (the first, then the one after the
+    /// last call's) inside every edge of the chain that the row's centre crosses.
+    fn bound(&mut self, lo: &mut i64, hi: &mut i64) {
         let j = self.row;
         self.row += 1;
+        let yc = j * SUB + SUB / 2;
         let chain = self.chain;
         let apply = |(lower, mut f): (bool, RowFloor), lo: &mut i64, hi: &mut i64| {
             let n = f.next();
@@ -508,7 +509,7 @@ impl<'a> ChainBound<'a> {
             f
         };
         // The first edge that reaches down to the row.
-        let mut k = if self.at == usize::MAX { 0 } else { self.at };
+        let mut k = self.at;
         while k + 2 < chain.len() && chain[k + 1][1] < yc {
             k += 1;
         }

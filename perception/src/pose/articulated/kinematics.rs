@@ -49,7 +49,8 @@ pub struct ArticulatedArm {
     /// links above the fitted joints stay there whatever the fit moves.
     held_poses: Vec<Pose>,
     /// The joints to the three parts that the fitted joints move (theirs and those below
-    /// them), in the model's (topological) order: all that [`Self::part_poses`] recomputes.
+    /// them), in the model's (topological) order: all that [`Self::fitted_part_poses`]
+    /// recomputes.
     moving: Vec<MovingJoint>,
     /// Where each part's pose comes from: a held link's, or a moving joint's child's.
     part_from: [PoseOf; 3],
@@ -57,7 +58,8 @@ pub struct ArticulatedArm {
     fitted_slot: Vec<Option<usize>>,
 }
 
-/// A joint that the fitted joints move, as [`ArticulatedArm::part_poses`] poses its child.
+/// A joint that the fitted joints move, as [`ArticulatedArm::fitted_part_poses`] poses its
+/// child.
 #[derive(Debug, Clone, Copy)]
 struct MovingJoint {
     joint: usize,
@@ -72,7 +74,7 @@ enum PoseOf {
     Moved(usize),
 }
 
-/// Joints [`ArticulatedArm::part_poses`] poses on the stack; a model with more moving
+/// Joints [`ArticulatedArm::fitted_part_poses`] poses on the stack; a model with more moving
 /// joints to the parts takes a whole forward kinematics pass.
 const MAX_MOVING: usize = 16;
 
@@ -300,21 +302,8 @@ impl ArticulatedArm {
     /// `q` has the wrong length or a value that is not finite.
     pub fn part_poses(&self, q: &[f64], X_WC: &Pose) -> Result<[Pose; 3]> {
         let X_CW = X_WC.inverse();
-        // Where `q` holds every joint above the fitted ones where the fit holds them, only
-        // the joints below move: the same products in the same order as a whole forward
-        // kinematics pass, so the same poses to the bit.
-        let above_held = self
-            .human
-            .actuated_joints()
-            .iter()
-            .enumerate()
-            .all(|(i, _)| self.fitted.contains(&i) || q.get(i) == self.held.get(i));
-        if !above_held || !self.poses_below_held() {
-            let k = self.human.fk(self.X_WH, q)?;
-            return Ok(self.links.map(|l| X_CW * *k.link_pose(l)));
-        }
-        self.human.check_configuration(q)?;
-        Ok(self.poses_below(|joint| joint.position(q), &X_CW))
+        let k = self.human.fk(self.X_WH, q)?;
+        Ok(self.links.map(|l| X_CW * *k.link_pose(l)))
     }
 
     /// Whether [`Self::poses_below`] can pose the parts (the held poses are the model's,
@@ -358,21 +347,14 @@ impl ArticulatedArm {
                 message: format!("fitted joint {i} is {}", q_fit[i]),
             });
         }
-        // A coordinate's value: the fitted one's where the fit moves it, else the held.
+        // The held configuration with the fitted joints at `q_fit`, without building it: the
+        // links above the fitted joints stay where the held poses have them, and the moving
+        // joints' products are forward kinematics', so the poses are its to the bit.
         let value = |index: usize| match self.fitted_slot.get(index).copied().flatten() {
             Some(slot) => q_fit[slot],
             None => self.held[index],
         };
-        let position = |joint: &Joint| match joint.coordinate {
-            Coordinate::None => 0.0,
-            Coordinate::Own { index } => value(index),
-            Coordinate::Mimic {
-                index,
-                multiplier,
-                offset,
-            } => multiplier * value(index) + offset,
-        };
-        Ok(self.poses_below(position, &X_WC.inverse()))
+        Ok(self.poses_below(|joint| joint.position_of(value), &X_WC.inverse()))
     }
 
     /// The forearm's ends in the world at fitted joints `q_fit`: the elbow's (the end nearer
