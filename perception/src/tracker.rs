@@ -202,6 +202,16 @@ impl ArmTracker {
         self.net.as_ref()
     }
 
+    /// Holds the trunk where the model's configuration `q` puts it for the next frames
+    /// ([`ArmFitter::hold_trunk_at`]): a trunk known from elsewhere, for the bound of a
+    /// perfect trunk. Returns whether the model has a trunk.
+    ///
+    /// # Errors
+    /// As [`ArmFitter::hold_trunk_at`].
+    pub fn hold_trunk_at(&mut self, q: &[f64]) -> Result<bool> {
+        self.fitter.hold_trunk_at(q)
+    }
+
     /// Forgets the track and the network's state (a new camera stream).
     pub fn reset(&mut self) {
         self.fitter.reset();

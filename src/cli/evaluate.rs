@@ -62,6 +62,9 @@ pub enum PerceptionArg {
     Procnet,
     /// As `procnet` with every arm part's true pixels for its masks: the fit alone.
     PoseGtMasks,
+    /// As `procnet` with the true joints at each frame in place of masks and fit: the
+    /// camera's rate and latency alone (the bound of a perfect network and fit).
+    PoseGt,
 }
 
 impl PerceptionArg {
@@ -74,6 +77,7 @@ impl PerceptionArg {
             PerceptionArg::Noisy => (PerceptionKind::Noisy, None),
             PerceptionArg::Procnet => (PerceptionKind::Procnet, masks("network")),
             PerceptionArg::PoseGtMasks => (PerceptionKind::Procnet, masks("ground_truth")),
+            PerceptionArg::PoseGt => (PerceptionKind::Procnet, masks("true_pose")),
         }
     }
 }

@@ -82,8 +82,10 @@ pub struct ProcNetConfig {
     pub weights: Option<std::path::PathBuf>,
     /// The cell's camera by name; empty for the first. Default empty.
     pub camera: String,
-    /// `network` (ProcNet's masks of the arm's parts) or `ground_truth` (each part's pixels
-    /// in the rendered frame: the articulated fit alone). Default `network`.
+    /// `network` (ProcNet's masks of the arm's parts), `ground_truth` (each part's pixels
+    /// in the rendered frame: the articulated fit alone) or `true_pose` (no masks and no
+    /// fit: the human's true joints at each frame's exposure, through the same latency and
+    /// velocity; the bound of a perfect network and fit at this camera). Default `network`.
     pub masks: MaskKind,
     /// The camera also measures depth (RGB-D), and the fit uses it. Default false.
     pub depth: bool,
@@ -135,6 +137,10 @@ pub struct ProcNetConfig {
     /// held-out ones (docs/perception.md, "The joints' velocity through three fits").
     /// Default 2.
     pub velocity_fits: usize,
+    /// The trunk held where the true human's is at each frame, the fit's trunk stage off:
+    /// an oracle, for the bound of a perfect trunk (the arm still fitted to the masks).
+    /// Default false.
+    pub true_trunk: bool,
     /// The camera delivers nothing from this time on, s (a failed camera): the last estimate
     /// ages out ([`super::procnet::MAX_AGE_S`]) and the filter then brakes. Left out, never.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -147,6 +153,9 @@ pub struct ProcNetConfig {
 pub enum MaskKind {
     Network,
     GroundTruth,
+    /// The true joints themselves, at each frame's exposure: an oracle for measuring what
+    /// the camera's rate, latency and the joints' velocity from successive frames leave.
+    TruePose,
 }
 
 /// Which perception model: the `kind` of a `[perception]` table.
@@ -201,6 +210,7 @@ impl PerceptionKind {
                 "latency_s",
                 "human_acceleration_m_s2",
                 "velocity_fits",
+                "true_trunk",
                 "camera_fails_at_s",
             ],
         }
@@ -258,6 +268,7 @@ impl Default for ProcNetConfig {
             latency_s: 0.05,
             human_acceleration_m_s2: 10.0,
             velocity_fits: 2,
+            true_trunk: false,
             camera_fails_at_s: None,
         }
     }
@@ -418,7 +429,7 @@ impl ProcNetConfig {
     #[must_use]
     pub fn describe(&self) -> String {
         format!(
-            "{} + articulated render-and-compare{}{}, latency {:.0} ms{}",
+            "{} + articulated render-and-compare{}{}, latency {:.0} ms{}{}",
             match self.masks {
                 // The weights' own header says which network they hold (ProcNet or the
                 // feed-forward baseline); an unreadable file fails when it is loaded.
@@ -429,6 +440,12 @@ impl ProcNetConfig {
                     self.weights_path().display()
                 ),
                 MaskKind::GroundTruth => "ground-truth arm masks".to_string(),
+                MaskKind::TruePose => {
+                    return format!(
+                        "the true pose at each frame (an oracle), latency {:.0} ms",
+                        self.latency_s * 1e3
+                    );
+                }
             },
             if self.depth {
                 " with depth (RGB-D)"
@@ -445,6 +462,11 @@ impl ProcNetConfig {
                 String::new()
             } else {
                 format!(", velocity through the last {} fits", self.velocity_fits)
+            },
+            if self.true_trunk {
+                ", the true trunk (an oracle)"
+            } else {
+                ""
             }
         )
     }
