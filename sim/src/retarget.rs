@@ -398,6 +398,7 @@ pub fn retarget(
         elbow_weight: config.elbow_weight,
         state: KinematicState::new(model),
         jacobian: Jacobian::zeros(dof),
+        scratch: Scratch::default(),
     };
     for (f, &(e_t, w_t)) in targets.iter().enumerate() {
         trunk.set(&mut q, trunk_q[f]);
@@ -496,6 +497,7 @@ struct Fit<'a> {
     elbow_weight: f64,
     state: KinematicState,
     jacobian: Jacobian,
+    scratch: Scratch,
 }
 
 impl Fit<'_> {
@@ -510,30 +512,40 @@ impl Fit<'_> {
     fn solve(&mut self, q: &mut [f64], e_t: Vector, w_t: Vector) -> workcell_robots::Result<f64> {
         let dof = q.len();
         let lambda2 = 1e-4;
+        self.scratch.resize(dof);
         for _ in 0..30 {
-            let (cost, a, b) = self.normal_equations(q, e_t, w_t)?;
+            let cost = self.normal_equations(q, e_t, w_t)?;
+            let Scratch {
+                a: normal_a,
+                b: normal_b,
+                work_a: a,
+                work_b: b,
+                step,
+                held,
+                pivot,
+            } = &mut self.scratch;
             // An active set: a joint at a limit that the step would push past it is held for
             // this step and the rest solved again without it (clamping the full step instead
             // leaves the other joints' steps computed as if it moved, and the fit stalls).
-            let mut held = vec![false; dof];
-            let step = loop {
-                let mut a = a.clone();
-                let mut b = b.clone();
-                for (i, row) in a.iter_mut().enumerate() {
-                    row[i] += lambda2;
+            held.fill(false);
+            loop {
+                a.copy_from_slice(normal_a);
+                b.copy_from_slice(normal_b);
+                for i in 0..dof {
+                    a[i * dof + i] += lambda2;
                 }
                 for i in (0..dof).filter(|&i| held[i]) {
                     // Row and column i zeroed, a unit diagonal: step[i] = 0.
-                    a[i].fill(0.0);
-                    for row in &mut a {
-                        row[i] = 0.0;
+                    a[i * dof..(i + 1) * dof].fill(0.0);
+                    for r in 0..dof {
+                        a[r * dof + i] = 0.0;
                     }
-                    a[i][i] = 1.0;
+                    a[i * dof + i] = 1.0;
                     b[i] = 0.0;
                 }
-                let Some(step) = solve(a, b) else {
+                if !solve_in_place(dof, a, b, pivot, step) {
                     return Ok(cost);
-                };
+                }
                 let mut newly_held = false;
                 for (j, held) in held.iter_mut().enumerate() {
                     let [lower, upper] = self.limits[j];
@@ -545,9 +557,9 @@ impl Fit<'_> {
                     }
                 }
                 if !newly_held {
-                    break step;
+                    break;
                 }
-            };
+            }
             let mut moved: f64 = 0.0;
             for j in 0..dof {
                 let next = (q[j] + step[j]).clamp(self.limits[j][0], self.limits[j][1]);
@@ -558,21 +570,23 @@ impl Fit<'_> {
                 break;
             }
         }
-        Ok(self.normal_equations(q, e_t, w_t)?.0)
+        self.normal_equations(q, e_t, w_t)
     }
 
-    /// The weighted squared error at `q`, and `J^T W J`, `J^T W e`.
+    /// The weighted squared error at `q`; `J^T W J` and `J^T W e` into the scratch's `a`
+    /// (row-major) and `b`.
     fn normal_equations(
         &mut self,
         q: &[f64],
         e_t: Vector,
         w_t: Vector,
-    ) -> workcell_robots::Result<(f64, Vec<Vec<f64>>, Vec<f64>)> {
+    ) -> workcell_robots::Result<f64> {
         let dof = q.len();
         self.model.forward_kinematics(q, &mut self.state)?;
         if self.jacobian.dof() != dof {
             self.jacobian = Jacobian::zeros(dof);
         }
+        self.scratch.resize(dof);
         let at = |state: &KinematicState, link: LinkId| state.link_pose(link).translation;
         let (e, w) = (
             at(&self.state, self.links[1]),
@@ -582,8 +596,9 @@ impl Fit<'_> {
             (self.links[2], w, w_t - w, 1.0),
             (self.links[1], e, e_t - e, self.elbow_weight),
         ];
-        let mut a = vec![vec![0.0; dof]; dof];
-        let mut b = vec![0.0; dof];
+        let (a, b) = (&mut self.scratch.a, &mut self.scratch.b);
+        a.fill(0.0);
+        b.fill(0.0);
         let mut cost = 0.0;
         for (link, p, err, weight) in rows {
             cost += weight * err.length_squared();
@@ -591,7 +606,12 @@ impl Fit<'_> {
                 .point_jacobian(&self.state, link, p, &mut self.jacobian);
             let columns = self.jacobian.columns();
             let free = |j: usize| self.free.get(j).copied().unwrap_or(true);
-            for (i, ((ci, row), bi)) in columns.iter().zip(&mut a).zip(&mut b).enumerate() {
+            for (i, ((ci, row), bi)) in columns
+                .iter()
+                .zip(a.chunks_exact_mut(dof))
+                .zip(b.iter_mut())
+                .enumerate()
+            {
                 if !free(i) {
                     continue;
                 }
@@ -604,12 +624,43 @@ impl Fit<'_> {
             }
         }
         // A joint held still: its row says "no step".
-        for (i, row) in a.iter_mut().enumerate() {
+        for i in 0..dof {
             if !self.free.get(i).copied().unwrap_or(true) {
-                row[i] = 1.0;
+                a[i * dof + i] = 1.0;
             }
         }
-        Ok((cost, a, b))
+        Ok(cost)
+    }
+}
+
+/// The solver's buffers, kept between its iterations and frames (a clip's frames each
+/// solve up to 82 starts of 30 steps).
+#[derive(Debug, Default)]
+struct Scratch {
+    /// `J^T W J`, row-major, and `J^T W e`.
+    a: Vec<f64>,
+    b: Vec<f64>,
+    /// Their copies that an active set's step is solved on.
+    work_a: Vec<f64>,
+    work_b: Vec<f64>,
+    step: Vec<f64>,
+    held: Vec<bool>,
+    pivot: Vec<f64>,
+}
+
+impl Scratch {
+    fn resize(&mut self, dof: usize) {
+        if self.b.len() != dof {
+            *self = Self {
+                a: vec![0.0; dof * dof],
+                b: vec![0.0; dof],
+                work_a: vec![0.0; dof * dof],
+                work_b: vec![0.0; dof],
+                step: vec![0.0; dof],
+                held: vec![false; dof],
+                pivot: vec![0.0; dof],
+            };
+        }
     }
 }
 
@@ -675,31 +726,43 @@ fn trunk_report(trunk: &TrunkJoints, q: &[Vec<f64>]) -> TrunkReport {
     }
 }
 
-/// `a x = b` by Gaussian elimination with partial pivoting; `None` when singular.
-fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
-    let n = b.len();
+/// `a x = b` (`a` `n x n` row-major; both overwritten) by Gaussian elimination with partial
+/// pivoting, `x` into `x`; false when singular. `pivot` is a row's scratch.
+fn solve_in_place(
+    n: usize,
+    a: &mut [f64],
+    b: &mut [f64],
+    pivot: &mut [f64],
+    x: &mut [f64],
+) -> bool {
     for c in 0..n {
-        let p = (c..n).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if a[p][c].abs() < 1e-15 {
-            return None;
+        let Some(p) = (c..n).max_by(|&i, &j| a[i * n + c].abs().total_cmp(&a[j * n + c].abs()))
+        else {
+            return false;
+        };
+        if a[p * n + c].abs() < 1e-15 {
+            return false;
         }
-        a.swap(c, p);
-        b.swap(c, p);
-        let pivot = a[c].clone();
+        if p != c {
+            for k in 0..n {
+                a.swap(c * n + k, p * n + k);
+            }
+            b.swap(c, p);
+        }
+        pivot.copy_from_slice(&a[c * n..(c + 1) * n]);
         for r in c + 1..n {
-            let m = a[r][c] / pivot[c];
-            for (x, p) in a[r][c..].iter_mut().zip(&pivot[c..]) {
+            let m = a[r * n + c] / pivot[c];
+            for (x, p) in a[r * n + c..(r + 1) * n].iter_mut().zip(&pivot[c..]) {
                 *x -= m * p;
             }
             b[r] -= m * b[c];
         }
     }
-    let mut x = vec![0.0; n];
     for r in (0..n).rev() {
-        let s: f64 = (r + 1..n).map(|k| a[r][k] * x[k]).sum();
-        x[r] = (b[r] - s) / a[r][r];
+        let s: f64 = (r + 1..n).map(|k| a[r * n + k] * x[k]).sum();
+        x[r] = (b[r] - s) / a[r * n + r];
     }
-    Some(x)
+    true
 }
 
 #[cfg(test)]

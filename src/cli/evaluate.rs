@@ -593,8 +593,9 @@ pub fn announce(record: &RunRecord, out: &Path) -> usize {
         a.headline(s.d_min_m)
     );
     say!(
-        "closed loop at {:.1}x real time per core; report: {}",
+        "closed loop at {:.2}x real time per core ({:.2}x with each episode's setup); report: {}",
         a.real_time_factor,
+        a.real_time_with_setup,
         out.join("summary.md").display()
     );
     let violating: Vec<_> = record.metrics.iter().filter(|e| e.violations > 0).collect();

@@ -105,6 +105,9 @@ fn run(
     let substeps = (c.control_period_s / dt_physics).round().max(1.0) as usize;
     let dt = substeps as f64 * dt_physics;
     let timeout_s = c.task_s * c.timeout_factor;
+    // The cell (a recorded clip retargeted), the perception and the filter are built: what
+    // follows is the loop.
+    let setup_s = started.elapsed().as_secs_f64();
     loop {
         let t = run.state.time_s();
         run.observe(t, dt)?;
@@ -131,7 +134,8 @@ fn run(
         on_tick((t / c.task_s).min(1.0));
     }
     let recording = run.recording.take().map(|(_, r)| r);
-    let (metrics, trace) = run.finish(started);
+    let (mut metrics, trace) = run.finish(started);
+    metrics.setup_s = setup_s;
     Ok((metrics, trace, recording))
 }
 

@@ -501,8 +501,13 @@ pub struct EpisodeMetrics {
     pub perception_error_by_part_m: Vec<f64>,
     #[serde(with = "lossless::f64")]
     pub simulated_s: f64,
+    /// The episode's wall time, building the cell and the perception included, s.
     #[serde(with = "lossless::f64")]
     pub wall_s: f64,
+    /// The part of `wall_s` before the first tick (the cell with its recorded clip
+    /// retargeted, the perception with its network loaded), s; 0 in files from before it.
+    #[serde(default, with = "lossless::f64")]
+    pub setup_s: f64,
 }
 
 /// Per-tick samples of one episode, for plots.

@@ -310,6 +310,7 @@ fn check_episode(m: &EpisodeMetrics, s: &RunSettings) -> std::result::Result<(),
         ),
         ("simulated_s", m.simulated_s),
         ("wall_s", m.wall_s),
+        ("setup_s", m.setup_s),
     ] {
         if !(v.is_finite() && v >= 0.0) {
             return Err(format!("{key} = {v}: must be finite and >= 0"));

@@ -68,6 +68,7 @@ impl Tally {
                 perception_error_by_part_m: super::no_part_errors(),
                 simulated_s: 0.0,
                 wall_s: 0.0,
+                setup_s: 0.0,
             },
             trace: EpisodeTrace::default(),
             human_v_prev: Vec::new(),
