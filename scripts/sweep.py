@@ -37,6 +37,7 @@ shared filesystem, or the same checkout and `cargo build --release` on each node
 from __future__ import annotations
 
 import argparse
+import csv
 import hashlib
 import itertools
 import json
@@ -194,12 +195,14 @@ def workcell(binary: str, *args: str) -> None:
 
 def same_report(single: Path, single_out: str, merged: Path) -> list[str]:
     """The files in which a merged report differs from the one-process report written into
-    `single_out` and copied to `single` (the wall time column, the command line, and the
+    `single_out` and copied to `single` (the timing columns, the command line, and the
     folder named in replay commands aside)."""
     differ = []
 
-    def rows(folder: Path) -> list[str]:
-        return [line.rsplit(",", 1)[0] for line in (folder / "metrics.csv").read_text().splitlines()]
+    def rows(folder: Path) -> list[list[str]]:
+        table = list(csv.reader((folder / "metrics.csv").read_text().splitlines()))
+        timing = {i for i, name in enumerate(table[0] if table else []) if name in ("wall_s", "setup_s")}
+        return [[cell for i, cell in enumerate(row) if i not in timing] for row in table]
 
     if rows(single) != rows(merged):
         differ.append("metrics.csv")
