@@ -512,8 +512,8 @@ impl Fit<'_> {
     fn solve(&mut self, q: &mut [f64], e_t: Vector, w_t: Vector) -> workcell_robots::Result<f64> {
         let dof = q.len();
         let lambda2 = 1e-4;
-        self.scratch.resize(dof);
         for _ in 0..30 {
+            // Sizes the scratch to `dof` too.
             let cost = self.normal_equations(q, e_t, w_t)?;
             let Scratch {
                 a: normal_a,

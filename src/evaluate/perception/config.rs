@@ -428,25 +428,31 @@ impl ProcNetConfig {
     /// The report's name of this perception, without loading anything.
     #[must_use]
     pub fn describe(&self) -> String {
+        let velocity = if self.velocity_fits == ProcNetConfig::default().velocity_fits {
+            String::new()
+        } else {
+            format!(", velocity through the last {} fits", self.velocity_fits)
+        };
+        let latency_ms = self.latency_s * 1e3;
+        let masks = match self.masks {
+            // The weights' own header says which network they hold (ProcNet or the
+            // feed-forward baseline); an unreadable file fails when it is loaded.
+            MaskKind::Network => format!(
+                "{} ({})",
+                crate::procnet::weights::read_config(&self.weights_path())
+                    .map_or("ProcNet", |c| c.model_name()),
+                self.weights_path().display()
+            ),
+            MaskKind::GroundTruth => "ground-truth arm masks".to_string(),
+            // No masks and no fit: nothing else of the table applies.
+            MaskKind::TruePose => {
+                return format!(
+                    "the true pose at each frame (an oracle), latency {latency_ms:.0} ms{velocity}"
+                );
+            }
+        };
         format!(
-            "{} + articulated render-and-compare{}{}, latency {:.0} ms{}{}",
-            match self.masks {
-                // The weights' own header says which network they hold (ProcNet or the
-                // feed-forward baseline); an unreadable file fails when it is loaded.
-                MaskKind::Network => format!(
-                    "{} ({})",
-                    crate::procnet::weights::read_config(&self.weights_path())
-                        .map_or("ProcNet", |c| c.model_name()),
-                    self.weights_path().display()
-                ),
-                MaskKind::GroundTruth => "ground-truth arm masks".to_string(),
-                MaskKind::TruePose => {
-                    return format!(
-                        "the true pose at each frame (an oracle), latency {:.0} ms",
-                        self.latency_s * 1e3
-                    );
-                }
-            },
+            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{}",
             if self.depth {
                 " with depth (RGB-D)"
             } else {
@@ -456,12 +462,6 @@ impl ProcNetConfig {
                 format!(", {:.0} % of the forearm hidden", 100.0 * self.occlusion)
             } else {
                 String::new()
-            },
-            self.latency_s * 1e3,
-            if self.velocity_fits == ProcNetConfig::default().velocity_fits {
-                String::new()
-            } else {
-                format!(", velocity through the last {} fits", self.velocity_fits)
             },
             if self.true_trunk {
                 ", the true trunk (an oracle)"
