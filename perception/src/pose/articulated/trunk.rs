@@ -16,10 +16,11 @@
 //! link with everything rigidly attached to it, the head), 1 for a perfect fit; pixels of
 //! something that may hide the torso (the robot, an arm part) count 0. With a depth image,
 //! less a depth term: the torso rendered at `t` against the measured depth where both show
-//! it, `depth_weight mean(min((dz / depth_sigma_m)^2, 9))` ([`ArmFitConfig`]'s, as the arm's
-//! parts' term). The outline alone leaves the turn and the side bend to a few hundredths
-//! of a radian, which the shoulder and the head carry 0.2 and 0.6 m out; the depth image
-//! shows one shoulder nearer.
+//! it, `trunk_depth_weight mean(min((dz / depth_sigma_m)^2, 9))` ([`ArmFitConfig`]'s; the
+//! arm's parts' term has the same form, a quarter of the weight). The outline alone leaves
+//! the turn and the side bend to a tenth of a radian either way on recorded people (a turn
+//! and a side bend of opposite signs draw nearly one outline), which the shoulder and the
+//! head carry 2 and 6 cm out; the depth image shows one shoulder nearer.
 //!
 //! **Where the person stands.** Recorded people walk: their pelvis travels up to the
 //! model's slide limits (0.6 m) from where the cell puts them, and on the recorded test clips
@@ -34,11 +35,18 @@
 //! nearer the camera from one leaning toward it poorly.
 //!
 //! **The search.** A grid over [`TRUNK_GRID`] (the trunk's working range) at those slides,
-//! the previous frame's trunk beside it, then a compass climb over the trunk's joints (the
-//! slides with a depth image only) from the best down to [`TRUNK_MIN_STEP_RAD`] (the
-//! slides' steps [`TRUNK_SLIDE_M_PER_RAD`] times that). The grid's outlines render in one
-//! batch and the best [`TRUNK_DEPTH_FINALISTS`] with their depth; each climb step's
-//! candidates with their depth.
+//! the previous frame's trunk beside it (the track), then a compass climb over the trunk's
+//! joints (the slides with a depth image only) from the best down to
+//! [`TRUNK_MIN_STEP_RAD`] (the slides' steps [`TRUNK_SLIDE_M_PER_RAD`] times that). The
+//! grid's outlines render in one batch and the best [`TRUNK_DEPTH_FINALISTS`] with their
+//! depth, the track among them whatever its outline's rank; each climb step's candidates
+//! with their depth. With a depth image the climb also starts from the track where it is
+//! not the best finalist, and the better of the two climbs is the fit: a person who steps
+//! 3 cm sideways moves the last frame's torso off its outline (its score fell from 0.93 to
+//! 0.48 on such a frame), grid trunks turned and bent the other way outrank it, and a
+//! compass climb that starts on the wrong side of the turn and side bend's shared valley
+//! stays there (on a recorded clip the fit left a trunk it had followed by 0.3 to 1.0 rad in
+//! a frame, and came back to it dozens of frames later).
 //!
 //! **Beyond the grid** ([`ArmFitConfig::spine_start`]). Recorded people bend 0.9-1.3 rad to
 //! reach down and lean back to the lean's limit, far outside the grid, and the climb from
@@ -70,7 +78,7 @@ pub(super) const TRUNK_GRID: [([f64; 2], usize); 3] =
 
 /// The climb's first step and the step it stops below, rad.
 pub(super) const TRUNK_FIRST_STEP_RAD: f64 = 0.1;
-pub(super) const TRUNK_MIN_STEP_RAD: f64 = 0.01;
+pub(super) const TRUNK_MIN_STEP_RAD: f64 = 0.005;
 
 /// Grid points whose outline scores best that the search then scores with the depth image
 /// too (rendering a depth image per candidate costs more than the grid's outlines in one
@@ -383,7 +391,11 @@ impl<R: Renderer> ArmFitter<R> {
             .iter()
             .map(|g| g.iter().chain(&slides).copied().collect())
             .collect();
+        // The track: the last frame's trunk, and where the centring moved the slides, its
+        // joints at the centred slides.
+        let mut track = Vec::with_capacity(2);
         if slides != previous[n_rev..] {
+            track.push(candidates.len());
             candidates.push(previous[..n_rev].iter().chain(&slides).copied().collect());
         }
         // Leans and side bends beyond the grid: the trunk that lays the torso's spine along
@@ -420,28 +432,92 @@ impl<R: Renderer> ArmFitter<R> {
                 }
             }
         }
+        track.push(candidates.len());
         candidates.push(previous);
         // The grid by outline alone; the best few outlines with their depth.
         let outline = self.trunk_scores(&trunk, camera, &mut target, false, &candidates)?;
         let mut order: Vec<usize> = (0..candidates.len()).collect();
         order.sort_by(|&a, &b| outline[b].total_cmp(&outline[a]));
-        let finalists: Vec<Vec<f64>> = order
+        let mut finalists: Vec<Vec<f64>> = order
             .iter()
             .take(if with_depth { TRUNK_DEPTH_FINALISTS } else { 1 })
             .map(|&i| candidates[i].clone())
             .collect();
+        // The track is a finalist whatever its outline's rank (with a depth image, which
+        // tells the trunks apart). A person who steps a few centimetres moves the last
+        // frame's torso off its outline and its depth, and the outlines of trunks turned
+        // and bent the other way can rank above it; without it, the fit jumped 0.3-0.8 rad
+        // away from a trunk it had followed (experiments/perception.md, 2026-12-06).
+        let mut track_finalists = Vec::with_capacity(track.len());
+        if with_depth {
+            for &i in &track {
+                let k = match finalists.iter().position(|f| *f == candidates[i]) {
+                    Some(k) => k,
+                    None => {
+                        finalists.push(candidates[i].clone());
+                        finalists.len() - 1
+                    }
+                };
+                track_finalists.push(k);
+            }
+        }
         // Without depth the one finalist's score is its outline's, already measured.
         let scores = if with_depth {
             self.trunk_scores(&trunk, camera, &mut target, true, &finalists)?
         } else {
             vec![outline[order[0]]]
         };
-        let (mut best, mut here) = scores
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(i, g)| (finalists[i].clone(), *g))
-            .unwrap_or((finalists[0].clone(), f64::NEG_INFINITY));
+        let best_of = |ks: &mut dyn Iterator<Item = usize>| {
+            ks.max_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+        };
+        let first = best_of(&mut (0..scores.len())).unwrap_or(0);
+        let (mut best, mut here) = self.trunk_climb(
+            &trunk,
+            camera,
+            &mut target,
+            with_depth,
+            &finalists[first],
+            scores[first],
+        )?;
+        // The climb from the track too, where it is not the best finalist: a compass climb
+        // from a start on the wrong side of the turn and side bend's shared valley stays
+        // there.
+        if let Some(k) = best_of(&mut track_finalists.iter().copied())
+            && k != first
+        {
+            let (b, h) = self.trunk_climb(
+                &trunk,
+                camera,
+                &mut target,
+                with_depth,
+                &finalists[k],
+                scores[k],
+            )?;
+            if h > here {
+                (best, here) = (b, h);
+            }
+        }
+        self.arm.hold_trunk(&trunk, &best)?;
+        Ok(Some(here))
+    }
+
+    /// The compass climb over the trunk's joints from `start` (scoring `here`), each joint
+    /// a step either way, from [`TRUNK_FIRST_STEP_RAD`] halved down to
+    /// [`TRUNK_MIN_STEP_RAD`]: the trunk it ends at and its score.
+    ///
+    /// # Errors
+    /// A renderer failure.
+    fn trunk_climb(
+        &mut self,
+        trunk: &TrunkModel,
+        camera: &Camera,
+        target: &mut TorsoTarget<'_>,
+        with_depth: bool,
+        start: &[f64],
+        mut here: f64,
+    ) -> Result<(Vec<f64>, f64)> {
+        let mut best = start.to_vec();
+        let n_rev = trunk.joints.len();
         let mut step = TRUNK_FIRST_STEP_RAD;
         while step >= TRUNK_MIN_STEP_RAD {
             let mut around = Vec::with_capacity(2 * best.len());
@@ -467,7 +543,7 @@ impl<R: Renderer> ArmFitter<R> {
             if around.is_empty() {
                 break;
             }
-            let scores = self.trunk_scores(&trunk, camera, &mut target, true, &around)?;
+            let scores = self.trunk_scores(trunk, camera, target, true, &around)?;
             match scores.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) {
                 Some((i, g)) if *g > here + 1e-9 => {
                     best.clone_from(&around[i]);
@@ -476,8 +552,7 @@ impl<R: Renderer> ArmFitter<R> {
                 _ => step *= 0.5,
             }
         }
-        self.arm.hold_trunk(&trunk, &best)?;
-        Ok(Some(here))
+        Ok((best, here))
     }
 
     /// The trunk's revolute joints (its first at `turn`, the others from upright by damped
@@ -661,7 +736,8 @@ impl<R: Renderer> ArmFitter<R> {
 
     /// The depth term of the trunk's score: the torso rendered at the candidate against the
     /// depth image where both show the torso: `min((dz / sigma)^2, 9)`, the mean over those
-    /// pixels, times [`ArmFitConfig::depth_weight`], as the arm's parts' depth term. The
+    /// pixels, times [`ArmFitConfig::trunk_depth_weight`] (the arm's parts' depth term's
+    /// form). The
     /// silhouette alone leaves the trunk's turn and side bend to a few hundredths of a
     /// radian, which the head and the shoulder carry 0.6 m and 0.2 m out; the depth image
     /// shows one shoulder nearer.
@@ -692,7 +768,7 @@ impl<R: Renderer> ArmFitter<R> {
         Ok(if n == 0 {
             0.0
         } else {
-            self.config.depth_weight * sum / n as f64
+            self.config.trunk_depth_weight * sum / n as f64
         })
     }
 }
