@@ -449,7 +449,7 @@ impl<R: Renderer> ArmFitter<R> {
         // The track is a finalist whatever its outline's rank (with a depth image, which
         // tells the trunks apart). A person who steps a few centimetres moves the last
         // frame's torso off its outline and its depth, and the outlines of trunks turned
-        // and bent the other way can rank above it; without it, the fit jumped 0.3-0.8 rad
+        // and bent the other way can rank above it; without it, the fit jumped 0.3-1.0 rad
         // away from a trunk it had followed (experiments/perception.md, 2026-12-06).
         let mut track_finalists = Vec::with_capacity(track.len());
         if with_depth {
@@ -740,9 +740,8 @@ impl<R: Renderer> ArmFitter<R> {
     /// The depth term of the trunk's score: the torso rendered at the candidate against the
     /// depth image where both show the torso: `min((dz / sigma)^2, 9)`, the mean over those
     /// pixels, times [`ArmFitConfig::trunk_depth_weight`] (the arm's parts' depth term's
-    /// form). The
-    /// silhouette alone leaves the trunk's turn and side bend to a few hundredths of a
-    /// radian, which the head and the shoulder carry 0.6 m and 0.2 m out; the depth image
+    /// form). The silhouette alone leaves the trunk's turn and side bend to a tenth of a
+    /// radian either way, which the shoulder and the head carry 2 and 6 cm; the depth image
     /// shows one shoulder nearer.
     ///
     /// # Errors
