@@ -101,8 +101,8 @@ pub struct ArmFitConfig {
     /// its turn and side bend to a tenth of a radian either way, and the depth image shows
     /// one shoulder nearer. On the tuning clips 1-12 with true masks (and the track kept
     /// among the stage's finalists) 0.2 against 0.05 took the median episode's error from
-    /// 45.8 to 39.6 mm, lower in 11 of 12; 0.5 gave 40.8 (experiments/perception.md,
-    /// 2026-12-06).
+    /// 45.8 to 39.6 mm, lower in 11 of 12 (35.0 with the climb down to 5 mrad, as
+    /// shipped); 0.5 gave 40.8 (experiments/perception.md, 2026-12-06).
     pub trunk_depth_weight: f64,
     /// On a model whose trunk turns, leans, bends or walks ([`ArticulatedArm::trunk`]), fit
     /// the trunk to the torso's mask (and the depth image) before the arm

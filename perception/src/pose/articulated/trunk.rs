@@ -470,10 +470,8 @@ impl<R: Renderer> ArmFitter<R> {
         } else {
             vec![outline[order[0]]]
         };
-        let best_of = |ks: &mut dyn Iterator<Item = usize>| {
-            ks.max_by(|&a, &b| scores[a].total_cmp(&scores[b]))
-        };
-        let first = best_of(&mut (0..scores.len())).unwrap_or(0);
+        let by_score = |a: &usize, b: &usize| scores[*a].total_cmp(&scores[*b]);
+        let first = (0..scores.len()).max_by(by_score).unwrap_or(0);
         let (mut best, mut here) = self.trunk_climb(
             &trunk,
             camera,
@@ -485,7 +483,7 @@ impl<R: Renderer> ArmFitter<R> {
         // The climb from the track too, where it is not the best finalist: a compass climb
         // from a start on the wrong side of the turn and side bend's shared valley stays
         // there.
-        if let Some(k) = best_of(&mut track_finalists.iter().copied())
+        if let Some(k) = track_finalists.iter().copied().max_by(by_score)
             && k != first
         {
             let (b, h) = self.trunk_climb(
