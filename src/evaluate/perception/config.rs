@@ -141,6 +141,12 @@ pub struct ProcNetConfig {
     /// an oracle, for the bound of a perfect trunk (the arm still fitted to the masks).
     /// Default false.
     pub true_trunk: bool,
+    /// The tracked region of interest holds the hand's far end as well as the shoulder,
+    /// elbow and wrist, and a frame whose forearm or hand reached its edge sends the next one
+    /// to the workspace (`ArmTracker::hold_hand_in_region`): recorded people's arms stay in
+    /// view, but the shipped calibration's bound grows with the larger region on the
+    /// generator's motion (docs/perception.md, "The region that cut the arm"). Default false.
+    pub hand_region: bool,
     /// The camera delivers nothing from this time on, s (a failed camera): the last estimate
     /// ages out ([`super::procnet::MAX_AGE_S`]) and the filter then brakes. Left out, never.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -211,6 +217,7 @@ impl PerceptionKind {
                 "human_acceleration_m_s2",
                 "velocity_fits",
                 "true_trunk",
+                "hand_region",
                 "camera_fails_at_s",
             ],
         }
@@ -269,6 +276,7 @@ impl Default for ProcNetConfig {
             human_acceleration_m_s2: 10.0,
             velocity_fits: 2,
             true_trunk: false,
+            hand_region: false,
             camera_fails_at_s: None,
         }
     }
@@ -452,7 +460,7 @@ impl ProcNetConfig {
             }
         };
         format!(
-            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{}",
+            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{}{}",
             if self.depth {
                 " with depth (RGB-D)"
             } else {
@@ -465,6 +473,11 @@ impl ProcNetConfig {
             },
             if self.true_trunk {
                 ", the true trunk (an oracle)"
+            } else {
+                ""
+            },
+            if self.hand_region {
+                ", the region holds the hand"
             } else {
                 ""
             }

@@ -170,6 +170,7 @@ impl ProcNetCamera {
         if let Some(net) = net {
             tracker = tracker.with_network(net)?;
         }
+        tracker.hold_hand_in_region(config.hand_region);
         let mut kinematics = KinematicState::new(&model.human);
         kinematics.X_WB = model.X_WH;
         Ok(Self {
@@ -239,6 +240,7 @@ impl ProcNetCamera {
             self.tracker.hold_trunk_at(input.state.human_q())?;
         }
         let depth = self.config.depth.then_some(self.frame.depth_m.as_slice());
+        let region = self.tracker.region(&self.camera);
         let outcome = if network {
             self.tracker.track(&self.camera, &self.frame.rgb, depth)?
         } else {
@@ -252,7 +254,7 @@ impl ProcNetCamera {
             Ok(estimate) => {
                 self.counts.estimates += 1;
                 if tracing::enabled!(tracing::Level::TRACE) {
-                    self.trace_fit(input, &estimate.fit);
+                    self.trace_fit(input, &estimate.fit, region);
                 }
                 Some(Measured {
                     reacquired: estimate.fit.reacquired,
@@ -272,9 +274,16 @@ impl ProcNetCamera {
     }
 
     /// The fit's error per part against the truth at exposure, with its gain, bound and
-    /// whether the search found it (trace level: where the closed loop's error comes from,
-    /// the fit or its ageing, and whether the bound covered it).
-    fn trace_fit(&mut self, input: &PerceptionInput<'_>, fit: &workcell_perception::pose::ArmFit) {
+    /// whether the search found it, and how much of each true part `region` (the region of
+    /// interest the frame was read through) showed (trace level: where the closed loop's
+    /// error comes from, the fit, the region or its ageing, and whether the bound covered
+    /// it).
+    fn trace_fit(
+        &mut self,
+        input: &PerceptionInput<'_>,
+        fit: &workcell_perception::pose::ArmFit,
+        region: (workcell_render::roi::Roi, workcell_render::roi::RoiKind),
+    ) {
         if input
             .model
             .human
@@ -302,9 +311,29 @@ impl ProcNetCamera {
                 true_joints.join(" ")
             )
         });
+        // Of the true parts' capsule ends, those the region read showed.
+        let (roi, kind) = region;
+        let X_CW = self.camera.X_WC.inverse();
+        let shown: Vec<String> = (input.truth.parts.iter())
+            .map(|p| {
+                let n = [p.capsule.a_W, p.capsule.b_W]
+                    .iter()
+                    .filter(|e| {
+                        self.camera.project(X_CW * **e).is_some_and(|[x, y]| {
+                            let (x0, y0, s) = (roi.x0 as f64, roi.y0 as f64, f64::from(roi.size));
+                            x >= x0 && x < x0 + s && y >= y0 && y < y0 + s
+                        })
+                    })
+                    .count();
+                format!("{:?}:{n}", p.part)
+            })
+            .collect();
         tracing::trace!(
             t = input.t_s,
             parts = %part_errors(&fitted, input.truth),
+            in_region = %shown.join(","),
+            region = ?kind,
+            hidden = fit.hidden_share,
             trunk = trunk.as_deref().unwrap_or("-"),
             gain = fit.gain,
             bound_m = fit.uncertainty_m,
