@@ -130,6 +130,8 @@ pub fn view_jump(last_fx: Option<f64>, fx: f64) -> bool {
 /// of 361 fits with true masks, the hand 0.39 m off; docs/perception.md, "The region that
 /// cut the arm").
 pub const CUT_RING_PX: usize = 2;
+/// The forearm's and hand's mass in [`CUT_RING_PX`]'s band from which the region cut the
+/// arm, pixels' worth of probability.
 pub const CUT_MASS_PX: f64 = 3.0;
 
 /// Poses in a row before the region of interest follows the arm. A network that has just
@@ -740,7 +742,6 @@ mod tests {
             .expect("in front");
         let inside = |x: f64, x0: i64| x >= x0 as f64 && x <= (x0 + i64::from(tracked.size)) as f64;
         assert!(inside(u, tracked.x0) && inside(v, tracked.y0));
-
         // A frame without a pose keeps the region for HOLD_REGION frames; a track lost for
         // longer falls back to the workspace.
         let empty = ArmMasks::from_classes(&vec![0; 640 * 480], 640, 480).expect("masks");
