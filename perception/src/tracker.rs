@@ -789,7 +789,6 @@ mod tests {
         let (tracked, kind) = tracker.region(&camera);
         assert_eq!(kind, RoiKind::Tracked);
         assert!(!tracker.cut);
-        let inside = |x: f64, x0: i64| x >= x0 as f64 && x <= (x0 + i64::from(tracked.size)) as f64;
         let hand = |e: &ArmEstimate| {
             *(e.parts.iter().find(|p| p.part == HumanPart::Hand)).expect("a hand")
         };
@@ -799,13 +798,10 @@ mod tests {
             .expect("a pose");
         let h = hand(&estimate);
         for end in [h.a_W, h.b_W] {
-            let [u, v] = camera
+            let p = camera
                 .project(camera.X_WC.inverse() * end)
                 .expect("in front");
-            assert!(
-                inside(u, tracked.x0) && inside(v, tracked.y0),
-                "{end} vs {tracked:?}"
-            );
+            assert!(tracked.contains(p), "{end} vs {tracked:?}");
         }
         // Stretched out: through that region the forearm and hand reach its edge.
         let q = [0.6, 1.0, 0.5];

@@ -265,6 +265,15 @@ impl Roi {
         }
     }
 
+    /// Whether the image point `p_px` (x right, y down, pixel edges at integers) lies in the
+    /// region: columns `x0 <= x < x0 + size`, rows likewise.
+    #[must_use]
+    pub fn contains(&self, p_px: [f64; 2]) -> bool {
+        let side = f64::from(self.size);
+        let inside = |v: f64, lo: i64| v >= lo as f64 && v < lo as f64 + side;
+        inside(p_px[0], self.x0) && inside(p_px[1], self.y0)
+    }
+
     /// The camera that sees exactly this region at `out_px x out_px` pixels (the region's
     /// pixels scaled by `out_px / size`).
     ///
@@ -421,6 +430,22 @@ pub fn mask_width(mask: &[u8], w: usize) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A region holds its first column and row and not the pixel edge one side past its last.
+    #[test]
+    fn a_region_holds_its_pixels_and_no_more() {
+        let r = Roi {
+            x0: 10,
+            y0: -4,
+            size: 8,
+        };
+        assert!(r.contains([10.0, -4.0]));
+        assert!(r.contains([17.99, 3.99]));
+        assert!(!r.contains([18.0, 0.0]));
+        assert!(!r.contains([12.0, 4.0]));
+        assert!(!r.contains([9.99, 0.0]));
+        assert!(!r.contains([12.0, -4.01]));
+    }
     use workcell_robots::math::Pose;
 
     #[test]

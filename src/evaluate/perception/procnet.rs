@@ -240,7 +240,9 @@ impl ProcNetCamera {
             self.tracker.hold_trunk_at(input.state.human_q())?;
         }
         let depth = self.config.depth.then_some(self.frame.depth_m.as_slice());
-        let region = self.tracker.region(&self.camera);
+        // The region this frame is read through, for the trace.
+        let region =
+            tracing::enabled!(tracing::Level::TRACE).then(|| self.tracker.region(&self.camera));
         let outcome = if network {
             self.tracker.track(&self.camera, &self.frame.rgb, depth)?
         } else {
@@ -253,7 +255,7 @@ impl ProcNetCamera {
         Ok(match outcome {
             Ok(estimate) => {
                 self.counts.estimates += 1;
-                if tracing::enabled!(tracing::Level::TRACE) {
+                if let Some(region) = region {
                     self.trace_fit(input, &estimate.fit, region);
                 }
                 Some(Measured {
@@ -318,12 +320,7 @@ impl ProcNetCamera {
             .map(|p| {
                 let n = [p.capsule.a_W, p.capsule.b_W]
                     .iter()
-                    .filter(|e| {
-                        self.camera.project(X_CW * **e).is_some_and(|[x, y]| {
-                            let (x0, y0, s) = (roi.x0 as f64, roi.y0 as f64, f64::from(roi.size));
-                            x >= x0 && x < x0 + s && y >= y0 && y < y0 + s
-                        })
-                    })
+                    .filter(|e| (self.camera.project(X_CW * **e)).is_some_and(|p| roi.contains(p)))
                     .count();
                 format!("{:?}:{n}", p.part)
             })
