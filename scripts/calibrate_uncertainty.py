@@ -261,7 +261,7 @@ def toml_value(v):
 
 FIT_KEYS = {"fit_trunk", "search_below_gain", "reversed_start", "depth_start"}
 # Settings that runs before them do not write (the fit then ran as their defaults say).
-OPTIONAL_FIT_KEYS = {"hull_outlines"}
+OPTIONAL_FIT_KEYS = {"hull_outlines", "hand_region"}
 
 
 def fit_settings(csv_path):

@@ -8,6 +8,8 @@
 //! ([`crate::pose::ArmFitter`]) puts the model's links ([`crate::pose::ArmModel`]). The
 //! tracker knows nothing of datasets: a human model, its base pose, a camera and frames.
 
+use std::ops::Range;
+
 use workcell_procnet::ProcNet;
 use workcell_procnet::image::{planar_rgb, planar_rgb_crop, resample};
 use workcell_render::roi::{self, Roi, RoiKind};
@@ -92,10 +94,10 @@ pub struct ArmTracker {
     joints_W: Option<[Vector; 4]>,
     /// The tracked region holds the hand's far end as well, and a frame whose forearm or
     /// hand reached the region's edge sends the next one to the workspace
-    /// ([`ArmTracker::hold_hand_in_region`]).
+    /// ([`ArmFitConfig::hand_region`]).
     hand_region: bool,
-    /// The last pose's forearm or hand masks reached the region's edge ([`CUT_RING_PX`],
-    /// [`CUT_MASS_PX`]): the region cut the arm, and the next frame reads the workspace.
+    /// The last pose's region cut the arm ([`CUT_RING_PX`]): the next frame reads the
+    /// workspace.
     cut: bool,
     /// The shoulder of the last pose, kept when the track is lost: where a human whose trunk
     /// moves was last seen, the centre of the workspace crop.
@@ -122,17 +124,27 @@ pub fn view_jump(last_fx: Option<f64>, fx: f64) -> bool {
     last_fx.is_some_and(|last| (fx / last).ln().abs() > VIEW_JUMP.ln())
 }
 
-/// With [`ArmTracker::hold_hand_in_region`]: the band along the region's edge, px of
-/// [`DEFAULT_INPUT_PX`], and the forearm's and hand's mass in it (pixels' worth of
-/// probability) from which the region cut the arm: the next frame reads the workspace,
-/// which holds the whole reach. Without it a fit that lost the hand kept a region around its
-/// own wrong wrist, and the true forearm stayed outside for seconds (on a recorded clip 92
-/// of 361 fits with true masks, the hand 0.39 m off; docs/perception.md, "The region that
-/// cut the arm").
+/// The band along the tracked region's edge, px of [`DEFAULT_INPUT_PX`], in which masks
+/// tell that the region cut the arm: the next frame reads the workspace, which holds the
+/// whole reach. The region around the last pose's shoulder, elbow and wrist cut the arm where
+/// the hand's masks reach its edge ([`HAND_CUT_MASS_PX`]) and the fitted hand does not
+/// (its far end projects inside the region): the fit lost the hand, and a region around its
+/// own wrong wrist kept the true forearm outside for seconds (on a recorded clip 92 of 361
+/// fits with true masks, the hand 0.39 m off); that frame's fit also runs the global search
+/// beside the track ([`ArmFitter::search_next`]), which a track of a good gain does not
+/// call. An arm held out, its hand past the edge in the fit as in the masks, is not cut. With [`ArmFitConfig::hand_region`] the region holds the
+/// hand too, and the forearm's or the hand's masks at its edge cut it ([`CUT_MASS_PX`];
+/// docs/perception.md, "The region that cut the arm").
 pub const CUT_RING_PX: usize = 2;
-/// The forearm's and hand's mass in [`CUT_RING_PX`]'s band from which the region cut the
-/// arm, pixels' worth of probability.
+/// With [`ArmFitConfig::hand_region`], the forearm's and hand's mass in [`CUT_RING_PX`]'s
+/// band from which the region cut the arm, pixels' worth of probability.
 pub const CUT_MASS_PX: f64 = 3.0;
+/// Around shoulder, elbow and wrist, the hand's mass in [`CUT_RING_PX`]'s band from which
+/// the region cut the arm (where the fitted hand does not reach the edge), pixels' worth of
+/// probability. In the trap the band held 36 (median) on a recorded clip; where the whole
+/// arm was inside, at most 21, and 3 sent a third of those frames to the workspace for
+/// nothing (docs/perception.md, "The region that cut the arm").
+pub const HAND_CUT_MASS_PX: f64 = 20.0;
 
 /// Poses in a row before the region of interest follows the arm. A network that has just
 /// started on a view can give a confident pose of the wrong arm; a crop around it would
@@ -173,13 +185,14 @@ impl ArmTracker {
         let capsules = articulated
             .part_links()
             .map(|l| link_bounding_capsule(human, l));
+        let hand_region = config.hand_region;
         Ok(Self {
             arm,
             fitter: ArmFitter::new(CpuRenderer::new(), articulated, config),
             capsules,
             net: None,
             joints_W: None,
-            hand_region: false,
+            hand_region,
             cut: false,
             last_shoulder_W: None,
             streak: 0,
@@ -233,19 +246,6 @@ impl ArmTracker {
         self.fitter.hold_trunk_at(q)
     }
 
-    /// Whether the tracked region holds the hand's far end as well as the shoulder, elbow
-    /// and wrist, and a frame whose forearm or hand masks reach the region's edge sends the
-    /// next frame to the workspace (off by default). On recorded people it keeps the arm in
-    /// view: the held-out clips' closed-loop error fell from 46.0 to 33.4 mm at the median
-    /// episode. On the generator's motion the larger region lowers the fit's gain, and with
-    /// the shipped calibration (floors by gain, fitted on the datasets' regions around
-    /// shoulder, elbow and wrist) the bound grows and the robot slows: the task took 0.48
-    /// more of the unfiltered time (docs/perception.md, "The region that cut the arm").
-    pub fn hold_hand_in_region(&mut self, on: bool) {
-        self.hand_region = on;
-        self.cut = false;
-    }
-
     /// Forgets the track and the network's state (a new camera stream).
     pub fn reset(&mut self) {
         self.fitter.reset();
@@ -263,10 +263,9 @@ impl ArmTracker {
     /// The region of `camera`'s image the next frame is read through: around the last
     /// estimate's shoulder, elbow and wrist ([`Roi::of_joints`], the middle of
     /// [`roi::TRACKED_MARGIN`]; and the hand's far end with
-    /// [`ArmTracker::hold_hand_in_region`]) once [`CONFIRM_POSES`] frames in a row gave a
-    /// pose (and for [`HOLD_REGION`] frames without one after that; with the hand held, and
-    /// the last pose's masks not at the region's edge, [`CUT_MASS_PX`]), else the sphere the
-    /// forearm can reach
+    /// [`ArmFitConfig::hand_region`]) once [`CONFIRM_POSES`] frames in a row gave a
+    /// pose (and for [`HOLD_REGION`] frames without one after that), unless the last pose's
+    /// region cut the arm ([`CUT_RING_PX`]), else the sphere the forearm can reach
     /// ([`Roi::of_sphere`]) around the shoulder (for a human whose trunk moves, the last
     /// pose's shoulder, before any pose the shoulder at rest), else the whole frame.
     #[must_use]
@@ -525,7 +524,18 @@ impl ArmTracker {
                 }
             });
         self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist, hand]);
-        self.cut = self.hand_region && edge_mass(masks, CUT_RING_PX) >= CUT_MASS_PX;
+        self.cut = if self.hand_region {
+            edge_mass(masks, CUT_RING_PX, FOREARM_AND_HAND) >= CUT_MASS_PX
+        } else {
+            // The masks reach the edge where the fit does not: the track is wrong, and the
+            // next frame's fit searches beside it.
+            let lost = edge_mass(masks, CUT_RING_PX, HAND) >= HAND_CUT_MASS_PX
+                && inside_px(camera, hand) >= 0.0;
+            if lost {
+                self.fitter.search_next();
+            }
+            lost
+        };
         self.last_shoulder_W = Some(X_WL[0].translation);
         self.streak += 1;
         self.held = 0;
@@ -538,12 +548,28 @@ impl ArmTracker {
     }
 }
 
-/// The forearm's and the hand's mass (the sum of their probabilities) in the outer `ring`
-/// pixels of the masks' square.
-fn edge_mass(masks: &ArmMasks, ring: usize) -> f64 {
+/// How far inside `camera`'s image `p_W` projects, px to the nearest edge (negative:
+/// outside; minus infinity behind the camera).
+fn inside_px(camera: &Camera, p_W: Vector) -> f64 {
+    let p_C = camera.X_WC.inverse().transform_point(p_W);
+    camera.project(p_C).map_or(f64::NEG_INFINITY, |[u, v]| {
+        u.min(v)
+            .min(f64::from(camera.width) - u)
+            .min(f64::from(camera.height) - v)
+    })
+}
+
+/// The hand's plane of [`ArmMasks::parts`].
+const HAND: Range<usize> = 2..3;
+/// The forearm's and hand's planes of [`ArmMasks::parts`].
+const FOREARM_AND_HAND: Range<usize> = 1..3;
+
+/// The probability mass of the `parts` planes in the band `ring` px wide along the masks'
+/// edge.
+fn edge_mass(masks: &ArmMasks, ring: usize, parts: Range<usize>) -> f64 {
     let (w, h) = (masks.width, masks.height);
     let mut m = 0.0;
-    for plane in &masks.parts[1..] {
+    for plane in &masks.parts[parts] {
         for (y, row) in plane.chunks_exact(w.max(1)).enumerate().take(h) {
             for (x, &v) in row.iter().enumerate() {
                 if x < ring || y < ring || x + ring >= w || y + ring >= h {
@@ -691,20 +717,27 @@ mod tests {
         assert_eq!(outcome, Err(NoEstimate::NoPose(NoPose::PoorFit)));
     }
 
+    /// The built-in human's arm, a tracker of it with `config`, a camera that sees it and
+    /// the workspace region through which that camera's first frame is read.
+    fn arm_in_view(config: ArmFitConfig) -> (RobotModel, Pose, ArmTracker, Camera, Roi) {
+        let human = human();
+        let X_WH = pose_from_xyz_rpy([0.9, -0.3, 0.0], [0.0, 0.0, 0.7]);
+        let tracker = ArmTracker::new(&human, &X_WH, config).expect("tracker");
+        let arm = tracker.arm();
+        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
+        let reach = arm.reach_m().expect("reach");
+        let camera = camera_at(arm, Vector::new(1.6, 1.7, 0.3), [640, 480], 55.0);
+        let workspace = Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).unwrap();
+        (human, X_WH, tracker, camera, workspace)
+    }
+
     /// The loop's conventions end to end: masks and depth of the arm at a configuration,
     /// through the region of interest, back as each part's collision capsule in the world
     /// where the model puts it at that configuration; the region then follows the arm and a
     /// lost track falls back to the workspace.
     #[test]
     fn the_tracker_finds_each_part_where_the_model_puts_it() {
-        let human = human();
-        let X_WH = pose_from_xyz_rpy([0.9, -0.3, 0.0], [0.0, 0.0, 0.7]);
-        let mut tracker = ArmTracker::new(&human, &X_WH, ArmFitConfig::default()).expect("tracker");
-        let arm = tracker.arm().clone();
-        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
-        let reach = arm.reach_m().expect("reach");
-        let camera = camera_at(&arm, Vector::new(1.6, 1.7, 0.3), [640, 480], 55.0);
-        let workspace = Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).unwrap();
+        let (human, X_WH, mut tracker, camera, workspace) = arm_in_view(ArmFitConfig::default());
         assert_eq!(tracker.roi(&camera), workspace);
         let q = [0.5, 0.9, 1.1];
         let masks = observe(&human, &tracker, &camera, &q);
@@ -758,6 +791,7 @@ mod tests {
         // The pose's shoulder is remembered through the loss (a fixed shoulder's workspace
         // does not read it).
         let last = tracker.last_shoulder_W.expect("the last pose's shoulder");
+        let (shoulder, _) = tracker.arm().shoulder_W.expect("fixed shoulder");
         assert!((last - shoulder).length() < 0.03, "{last} vs {shoulder}");
     }
 
@@ -768,16 +802,12 @@ mod tests {
     /// stays around the last pose's shoulder, elbow and wrist.
     #[test]
     fn an_arm_the_region_cuts_is_read_through_the_workspace_next() {
-        let human = human();
-        let X_WH = pose_from_xyz_rpy([0.9, -0.3, 0.0], [0.0, 0.0, 0.7]);
-        let mut tracker = ArmTracker::new(&human, &X_WH, ArmFitConfig::default()).expect("tracker");
+        let holding = ArmFitConfig {
+            hand_region: true,
+            ..ArmFitConfig::default()
+        };
+        let (human, X_WH, mut tracker, camera, workspace) = arm_in_view(holding);
         let mut plain = ArmTracker::new(&human, &X_WH, ArmFitConfig::default()).expect("tracker");
-        tracker.hold_hand_in_region(true);
-        let arm = tracker.arm().clone();
-        let (shoulder, _) = arm.shoulder_W.expect("fixed shoulder");
-        let reach = arm.reach_m().expect("reach");
-        let camera = camera_at(&arm, Vector::new(1.6, 1.7, 0.3), [640, 480], 55.0);
-        let workspace = Roi::of_sphere(&camera, shoulder, reach, roi::WORKSPACE_MARGIN).unwrap();
         // Bent: the region follows the arm after two poses, and it holds the whole arm.
         let bent = observe(&human, &tracker, &camera, &[0.0, 0.3, 1.6]);
         for _ in 0..CONFIRM_POSES {
@@ -819,7 +849,7 @@ mod tests {
             depth_m: None,
         };
         assert!(
-            edge_mass(&crop, CUT_RING_PX) >= CUT_MASS_PX,
+            edge_mass(&crop, CUT_RING_PX, FOREARM_AND_HAND) >= CUT_MASS_PX,
             "the arm is not cut"
         );
         tracker
@@ -828,14 +858,23 @@ mod tests {
             .expect("an estimate");
         assert!(tracker.cut);
         assert_eq!(tracker.region(&camera), (workspace, RoiKind::Workspace));
-        // Without the hand held, the same frames keep the region on the arm's joints.
-        for masks in [&bent, &bent, &stretched] {
+        // Without the hand held the region is drawn around shoulder, elbow and wrist, and it
+        // cuts the stretched arm too: the hand's masks reach its edge, and the pose fitted
+        // through it keeps the hand inside.
+        for _ in 0..CONFIRM_POSES {
             plain
-                .track_masks(&camera, masks)
+                .track_masks(&camera, &bent)
                 .expect("track")
                 .expect("a pose");
         }
-        assert_eq!(plain.region(&camera).1, RoiKind::Tracked);
+        let (around_joints, kind) = plain.region(&camera);
+        assert_eq!(kind, RoiKind::Tracked);
+        assert_ne!(around_joints, tracked);
+        plain
+            .track_masks(&camera, &stretched)
+            .expect("track")
+            .expect("a pose");
+        assert_eq!(plain.region(&camera).1, RoiKind::Workspace);
         // Read whole through the workspace, the pose is found and the region follows it.
         let estimate = tracker
             .track_masks(&camera, &stretched)
@@ -852,6 +891,68 @@ mod tests {
         let (a, b) = c.segment_in_world(k.link_pose(link));
         let off = [(hand.a_W - a).length(), (hand.b_W - b).length()];
         assert!(off[0] < 0.03 && off[1] < 0.03, "{off:?}");
+    }
+
+    /// Around shoulder, elbow and wrist, a frame whose hand masks reach the region's edge
+    /// where the fitted hand does not (the fit lost the hand, and the region follows its wrong
+    /// wrist) sends the next frame to the workspace; the same masks without the hand at the
+    /// edge keep the region on the arm.
+    #[test]
+    fn a_hand_at_the_edge_the_fit_does_not_reach_sends_the_next_frame_to_the_workspace() {
+        let (human, _, mut tracker, camera, workspace) = arm_in_view(ArmFitConfig::default());
+        let bent = observe(&human, &tracker, &camera, &[0.0, 0.3, 1.6]);
+        for _ in 0..=CONFIRM_POSES {
+            tracker
+                .track_masks(&camera, &bent)
+                .expect("track")
+                .expect("a pose");
+        }
+        let (tracked, kind) = tracker.region(&camera);
+        assert_eq!(kind, RoiKind::Tracked);
+        assert!(!tracker.cut);
+        // A hand's worth of mask along the region's left edge, a fifth of its side long, in
+        // the middle: nothing the bent arm's pose explains.
+        let mut stray = bent.clone();
+        let (w, h) = (640_i64, 480_i64);
+        let band = (2 * CUT_RING_PX as u32 * tracked.size).div_ceil(DEFAULT_INPUT_PX as u32);
+        let band = i64::from(band);
+        let side = i64::from(tracked.size);
+        for y in tracked.y0 + 2 * side / 5..tracked.y0 + 3 * side / 5 {
+            for x in tracked.x0..tracked.x0 + band {
+                if (0..w).contains(&x) && (0..h).contains(&y) {
+                    let i = (y * w + x) as usize;
+                    stray.parts[2][i] = 1.0;
+                    stray.background[i] = 0.0;
+                }
+            }
+        }
+        let estimate = tracker
+            .track_masks(&camera, &stray)
+            .expect("track")
+            .expect("a pose");
+        let hand = estimate
+            .parts
+            .iter()
+            .find(|p| p.part == HumanPart::Hand)
+            .expect("a hand");
+        for end in [hand.a_W, hand.b_W] {
+            let p = camera
+                .project(camera.X_WC.inverse() * end)
+                .expect("in front");
+            assert!(
+                tracked.contains(p),
+                "the fitted hand left the region: {end}"
+            );
+        }
+        assert!(tracker.cut);
+        assert_eq!(tracker.region(&camera), (workspace, RoiKind::Workspace));
+        // Read whole through the workspace, the arm is explained and the region follows it.
+        tracker
+            .track_masks(&camera, &bent)
+            .expect("track")
+            .expect("a pose");
+        assert!(!tracker.cut);
+        assert_eq!(tracker.region(&camera).1, RoiKind::Tracked);
     }
 
     /// A human whose trunk moves (the catalogue's `human`: slides, turn, lean) has no fixed

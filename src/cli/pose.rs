@@ -201,6 +201,7 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
         .map(|k| mask_source(k, args, &human_model))
         .collect::<Result<Vec<_>>>()?;
     let n = dataset.entries(Some(split)).count();
+    let crops_hold_hand = tracked_crops_hold_hand(&dataset.manifest.config);
     let method = match args.method.as_str() {
         "articulated" => {
             if args.no_roi || args.no_anchor {
@@ -329,6 +330,9 @@ pub fn eval_pose(args: &EvalPoseArgs) -> Result<ExitCode> {
                 if let Some(on) = args.hull_outlines {
                     config.hull_outlines = on;
                 }
+                // What the fit is shown: the stored crops, which hold the hand's far end
+                // where the dataset's tracked crops were drawn so.
+                config.hand_region = crops_hold_hand;
                 if let Some(measured) = calibration.and_then(|c| c.fit) {
                     let differences = measured.differences(&FitSettings::of(&config));
                     if !differences.is_empty() {
@@ -546,4 +550,31 @@ fn distance_plot(kinds: &[&str], evaluations: &[PoseEvaluation]) -> String {
         },
     ];
     svg_panels(&x, "forearm distance from the camera (m)", &panels)
+}
+
+/// Whether a dataset's tracked crops hold the hand's far end (its configuration's `[roi]
+/// tracked_hand`, false where it has none: written before the key, or a configuration of
+/// another form).
+fn tracked_crops_hold_hand(config: &str) -> bool {
+    toml::from_str::<toml::Table>(config)
+        .ok()
+        .and_then(|t| t.get("roi")?.get("tracked_hand")?.as_bool())
+        .unwrap_or(false)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use workcell::sim::dataset::DatasetConfig;
+
+    /// The key is read as the dataset generator writes its configuration into the manifest.
+    #[test]
+    fn a_datasets_crops_say_whether_they_hold_the_hand() {
+        let mut config = DatasetConfig::default();
+        let text = DatasetConfig::to_toml;
+        assert!(!tracked_crops_hold_hand(&text(&config)));
+        config.roi.tracked_hand = true;
+        assert!(tracked_crops_hold_hand(&text(&config)));
+        assert!(!tracked_crops_hold_hand("roi = 3"));
+    }
 }

@@ -81,6 +81,10 @@ pub struct RoiConfig {
     pub tracked_min_m: f64,
     /// ... around an estimate this far off the true elbow and wrist (uniform per axis, m).
     pub tracked_error_m: f64,
+    /// The tracked crop holds the hand's far end as well (the crop the closed loop's tracker
+    /// reads with `perception.hand_region`, `ArmTracker::hold_hand_in_region`). Default
+    /// false.
+    pub tracked_hand: bool,
 }
 
 impl Default for RoiConfig {
@@ -92,6 +96,7 @@ impl Default for RoiConfig {
             tracked_margin: roi::TRACKED_MARGIN,
             tracked_min_m: roi::TRACKED_MIN_M,
             tracked_error_m: 0.03,
+            tracked_hand: false,
         }
     }
 }

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
+use workcell_robots::collision::link_bounding_capsule;
 use workcell_robots::input::{MAX_CONFIG_BYTES, read_regular_file, read_text_file};
 use workcell_robots::math::{Pose, Vector};
 
@@ -727,6 +728,7 @@ impl Generator {
         // The shoulder (the upper arm's origin) and how far the wrist can be from it.
         let at = |k: usize, l: usize| episode.ticks[k].human[l].translation;
         let shoulder = at(0, upper);
+        let hand_capsule = link_bounding_capsule(&model.human, hand);
         let reach = (at(0, fl) - shoulder).length() + (at(0, hand) - at(0, fl)).length();
         // The cell centre: between the robot's base and the human's shoulder.
         let centre = 0.5 * (model.X_WR.translation + shoulder);
@@ -763,7 +765,9 @@ impl Generator {
                     rng.random_range(-e..=e),
                 )
             };
-            let bias = [error(), error(), error()];
+            // Shoulder, elbow and wrist, and with `tracked_hand` the hand's far end.
+            let points = if c.roi.tracked_hand { 4 } else { 3 };
+            let bias: Vec<Vector> = (0..points).map(|_| error()).collect();
             let mut frames = Vec::with_capacity(c.frames);
             let mut failing = 0;
             for f in 0..c.frames {
@@ -773,10 +777,13 @@ impl Generator {
                         // The tracker's estimate of the shoulder, the elbow and the wrist:
                         // off by a bias per sequence and noise per frame.
                         let k = first_tick + f;
-                        let joints: Vec<Vector> = [shoulder, at(k, fl), at(k, hand)]
+                        let hand_end = hand_capsule.map_or(at(k, hand), |c| {
+                            far_end(c.segment_in_world(&episode.ticks[k].human[hand]), at(k, fl))
+                        });
+                        let joints: Vec<Vector> = [at(k, upper), at(k, fl), at(k, hand), hand_end]
                             .iter()
-                            .zip(bias)
-                            .map(|(p, b)| *p + b + 0.3 * error())
+                            .zip(&bias)
+                            .map(|(p, b)| *p + *b + 0.3 * error())
                             .collect();
                         Roi::of_joints(&camera, &joints, margin, c.roi.tracked_min_m)
                     }
@@ -1438,5 +1445,15 @@ fn part_frame(
             human.get(l).copied().unwrap_or(Pose::IDENTITY),
         ),
         None => (String::new(), Pose::IDENTITY),
+    }
+}
+
+/// The end of a capsule's segment `(a, b)` farther from `from` (the hand's far end, from the
+/// elbow: what the tracker's region holds with `ArmTracker::hold_hand_in_region`).
+fn far_end((a, b): (Vector, Vector), from: Vector) -> Vector {
+    if (a - from).length() > (b - from).length() {
+        a
+    } else {
+        b
     }
 }

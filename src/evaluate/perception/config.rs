@@ -143,10 +143,11 @@ pub struct ProcNetConfig {
     pub true_trunk: bool,
     /// The tracked region of interest holds the hand's far end as well as the shoulder,
     /// elbow and wrist, and a frame whose forearm or hand reached its edge sends the next one
-    /// to the workspace (`ArmTracker::hold_hand_in_region`): recorded people's arms stay in
-    /// view, but the shipped calibration's bound grows with the larger region on the
-    /// generator's motion (docs/perception.md, "The region that cut the arm"). Default false.
-    pub hand_region: bool,
+    /// to the workspace (`ArmFitConfig::hand_region`; docs/perception.md, "The region that
+    /// cut the arm"). Default: the masks' calibration's, else false; as `fit_trunk`, another
+    /// value than the calibration's is warned of.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hand_region: Option<bool>,
     /// The camera delivers nothing from this time on, s (a failed camera): the last estimate
     /// ages out ([`super::procnet::MAX_AGE_S`]) and the filter then brakes. Left out, never.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -276,7 +277,7 @@ impl Default for ProcNetConfig {
             human_acceleration_m_s2: 10.0,
             velocity_fits: 2,
             true_trunk: false,
-            hand_region: false,
+            hand_region: None,
             camera_fails_at_s: None,
         }
     }
@@ -476,10 +477,10 @@ impl ProcNetConfig {
             } else {
                 ""
             },
-            if self.hand_region {
-                ", the region holds the hand"
-            } else {
-                ""
+            match self.hand_region {
+                Some(true) => ", the region holds the hand",
+                Some(false) => ", the region around shoulder, elbow and wrist",
+                None => "",
             }
         )
     }

@@ -152,10 +152,12 @@ impl ProcNetCamera {
         fit.reversed_start = config.reversed_start.unwrap_or(fit.reversed_start);
         fit.depth_start = config.depth_start.unwrap_or(fit.depth_start);
         fit.search_below_gain = config.search_below_gain.unwrap_or(fit.search_below_gain);
+        fit.hand_region = config.hand_region.unwrap_or(fit.hand_region);
         let overridden = config.fit_trunk.is_some()
             || config.reversed_start.is_some()
             || config.depth_start.is_some()
-            || config.search_below_gain.is_some();
+            || config.search_below_gain.is_some()
+            || config.hand_region.is_some();
         if overridden && let Some(measured_fit) = measured.fit {
             let differences = measured_fit.differences(&FitSettings::of(&fit));
             if !differences.is_empty() {
@@ -170,7 +172,6 @@ impl ProcNetCamera {
         if let Some(net) = net {
             tracker = tracker.with_network(net)?;
         }
-        tracker.hold_hand_in_region(config.hand_region);
         let mut kinematics = KinematicState::new(&model.human);
         kinematics.X_WB = model.X_WH;
         Ok(Self {

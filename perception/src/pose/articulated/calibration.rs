@@ -105,6 +105,10 @@ pub struct FitSettings {
     /// [`ArmFitConfig::hull_outlines`] (false where a file leaves it out).
     #[serde(default)]
     pub hull_outlines: bool,
+    /// [`ArmFitConfig::hand_region`]: the crops held the hand's far end (false where a file
+    /// leaves it out).
+    #[serde(default)]
+    pub hand_region: bool,
 }
 
 impl FitSettings {
@@ -117,6 +121,7 @@ impl FitSettings {
             reversed_start: config.reversed_start,
             depth_start: config.depth_start,
             hull_outlines: config.hull_outlines,
+            hand_region: config.hand_region,
         }
     }
 
@@ -129,6 +134,7 @@ impl FitSettings {
             reversed_start: self.reversed_start,
             depth_start: self.depth_start,
             hull_outlines: self.hull_outlines,
+            hand_region: self.hand_region,
             ..config
         }
     }
@@ -144,6 +150,7 @@ impl FitSettings {
                 ("reversed_start", f.reversed_start.to_string()),
                 ("depth_start", f.depth_start.to_string()),
                 ("hull_outlines", f.hull_outlines.to_string()),
+                ("hand_region", f.hand_region.to_string()),
             ]
         };
         settings(self)

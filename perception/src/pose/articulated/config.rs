@@ -1,6 +1,8 @@
 //! The fit's settings ([`ArmFitConfig`]) and their defaults.
 
 use super::ConfidentFloors;
+#[cfg(doc)]
+use super::FitSettings;
 
 /// Settings of the articulated fit.
 // Serialize: the docs' stated defaults are checked against it (tests/defaults.rs).
@@ -30,6 +32,13 @@ pub struct ArmFitConfig {
     /// is convex, from fewer triangles (the whole body's upper arm, forearm and hand: 96,
     /// 108 and 24 triangles against 270, 276 and 178). Default false.
     pub hull_outlines: bool,
+    /// The tracker's region of interest ([`crate::ArmTracker::region`]) holds the hand's far
+    /// end as well as the shoulder, elbow and wrist, and a frame whose forearm or hand masks
+    /// reach the region's edge sends the next frame to the workspace crop (without it, a
+    /// frame whose hand masks reach the edge where the fitted hand does not;
+    /// [`crate::tracker::CUT_RING_PX`]). Not a setting of the fit itself but of what it is
+    /// shown: a bound is measured on crops of one kind ([`FitSettings`]). Default false.
+    pub hand_region: bool,
     /// First step of the climb, rad. Default 0.05.
     pub initial_step_rad: f64,
     /// The climb stops when its step falls below this, rad (the Newton refinement finishes
@@ -142,6 +151,7 @@ impl Default for ArmFitConfig {
             refine: 10,
             max_iterations: 40,
             hull_outlines: false,
+            hand_region: false,
             initial_step_rad: 0.05,
             min_step_rad: 0.005,
             random_probes: 2,

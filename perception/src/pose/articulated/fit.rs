@@ -134,6 +134,8 @@ pub struct ArmFitter<R: Renderer> {
     /// The forearm's centre and wrist in the world frame where the last frame put them (its
     /// pose, or its best fit of at least [`ArmFitConfig::confirm_min_gain`]).
     pub(super) last_points: Option<[Vector; 2]>,
+    /// The next frame runs the global search beside the track ([`Self::search_next`]).
+    pub(super) search_next: bool,
     pub(super) batch: MaskBatch,
     pub(super) spans: SpanBatch,
     pub(super) poses: Vec<Pose>,
@@ -156,6 +158,7 @@ impl<R: Renderer> ArmFitter<R> {
             config,
             tracks: Vec::new(),
             last_points: None,
+            search_next: false,
             batch: MaskBatch::new(),
             spans: SpanBatch::new(),
             poses: Vec::new(),
@@ -176,6 +179,7 @@ impl<R: Renderer> ArmFitter<R> {
     pub fn reset(&mut self) {
         self.tracks.clear();
         self.last_points = None;
+        self.search_next = false;
         if let Some(trunk) = self.arm.trunk.clone() {
             // Finite values within the limits: the kinematics cannot fail.
             let _ = self.arm.hold_trunk(&trunk, &trunk.upright);
@@ -210,6 +214,13 @@ impl<R: Renderer> ArmFitter<R> {
             .collect();
         self.arm.hold_trunk(&trunk, &values)?;
         Ok(true)
+    }
+
+    /// The next frame runs the global search beside the track, whatever the track's gain:
+    /// a track that something else says is wrong (the tracker's region cut the arm where
+    /// the fit did not reach) competes with the search's fits.
+    pub fn search_next(&mut self) {
+        self.search_next = true;
     }
 
     /// Tracks from the model's configuration `q` on the next frame (as if it had been the
@@ -294,7 +305,9 @@ impl<R: Renderer> ArmFitter<R> {
             .iter()
             .map(|(climb, _)| climb.score.gain)
             .fold(f64::NEG_INFINITY, f64::max);
-        let reacquired = climbs.is_empty() || tracked_gain < c.search_below_gain;
+        let reacquired = climbs.is_empty()
+            || tracked_gain < c.search_below_gain
+            || std::mem::take(&mut self.search_next);
         if reacquired {
             for climb in self.search(coarse)? {
                 sort_climb(&c, climb, Vec::new(), &mut climbs, &mut faint);

@@ -801,7 +801,8 @@ fn the_trunks_stage_follows_a_turned_person_who_steps() {
 
 /// A track that explains the masks poorly (a gain between `min_gain` and
 /// `search_below_gain`) calls the global search beside it, which finds the arm; with the
-/// threshold at 0 the poor track is kept.
+/// threshold at 0 the poor track is kept, unless the frame is told to search
+/// ([`ArmFitter::search_next`]).
 #[test]
 fn a_poor_track_calls_the_global_search() {
     let (arm, camera) = setup();
@@ -836,6 +837,18 @@ fn a_poor_track_calls_the_global_search() {
     let fit = kept.fit(&camera, &masks).expect("fit").expect("a pose");
     assert!(!fit.reacquired);
     assert!(fit.gain < 0.5, "gain {}", fit.gain);
+
+    // Told that the track is wrong, the fitter searches beside it on the next frame whatever
+    // its gain, and finds the arm; once: the frame after keeps the track again.
+    kept.set_prior(&poor);
+    kept.search_next();
+    let fit = kept.fit(&camera, &masks).expect("fit").expect("a pose");
+    assert!(fit.reacquired);
+    let err = distance_cm(&arm, &camera, &fit.q, &truth);
+    assert!(err < 3.0, "{err:.2} cm off, q {:?}", fit.q);
+    kept.set_prior(&poor);
+    let fit = kept.fit(&camera, &masks).expect("fit").expect("a pose");
+    assert!(!fit.reacquired);
 }
 
 /// A fit below `min_gain` is a pose only when the frame before put the forearm within
@@ -1167,6 +1180,7 @@ fn the_floor_follows_the_hidden_share() {
             reversed_start: true,
             depth_start: false,
             hull_outlines: true,
+            hand_region: true,
         }),
     };
     let floors: Vec<f64> = [0.0, 0.24, 0.25, 0.5, 0.74, 0.75, 1.0]
@@ -1236,7 +1250,7 @@ fn the_floor_follows_the_hidden_share() {
     let config = c.apply(ArmFitConfig::default());
     assert!(config.fit_trunk && config.reversed_start && !config.depth_start);
     assert_eq!(config.search_below_gain, 0.7);
-    assert!(config.hull_outlines);
+    assert!(config.hull_outlines && config.hand_region);
     assert_eq!(Calibration::of(&config), c);
     // The file's form: a calibration's fit settings are a table of their own.
     let text = toml::to_string(&c).expect("serialises");
@@ -1245,16 +1259,19 @@ fn the_floor_follows_the_hidden_share() {
         "{text}"
     );
     assert_eq!(toml::from_str::<Calibration>(&text).expect("parses"), c);
-    // A file from before the outlines: the fit as it was then, the pieces.
+    // A file from before the outlines and the hand's region: the fit as it was then, the
+    // pieces, read through the region around shoulder, elbow and wrist.
     let older: String = text
         .lines()
-        .filter(|l| !l.starts_with("hull_outlines"))
+        .filter(|l| !l.starts_with("hull_outlines") && !l.starts_with("hand_region"))
         .map(|l| format!("{l}\n"))
         .collect();
     let older = toml::from_str::<Calibration>(&older).expect("parses");
     assert_eq!(
-        older.fit.map(|f| (f.hull_outlines, f.search_below_gain)),
-        Some((false, 0.7))
+        older
+            .fit
+            .map(|f| (f.hull_outlines, f.hand_region, f.search_below_gain)),
+        Some((false, false, 0.7))
     );
     let other = FitSettings {
         depth_start: true,
