@@ -674,6 +674,7 @@ mod tests {
                     reversed_start: Some(true),
                     depth_start: Some(true),
                     search_below_gain: Some(0.7),
+                    hand_region: Some(true),
                     uncertainty_scale: Some(1.0),
                     uncertainty_floor_m: Some(0.01),
                     camera_fails_at_s: Some(1.0),
