@@ -130,11 +130,12 @@ pub fn view_jump(last_fx: Option<f64>, fx: f64) -> bool {
 /// the hand's masks reach its edge ([`HAND_CUT_MASS_PX`]) and the fitted hand does not
 /// (its far end projects inside the region): the fit lost the hand, and a region around its
 /// own wrong wrist kept the true forearm outside for seconds (on a recorded clip 92 of 361
-/// fits with true masks, the hand 0.39 m off); that frame's fit also runs the global search
-/// beside the track ([`ArmFitter::search_next`]), which a track of a good gain does not
-/// call. An arm held out, its hand past the edge in the fit as in the masks, is not cut. With [`ArmFitConfig::hand_region`] the region holds the
-/// hand too, and the forearm's or the hand's masks at its edge cut it ([`CUT_MASS_PX`];
-/// docs/perception.md, "The region that cut the arm").
+/// fits with true masks, the hand 0.39 m off), so the next frame's fit also runs the global
+/// search beside the track ([`ArmFitter::search_next`]), which a track of a good gain does
+/// not call. An arm held out, its hand past the edge in the fit as in the masks, is not cut.
+/// With [`ArmFitConfig::hand_region`] the region holds the hand too, and the forearm's or
+/// the hand's masks at its edge cut it ([`CUT_MASS_PX`]; docs/perception.md, "The region
+/// that cut the arm").
 pub const CUT_RING_PX: usize = 2;
 /// With [`ArmFitConfig::hand_region`], the forearm's and hand's mass in [`CUT_RING_PX`]'s
 /// band from which the region cut the arm, pixels' worth of probability.

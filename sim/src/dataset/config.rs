@@ -82,7 +82,7 @@ pub struct RoiConfig {
     /// ... around an estimate this far off the true elbow and wrist (uniform per axis, m).
     pub tracked_error_m: f64,
     /// The tracked crop holds the hand's far end as well (the crop the closed loop's tracker
-    /// reads with `perception.hand_region`, `ArmTracker::hold_hand_in_region`). Default
+    /// reads with `perception.hand_region`, `ArmFitConfig::hand_region`). Default
     /// false.
     pub tracked_hand: bool,
 }

@@ -1449,7 +1449,7 @@ fn part_frame(
 }
 
 /// The end of a capsule's segment `(a, b)` farther from `from` (the hand's far end, from the
-/// elbow: what the tracker's region holds with `ArmTracker::hold_hand_in_region`).
+/// elbow: what the tracker's region holds with `ArmFitConfig::hand_region`).
 fn far_end((a, b): (Vector, Vector), from: Vector) -> Vector {
     if (a - from).length() > (b - from).length() {
         a

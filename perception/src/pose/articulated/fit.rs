@@ -134,7 +134,8 @@ pub struct ArmFitter<R: Renderer> {
     /// The forearm's centre and wrist in the world frame where the last frame put them (its
     /// pose, or its best fit of at least [`ArmFitConfig::confirm_min_gain`]).
     pub(super) last_points: Option<[Vector; 2]>,
-    /// The next frame runs the global search beside the track ([`Self::search_next`]).
+    /// The next fit whose track would be kept runs the global search beside it
+    /// ([`Self::search_next`]).
     pub(super) search_next: bool,
     pub(super) batch: MaskBatch,
     pub(super) spans: SpanBatch,
@@ -216,9 +217,11 @@ impl<R: Renderer> ArmFitter<R> {
         Ok(true)
     }
 
-    /// The next frame runs the global search beside the track, whatever the track's gain:
-    /// a track that something else says is wrong (the tracker's region cut the arm where
-    /// the fit did not reach) competes with the search's fits.
+    /// The next fit whose track would be kept (its gain at least
+    /// [`ArmFitConfig::search_below_gain`]) runs the global search beside it: a track that
+    /// something else says is wrong (the tracker's region cut the arm where the fit did not
+    /// reach) competes with the search's fits. Fits before it that search anyway (no track,
+    /// or a poor one) leave the request standing; [`Self::reset`] drops it.
     pub fn search_next(&mut self) {
         self.search_next = true;
     }

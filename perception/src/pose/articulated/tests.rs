@@ -849,6 +849,20 @@ fn a_poor_track_calls_the_global_search() {
     kept.set_prior(&poor);
     let fit = kept.fit(&camera, &masks).expect("fit").expect("a pose");
     assert!(!fit.reacquired);
+
+    // Asked while the next fit searches anyway (a poor track), the request stands until a
+    // fit whose track would be kept.
+    fitter.set_prior(&poor);
+    fitter.search_next();
+    let searched = |f: &mut ArmFitter<CpuRenderer>| {
+        f.fit(&camera, &masks)
+            .expect("fit")
+            .expect("a pose")
+            .reacquired
+    };
+    assert!(searched(&mut fitter));
+    assert!(searched(&mut fitter));
+    assert!(!searched(&mut fitter));
 }
 
 /// A fit below `min_gain` is a pose only when the frame before put the forearm within
