@@ -14,7 +14,7 @@ use workcell_procnet::ProcNet;
 use workcell_procnet::image::{planar_rgb, planar_rgb_crop, resample};
 use workcell_render::roi::{self, Roi, RoiKind};
 use workcell_render::{Camera, Class, CpuRenderer};
-use workcell_robots::collision::{LinkCapsule, link_bounding_capsule};
+use workcell_robots::collision::{LinkCapsule, end_away_from, link_bounding_capsule};
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{HumanPart, RobotModel};
 
@@ -92,10 +92,6 @@ pub struct ArmTracker {
     /// The last estimate's shoulder, elbow, wrist and the hand's far end: the next region
     /// of interest follows them.
     joints_W: Option<[Vector; 4]>,
-    /// The tracked region holds the hand's far end as well, and a frame whose forearm or
-    /// hand reached the region's edge sends the next one to the workspace
-    /// ([`ArmFitConfig::hand_region`]).
-    hand_region: bool,
     /// The last pose's region cut the arm ([`CUT_RING_PX`]): the next frame reads the
     /// workspace.
     cut: bool,
@@ -186,14 +182,12 @@ impl ArmTracker {
         let capsules = articulated
             .part_links()
             .map(|l| link_bounding_capsule(human, l));
-        let hand_region = config.hand_region;
         Ok(Self {
             arm,
             fitter: ArmFitter::new(CpuRenderer::new(), articulated, config),
             capsules,
             net: None,
             joints_W: None,
-            hand_region,
             cut: false,
             last_shoulder_W: None,
             streak: 0,
@@ -278,7 +272,11 @@ impl ArmTracker {
     #[must_use]
     pub fn region(&self, camera: &Camera) -> (Roi, RoiKind) {
         let margin = 0.5 * (roi::TRACKED_MARGIN[0] + roi::TRACKED_MARGIN[1]);
-        let points = if self.hand_region { 4 } else { 3 };
+        let points = if self.fitter.config().hand_region {
+            4
+        } else {
+            3
+        };
         self.joints_W
             .filter(|_| self.streak >= CONFIRM_POSES && !self.cut)
             .and_then(|joints| {
@@ -498,34 +496,20 @@ impl ArmTracker {
                 })
             })
             .collect();
-        let wrist =
+        // Each capsule's end away from the elbow: the forearm's is the wrist; the hand's
+        // far end, as the wrist alone leaves the hand of an arm held out at the region's
+        // edge, cut.
+        let elbow = X_WL[1].translation;
+        let away = |part: HumanPart| {
             parts
                 .iter()
-                .find(|p| p.part == HumanPart::Forearm)
-                .map_or(X_WL[2].translation, |p| {
-                    // The capsule's end away from the elbow.
-                    let e = X_WL[1].translation;
-                    if (p.a_W - e).length() > (p.b_W - e).length() {
-                        p.a_W
-                    } else {
-                        p.b_W
-                    }
-                });
-        // The hand's end away from the elbow: the wrist alone leaves the hand of an arm
-        // held out at the region's edge, cut.
-        let hand = parts
-            .iter()
-            .find(|p| p.part == HumanPart::Hand)
-            .map_or(wrist, |p| {
-                let e = X_WL[1].translation;
-                if (p.a_W - e).length() > (p.b_W - e).length() {
-                    p.a_W
-                } else {
-                    p.b_W
-                }
-            });
+                .find(|p| p.part == part)
+                .map(|p| end_away_from(p.a_W, p.b_W, elbow))
+        };
+        let wrist = away(HumanPart::Forearm).unwrap_or(X_WL[2].translation);
+        let hand = away(HumanPart::Hand).unwrap_or(wrist);
         self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist, hand]);
-        self.cut = if self.hand_region {
+        self.cut = if self.fitter.config().hand_region {
             edge_mass(masks, CUT_RING_PX, FOREARM_AND_HAND) >= CUT_MASS_PX
         } else {
             // The masks reach the edge where the fit does not: the track is wrong, and the

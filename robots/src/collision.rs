@@ -209,6 +209,17 @@ fn dominant_eigenvector(m: parry3d_f64::math::Matrix) -> Vector {
     v.normalize()
 }
 
+/// The end of segment `a`-`b` farther from `from` (`b` where both are as far): a limb
+/// capsule's end away from the joint it hangs from.
+#[must_use]
+pub fn end_away_from(a: Vector, b: Vector, from: Vector) -> Vector {
+    if (a - from).length() > (b - from).length() {
+        a
+    } else {
+        b
+    }
+}
+
 /// Distance from point `p` to segment `a`-`b`.
 #[must_use]
 pub fn distance_point_segment(p: Vector, a: Vector, b: Vector) -> f64 {
@@ -226,6 +237,15 @@ pub fn distance_point_segment(p: Vector, a: Vector, b: Vector) -> f64 {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    #[test]
+    fn the_end_away_from_a_point_is_the_farther_one() {
+        let (a, b) = (Vector::new(0.0, 0.0, 0.0), Vector::new(0.3, 0.0, 0.0));
+        assert_eq!(end_away_from(a, b, Vector::new(-0.1, 0.0, 0.0)), b);
+        assert_eq!(end_away_from(a, b, Vector::new(0.4, 0.1, 0.0)), a);
+        // Equidistant: the second end.
+        assert_eq!(end_away_from(a, b, Vector::new(0.15, 1.0, 0.0)), b);
+    }
 
     #[test]
     fn capsule_of_a_capsule_is_itself() {

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use workcell_robots::collision::link_bounding_capsule;
+use workcell_robots::collision::{end_away_from, link_bounding_capsule};
 use workcell_robots::input::{MAX_CONFIG_BYTES, read_regular_file, read_text_file};
 use workcell_robots::math::{Pose, Vector};
 
@@ -778,7 +778,8 @@ impl Generator {
                         // off by a bias per sequence and noise per frame.
                         let k = first_tick + f;
                         let hand_end = hand_capsule.map_or(at(k, hand), |c| {
-                            far_end(c.segment_in_world(&episode.ticks[k].human[hand]), at(k, fl))
+                            let (a, b) = c.segment_in_world(&episode.ticks[k].human[hand]);
+                            end_away_from(a, b, at(k, fl))
                         });
                         let joints: Vec<Vector> = [at(k, upper), at(k, fl), at(k, hand), hand_end]
                             .iter()
@@ -1445,15 +1446,5 @@ fn part_frame(
             human.get(l).copied().unwrap_or(Pose::IDENTITY),
         ),
         None => (String::new(), Pose::IDENTITY),
-    }
-}
-
-/// The end of a capsule's segment `(a, b)` farther from `from` (the hand's far end, from the
-/// elbow: what the tracker's region holds with `ArmFitConfig::hand_region`).
-fn far_end((a, b): (Vector, Vector), from: Vector) -> Vector {
-    if (a - from).length() > (b - from).length() {
-        a
-    } else {
-        b
     }
 }

@@ -171,6 +171,11 @@ impl<R: Renderer> ArmFitter<R> {
         }
     }
 
+    /// The fit's settings.
+    pub fn config(&self) -> &ArmFitConfig {
+        &self.config
+    }
+
     /// The arm fitted.
     pub fn arm(&self) -> &ArticulatedArm {
         &self.arm
