@@ -67,7 +67,6 @@ use workcell_robots::{JointKind, LinkId, RobotModel, Shape};
 use super::fit::plane_points;
 use super::*;
 use crate::error::Result;
-use crate::pose::POSE_MESH_SEGMENTS;
 
 /// The trunk's working range the search's grid spans, per revolute trunk joint in the chain's
 /// order (turn, lean, side bend), rad, and the grid's points in it: a person at a work-cell
@@ -103,6 +102,16 @@ pub(super) const TRUNK_CENTRE_PASSES: usize = 2;
 /// The least shift the centring applies, m: below it the torso's points moved as much with
 /// a turn or lean of a tenth of a radian, which the grid and the climb fit.
 pub(super) const TRUNK_CENTRE_MIN_M: f64 = 0.1;
+
+/// Sides of the round shapes (the hips, the shoulders, the head) in the stage's mesh: the
+/// renderer's (`RenderMesh::from_geometry`), which a camera's round body is nearer than a
+/// hexagon. With the arm's hexagons ([`crate::pose::POSE_MESH_SEGMENTS`], cheap and exact
+/// enough for the thin parts the search renders thousands of times a frame) a round piece's
+/// outline and depth are off by up to 13 % of its radius (1.4 cm on the 11 cm hips), and the
+/// track leaned and turned the trunk to make up for it: on the tuning clips with ProcNet the
+/// head's error fell by 5.1 mm per episode with 16 sides (docs/perception.md, "The torso's
+/// round shapes"; `the_trunks_stage_fits_a_body_drawn_round`).
+pub(super) const TRUNK_MESH_SEGMENTS: usize = 16;
 
 /// The trunk as its stage fits it: the joints that carry the torso and the torso's mesh.
 #[derive(Debug, Clone)]
@@ -194,36 +203,7 @@ impl TrunkModel {
         }
         let slides = in_chain(true);
         let all: Vec<usize> = joints.iter().chain(&slides).copied().collect();
-        // The torso and every link fixed to it (the head, through the neck).
-        let k = human.fk(Pose::IDENTITY, held)?;
-        let X_TW = k.link_pose(torso).inverse();
-        let mut rigid = vec![torso];
-        let mut grew = true;
-        while grew {
-            grew = false;
-            for joint in human.joints() {
-                if matches!(joint.kind, JointKind::Fixed)
-                    && rigid.contains(&joint.parent)
-                    && !rigid.contains(&joint.child)
-                {
-                    rigid.push(joint.child);
-                    grew = true;
-                }
-            }
-        }
-        // Their outer surface only (`RenderMesh::outer_union`): the same silhouettes, and the
-        // depth term sees no face that lies inside another piece.
-        let mut pieces = Vec::new();
-        for &l in &rigid {
-            let X_TL = X_TW * *k.link_pose(l);
-            for g in &human.links()[l].visuals {
-                let piece = RenderMesh::from_geometry_with(g, [0.5, 0.5, 0.5], POSE_MESH_SEGMENTS);
-                let mut placed = RenderMesh::default();
-                placed.append(&piece, &X_TL);
-                pieces.push((placed, !matches!(g.shape, Shape::Mesh { .. })));
-            }
-        }
-        let mesh = RenderMesh::outer_union(&pieces);
+        let mesh = Self::torso_mesh(human, torso, held, TRUNK_MESH_SEGMENTS)?;
         if mesh.is_empty() {
             return Ok(None);
         }
@@ -278,6 +258,48 @@ impl TrunkModel {
             spine_T,
             mesh: Arc::new(mesh),
         }))
+    }
+
+    /// The torso and every link fixed to it (the head, through the neck) in the torso's
+    /// frame at the configuration `held`, as one mesh of their outer surface
+    /// (`RenderMesh::outer_union`: the same silhouettes, and the depth term sees no face
+    /// that lies inside another piece), round shapes with `segments` sides.
+    ///
+    /// # Errors
+    /// A forward kinematics failure.
+    pub(super) fn torso_mesh(
+        human: &RobotModel,
+        torso: LinkId,
+        held: &[f64],
+        segments: usize,
+    ) -> Result<RenderMesh> {
+        let k = human.fk(Pose::IDENTITY, held)?;
+        let X_TW = k.link_pose(torso).inverse();
+        let mut rigid = vec![torso];
+        let mut grew = true;
+        while grew {
+            grew = false;
+            for joint in human.joints() {
+                if matches!(joint.kind, JointKind::Fixed)
+                    && rigid.contains(&joint.parent)
+                    && !rigid.contains(&joint.child)
+                {
+                    rigid.push(joint.child);
+                    grew = true;
+                }
+            }
+        }
+        let mut pieces = Vec::new();
+        for &l in &rigid {
+            let X_TL = X_TW * *k.link_pose(l);
+            for g in &human.links()[l].visuals {
+                let piece = RenderMesh::from_geometry_with(g, [0.5, 0.5, 0.5], segments);
+                let mut placed = RenderMesh::default();
+                placed.append(&piece, &X_TL);
+                pieces.push((placed, !matches!(g.shape, Shape::Mesh { .. })));
+            }
+        }
+        Ok(RenderMesh::outer_union(&pieces))
     }
 
     /// The trunk's revolute joints fitted (turn, lean, side bend), by index in the model's
