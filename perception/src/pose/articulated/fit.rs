@@ -261,7 +261,14 @@ impl<R: Renderer> ArmFitter<R> {
         self.rng = ChaCha8Rng::seed_from_u64(0x4152_4d46); // "ARMF"
         // The trunk first, from the torso's mask: the arm is then fitted on it.
         if self.config.fit_trunk {
+            let t0 = std::time::Instant::now();
+            let r0 = self.renders;
             self.fit_trunk(camera, masks)?;
+            tracing::trace!(
+                renders = self.renders - r0,
+                ms = t0.elapsed().as_secs_f64() * 1e3,
+                "trunk stage"
+            );
         }
         let last_points = self.last_points.take();
         let outcome = self.fit_inner(camera, masks, last_points);

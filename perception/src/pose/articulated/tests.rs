@@ -1421,10 +1421,11 @@ fn the_parts_poses_below_a_held_trunk_are_forward_kinematics_to_the_bit() {
 
 /// The trunk's stage on a body drawn as the simulator draws it (`link_objects`: round shapes
 /// with the renderer's 16 sides), seen through a region of interest around the shoulder, as a
-/// person turns, bends and steps over 12 frames, followed: the head within 0.4 cm on average
-/// and 1 cm in every frame (measured 0.23 and 0.68). The control: the same stage with the
-/// torso's mesh in the arm's hexagons ([`POSE_MESH_SEGMENTS`]), as it was, puts the heads more
-/// than twice as far off (measured 0.64 cm on average, 1.01 at worst).
+/// person turns, bends and steps over 12 frames, followed. With the stage's mesh on 16 sides
+/// as well, the head within 0.4 cm on average and 1 cm in every frame (measured 0.23 and
+/// 0.68); on the hexagons the stage ships with ([`POSE_MESH_SEGMENTS`]), within 1.5 cm in
+/// every frame but more than twice as far off on average (measured 0.64 cm, 1.01 at worst):
+/// the bias docs/perception.md's "The torso's round shapes" measures in the closed loop.
 #[test]
 fn the_trunks_stage_fits_a_body_drawn_round() {
     let human = RobotModel::from_catalogue("human").expect("catalogue human");
@@ -1440,12 +1441,13 @@ fn the_trunks_stage_fits_a_body_drawn_round() {
         |l| classes_of[l],
         [0.85, 0.72, 0.62],
     );
-    let mut hexagons = arm.clone();
-    let mut coarse = trunk.clone();
-    coarse.mesh = std::sync::Arc::new(
-        TrunkModel::torso_mesh(&human, trunk.torso, &arm.held, POSE_MESH_SEGMENTS).expect("mesh"),
+    // The shipped stage draws the hexagons; the same stage on the renderer's 16 sides.
+    let mut round = arm.clone();
+    let mut smooth = trunk.clone();
+    smooth.mesh = std::sync::Arc::new(
+        TrunkModel::torso_mesh(&human, trunk.torso, &arm.held, 16).expect("mesh"),
     );
-    hexagons.trunk = Some(std::sync::Arc::new(coarse));
+    round.trunk = Some(std::sync::Arc::new(smooth));
     let config = ArmFitConfig {
         fit_trunk: true,
         ..ArmFitConfig::default()
@@ -1472,7 +1474,7 @@ fn the_trunks_stage_fits_a_body_drawn_round() {
             ]
         })
         .collect();
-    let mut fitters: Vec<ArmFitter<CpuRenderer>> = [&arm, &hexagons]
+    let mut fitters: Vec<ArmFitter<CpuRenderer>> = [&round, &arm]
         .into_iter()
         .map(|model| ArmFitter::new(CpuRenderer::new(), model.clone(), config.clone()))
         .collect();
@@ -1522,7 +1524,7 @@ fn the_trunks_stage_fits_a_body_drawn_round() {
         worst[0]
     );
     assert!(
-        mean[1] > 2.0 * mean[0],
-        "hexagons: the head {mean:?} cm off"
+        worst[1] < 1.5 && mean[1] > 2.0 * mean[0],
+        "hexagons: the head {mean:?} cm off, at worst {worst:?}"
     );
 }

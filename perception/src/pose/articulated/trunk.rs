@@ -67,6 +67,7 @@ use workcell_robots::{JointKind, LinkId, RobotModel, Shape};
 use super::fit::plane_points;
 use super::*;
 use crate::error::Result;
+use crate::pose::POSE_MESH_SEGMENTS;
 
 /// The trunk's working range the search's grid spans, per revolute trunk joint in the chain's
 /// order (turn, lean, side bend), rad, and the grid's points in it: a person at a work-cell
@@ -104,14 +105,14 @@ pub(super) const TRUNK_CENTRE_PASSES: usize = 2;
 pub(super) const TRUNK_CENTRE_MIN_M: f64 = 0.1;
 
 /// Sides of the round shapes (the hips, the shoulders, the head) in the stage's mesh: the
-/// renderer's (`RenderMesh::from_geometry`), which a camera's round body is nearer than a
-/// hexagon. With the arm's hexagons ([`crate::pose::POSE_MESH_SEGMENTS`], cheap and exact
-/// enough for the thin parts the search renders thousands of times a frame) a round piece's
-/// outline and depth are off by up to 13 % of its radius (1.4 cm on the 11 cm hips), and the
-/// track leaned and turned the trunk to make up for it: on the tuning clips with ProcNet the
-/// head's error fell by 5.1 mm per episode with 16 sides (docs/perception.md, "The torso's
-/// round shapes"; `the_trunks_stage_fits_a_body_drawn_round`).
-pub(super) const TRUNK_MESH_SEGMENTS: usize = 16;
+/// arm's hexagons ([`POSE_MESH_SEGMENTS`]), where the renderer draws a body with 16. A
+/// hexagon's outline and depth are off a round piece's by up to 13 % of its radius (1.4 cm
+/// on the 11 cm hips), and the track leans and turns the trunk to make up for it; with 16
+/// sides the held-out people's error fell by 3.3 mm per episode and the generator's by 2.2,
+/// but each of the stage's renders costs 2.6 times as much and the closed loop ran a third
+/// slower (docs/perception.md, "The torso's round shapes";
+/// `the_trunks_stage_fits_a_body_drawn_round`).
+pub(super) const TRUNK_MESH_SEGMENTS: usize = POSE_MESH_SEGMENTS;
 
 /// The trunk as its stage fits it: the joints that carry the torso and the torso's mesh.
 #[derive(Debug, Clone)]
