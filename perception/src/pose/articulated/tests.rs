@@ -7,7 +7,7 @@ use workcell_robots::RobotModel;
 use workcell_robots::math::{Pose, Vector};
 
 use super::fit::{MeasuredForearm, grid_points, measured_forearm};
-use super::trunk::measured_spine;
+use super::trunk::{TORSO_FIXED_SCALE, covered_sum, measured_spine, torso_fixed};
 use super::*;
 use crate::pose::{NoPose, POSE_MESH_SEGMENTS};
 use workcell_render::CpuRenderer;
@@ -522,10 +522,13 @@ fn observe_body(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> (Vec<u8>, V
     let trunk = arm.trunk().expect("a trunk");
     let k = arm.human.fk(arm.X_WH, q).expect("fk");
     let mut scene = workcell_render::Scene::default();
+    // The torso round, with the renderer's 16 sides, as the simulator draws it: the stage's
+    // own mesh would hand it an outline whose facets tell the trunk's turn.
+    let torso = TrunkModel::torso_mesh(&arm.human, trunk.torso, &arm.held, 16, None).expect("mesh");
     scene.push(workcell_render::SceneObject {
         name: "torso".into(),
         class: Class::Torso,
-        mesh: trunk.mesh.clone(),
+        mesh: std::sync::Arc::new(torso),
         texture: 0.0,
         X_WO: *k.link_pose(trunk.torso),
     });
@@ -534,10 +537,14 @@ fn observe_body(arm: &ArticulatedArm, camera: &Camera, q: &[f64]) -> (Vec<u8>, V
 
 /// The trunk's stage (`fit_trunk`): on the whole body, whose trunk a generated reach turns by up to 0.25
 /// rad and leans by up to 0.3, the trunk's joints come from the torso's mask, and the arm's
-/// fit on that trunk finds the forearm, globally and then tracking, from the outline alone
-/// and with the depth image: the shoulder within 1 cm, the forearm's centre within 2.5 cm
-/// (0.2-2.2 cm measured from the outline, 0.3-0.7 cm with depth; the torso in front hides
-/// some of the upper arm, which the arm on a fixed torso's test does not render). The control: the
+/// fit on that trunk finds the forearm, globally and then tracking. From the outline alone:
+/// the shoulder within 1.5 cm, the forearm's centre within 2.5 cm (measured 0.4-1.0 and
+/// 0.6-1.6 cm; the inscribed hexagons the stage shipped with before, 0.2-0.5 and 0.3-2.8 cm
+/// on these frames). With the depth image: the shoulder within 0.5 cm and the forearm
+/// within 1 cm (measured 0.0-0.3 and 0.04-0.30 cm; the hexagons 0.0-0.1 and 0.3-1.6). The
+/// body is drawn round, as the simulator draws it; the stage's own mesh would hand it an
+/// outline whose facets tell the trunk's turn. The torso in front hides some of the
+/// upper arm, which the arm on a fixed torso's test does not render. The control: the
 /// same masks without the torso's plane leave the trunk upright, and the arm's joints cannot
 /// make up for the shoulder's place (49 cm off). The paper's arm, on a torso that
 /// does not move, has no trunk stage.
@@ -594,8 +601,9 @@ fn the_trunk_from_the_torsos_mask_carries_the_arms_fit() {
             eprintln!(
                 "depth {with_depth}, frame {k}: forearm {err:.2} cm, shoulder {shoulder_cm:.2} cm"
             );
+            let (shoulder_max, forearm_max) = if with_depth { (0.5, 1.0) } else { (1.5, 2.5) };
             assert!(
-                shoulder_cm < 1.0 && err < 2.5,
+                shoulder_cm < shoulder_max && err < forearm_max,
                 "depth {with_depth}, frame {k}: shoulder {shoulder_cm:.2} cm, forearm \
                  {err:.2} cm, q {:?} vs {truth:?}",
                 fit.q
@@ -626,10 +634,9 @@ fn the_trunk_from_the_torsos_mask_carries_the_arms_fit() {
 /// Recorded people lean far beyond the trunk grid's range (bent 0.9 rad and more to reach
 /// down, 0.4 rad back): the principal axis of the torso's depth points is the spine, and the
 /// trunk laid along it at the true turn comes within 0.3 rad of the true lean and side bend
-/// (measured 0.17 at worst: the visible surface's axis is not the whole mesh's); from there
+/// (measured 0.22 at worst: the visible surface's axis is not the whole mesh's); from there
 /// the trunk's stage finds the lean within 0.05 rad and the shoulder within 5 cm (measured
-/// 0.02 rad, 1.2, 0.7 and 4.3 cm: bent far forward, a turn and a side bend move the torso
-/// alike). The control: without the spine's start ([`ArmFitConfig::spine_start`]) the stage
+/// at most 0.014 rad, and 0.4, 0.3 and 1.5 cm). The control: without the spine's start ([`ArmFitConfig::spine_start`]) the stage
 /// misses a lean by more than 0.15 rad.
 #[test]
 fn the_torsos_depth_points_lay_the_spine_beyond_the_grid() {
@@ -688,7 +695,7 @@ fn the_torsos_depth_points_lay_the_spine_beyond_the_grid() {
 /// Where the person stands: a person 25 cm nearer the camera and 15 cm to the side of where
 /// the cell puts them (recorded people walk), turned and leaned. With the depth image the
 /// trunk's stage centres the pelvis's slides on the torso's points and the arm's fit then
-/// finds the forearm within 2.5 cm and the shoulder within 1 cm (measured 1.1 and 0.5 cm);
+/// finds the forearm within 2.5 cm and the shoulder within 1 cm (measured 1.3 and 0.4 cm);
 /// the control, the slides held where the cell puts the person (their limits closed), finds
 /// no pose that explains the masks, or one more than 10 cm off.
 #[test]
@@ -1421,9 +1428,10 @@ fn the_parts_poses_below_a_held_trunk_are_forward_kinematics_to_the_bit() {
 
 /// The trunk's stage on a body drawn as the simulator draws it (`link_objects`: round shapes
 /// with the renderer's 16 sides), seen through a region of interest around the shoulder, as a
-/// person turns, bends and steps over 12 frames, followed. With the stage's mesh on 16 sides
-/// as well, the head within 0.4 cm on average and 1 cm in every frame (measured 0.23 and
-/// 0.68); on the hexagons the stage ships with ([`POSE_MESH_SEGMENTS`]), within 1.5 cm in
+/// person turns, bends and steps over 12 frames, followed. The stage as it ships (its round
+/// shapes sized to the round ones, `trunk::TRUNK_SPHERE_SUBDIVISIONS`) keeps the head within 0.4
+/// cm on average and 1 cm in every frame (measured 0.24 and 0.43; with the renderer's own 16
+/// sides 0.23 and 0.68); with the inscribed hexagons it shipped with before, within 1.5 cm in
 /// every frame but more than twice as far off on average (measured 0.64 cm, 1.01 at worst):
 /// the bias docs/perception.md's "The torso's round shapes" measures in the closed loop.
 #[test]
@@ -1441,13 +1449,13 @@ fn the_trunks_stage_fits_a_body_drawn_round() {
         |l| classes_of[l],
         [0.85, 0.72, 0.62],
     );
-    // The shipped stage draws the hexagons; the same stage on the renderer's 16 sides.
-    let mut round = arm.clone();
-    let mut smooth = trunk.clone();
-    smooth.mesh = std::sync::Arc::new(
-        TrunkModel::torso_mesh(&human, trunk.torso, &arm.held, 16).expect("mesh"),
+    // The shipped stage, and the same stage on inscribed hexagons.
+    let mut hexagons = arm.clone();
+    let mut inscribed = trunk.clone();
+    inscribed.mesh = std::sync::Arc::new(
+        TrunkModel::torso_mesh(&human, trunk.torso, &arm.held, 6, None).expect("mesh"),
     );
-    round.trunk = Some(std::sync::Arc::new(smooth));
+    hexagons.trunk = Some(std::sync::Arc::new(inscribed));
     let config = ArmFitConfig {
         fit_trunk: true,
         ..ArmFitConfig::default()
@@ -1474,7 +1482,7 @@ fn the_trunks_stage_fits_a_body_drawn_round() {
             ]
         })
         .collect();
-    let mut fitters: Vec<ArmFitter<CpuRenderer>> = [&round, &arm]
+    let mut fitters: Vec<ArmFitter<CpuRenderer>> = [&arm, &hexagons]
         .into_iter()
         .map(|model| ArmFitter::new(CpuRenderer::new(), model.clone(), config.clone()))
         .collect();
@@ -1511,7 +1519,7 @@ fn the_trunks_stage_fits_a_body_drawn_round() {
         for (k, fitter) in fitters.iter_mut().enumerate() {
             assert!(fitter.fit_trunk(&camera, &masks).expect("fit").is_some());
             let cm = head_cm(fitter.arm(), &truth);
-            eprintln!("trunk {f}, {} sides: head {cm:.2} cm", [16, 6][k]);
+            eprintln!("trunk {f}, {}: head {cm:.2} cm", ["round", "hexagons"][k]);
             worst[k] = worst[k].max(cm);
             mean[k] += cm / trunks.len() as f64;
         }
@@ -1519,12 +1527,52 @@ fn the_trunks_stage_fits_a_body_drawn_round() {
     eprintln!("head, mean and worst (cm): {mean:?}, {worst:?}");
     assert!(
         mean[0] < 0.4 && worst[0] < 1.0,
-        "round: the head {:.2} cm off, at worst {:.2}",
+        "shipped: the head {:.2} cm off, at worst {:.2}",
         mean[0],
         worst[0]
     );
     assert!(
         worst[1] < 1.5 && mean[1] > 2.0 * mean[0],
         "hexagons: the head {mean:?} cm off, at worst {worst:?}"
+    );
+}
+
+/// The trunk's score sums the torso's mask in fixed point: the ends of the range and a
+/// value that is not a number are exact, and over a random mask the integer sum is the
+/// floating-point sum within the rounding of each pixel (2^-24 each: the difference in
+/// `f32` and the fixed point, half of that each).
+#[test]
+fn the_torsos_fixed_point_sum_is_the_masks_sum() {
+    use rand::{Rng, SeedableRng};
+    assert_eq!(torso_fixed(1.0, 0.0), 1 << 24);
+    assert_eq!(torso_fixed(0.0, 1.0), -(1 << 24));
+    assert_eq!(torso_fixed(f32::NAN, 0.0), 0);
+    assert_eq!(torso_fixed(0.25, 0.75), -(1 << 23));
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let n = 128 * 128;
+    let (torso, background): (Vec<f32>, Vec<f32>) = (0..n)
+        .map(|_| (rng.random::<f32>(), rng.random::<f32>()))
+        .unzip();
+    let depth: Vec<f32> = (0..n)
+        .map(|_| if rng.random_bool(0.4) { 1.5 } else { 0.0 })
+        .collect();
+    let s: Vec<i32> = torso
+        .iter()
+        .zip(&background)
+        .map(|(&t, &b)| torso_fixed(t, b))
+        .collect();
+    let exact: f64 = (0..n)
+        .filter(|&p| depth[p] > 0.0)
+        .map(|p| f64::from(torso[p]) - f64::from(background[p]))
+        .sum();
+    let fixed = covered_sum(&depth, &s, |z| z > 0.0) as f64 / f64::from(TORSO_FIXED_SCALE);
+    let covered = depth.iter().filter(|&&z| z > 0.0).count() as f64;
+    assert!((fixed - exact).abs() <= covered / f64::from(TORSO_FIXED_SCALE));
+    assert!(exact.abs() > 1.0, "a sum that says something: {exact}");
+    // A mask of bytes covers the same pixels to the same sum.
+    let mask: Vec<u8> = depth.iter().map(|&z| u8::from(z > 0.0)).collect();
+    assert_eq!(
+        covered_sum(&mask, &s, |m| m > 0),
+        covered_sum(&depth, &s, |z| z > 0.0)
     );
 }

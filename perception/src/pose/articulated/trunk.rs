@@ -104,15 +104,22 @@ pub(super) const TRUNK_CENTRE_PASSES: usize = 2;
 /// a turn or lean of a tenth of a radian, which the grid and the climb fit.
 pub(super) const TRUNK_CENTRE_MIN_M: f64 = 0.1;
 
-/// Sides of the round shapes (the hips, the shoulders, the head) in the stage's mesh: the
-/// arm's hexagons ([`POSE_MESH_SEGMENTS`]), where the renderer draws a body with 16. A
-/// hexagon's outline and depth are off a round piece's by up to 13 % of its radius (1.4 cm
-/// on the 11 cm hips), and the track leans and turns the trunk to make up for it; with 16
-/// sides the held-out people's error fell by 3.3 mm per episode and the generator's by 2.2,
-/// but each of the stage's renders costs 2.6 times as much and the closed loop ran a third
-/// slower (docs/perception.md, "The torso's round shapes";
-/// `the_trunks_stage_fits_a_body_drawn_round`).
+/// Sides of the cylinders (the chest, the neck) in the stage's mesh: the arm's hexagons
+/// ([`POSE_MESH_SEGMENTS`]), inscribed as the renderer draws them. Widened so that their
+/// outline is on average as wide as a round cylinder's (4.5 %), they brought the upper arm
+/// nearer on the generator's motion but cost it 5 % of the task time (docs/perception.md,
+/// "The torso's round shapes").
 pub(super) const TRUNK_MESH_SEGMENTS: usize = POSE_MESH_SEGMENTS;
+
+/// The stage's spheres (the hips, the shoulders, the head) as geodesic spheres subdivided
+/// once (80 triangles), sized to the sphere's surface
+/// ([`RenderMesh::from_geometry_geodesic`]): their outline covers the sphere's disc within
+/// 1 % from any view, where a hexagonal UV sphere's leaves 6 to 19 % of it and the
+/// renderer's own 16 sides (512 triangles) 1 to 3 %. Inscribed hexagons put the head 15 mm
+/// off at the median fit, and the track leaned and turned the trunk to make up for them;
+/// the stage on 16 sides fitted them as near but the closed loop ran a third slower
+/// (docs/perception.md, "The torso's round shapes"; `the_trunks_stage_fits_a_body_drawn_round`).
+pub(super) const TRUNK_SPHERE_SUBDIVISIONS: Option<u32> = Some(1);
 
 /// The trunk as its stage fits it: the joints that carry the torso and the torso's mesh.
 #[derive(Debug, Clone)]
@@ -204,7 +211,13 @@ impl TrunkModel {
         }
         let slides = in_chain(true);
         let all: Vec<usize> = joints.iter().chain(&slides).copied().collect();
-        let mesh = Self::torso_mesh(human, torso, held, TRUNK_MESH_SEGMENTS)?;
+        let mesh = Self::torso_mesh(
+            human,
+            torso,
+            held,
+            TRUNK_MESH_SEGMENTS,
+            TRUNK_SPHERE_SUBDIVISIONS,
+        )?;
         if mesh.is_empty() {
             return Ok(None);
         }
@@ -264,7 +277,10 @@ impl TrunkModel {
     /// The torso and every link fixed to it (the head, through the neck) in the torso's
     /// frame at the configuration `held`, as one mesh of their outer surface
     /// (`RenderMesh::outer_union`: the same silhouettes, and the depth term sees no face
-    /// that lies inside another piece), round shapes with `segments` sides.
+    /// that lies inside another piece): round shapes with `segments` sides, inscribed as
+    /// the renderer draws them where `sphere_subdivisions` is `None`, else as
+    /// [`RenderMesh::from_geometry_geodesic`] draws them (spheres geodesic, subdivided so many
+    /// times).
     ///
     /// # Errors
     /// A forward kinematics failure.
@@ -273,6 +289,7 @@ impl TrunkModel {
         torso: LinkId,
         held: &[f64],
         segments: usize,
+        sphere_subdivisions: Option<u32>,
     ) -> Result<RenderMesh> {
         let k = human.fk(Pose::IDENTITY, held)?;
         let X_TW = k.link_pose(torso).inverse();
@@ -294,7 +311,10 @@ impl TrunkModel {
         for &l in &rigid {
             let X_TL = X_TW * *k.link_pose(l);
             for g in &human.links()[l].visuals {
-                let piece = RenderMesh::from_geometry_with(g, [0.5, 0.5, 0.5], segments);
+                let piece = match sphere_subdivisions {
+                    Some(n) => RenderMesh::from_geometry_geodesic(g, [0.5, 0.5, 0.5], segments, n),
+                    None => RenderMesh::from_geometry_with(g, [0.5, 0.5, 0.5], segments),
+                };
                 let mut placed = RenderMesh::default();
                 placed.append(&piece, &X_TL);
                 pieces.push((placed, !matches!(g.shape, Shape::Mesh { .. })));
@@ -320,8 +340,8 @@ impl TrunkModel {
 
 /// One frame's torso as the trunk's stage scores it.
 struct TorsoTarget<'a> {
-    /// `m_torso - m_background` per pixel.
-    s: Vec<f32>,
+    /// `m_torso - m_background` per pixel, in [`TORSO_FIXED_SCALE`]'s fixed point.
+    s: Vec<i32>,
     /// The torso mask's pixels.
     mass: f64,
     torso: &'a [f32],
@@ -359,7 +379,7 @@ impl<R: Renderer> ArmFitter<R> {
                 .torso
                 .iter()
                 .zip(&masks.background)
-                .map(|(t, b)| t - b)
+                .map(|(&t, &b)| torso_fixed(t, b))
                 .collect(),
             mass,
             torso: &masks.torso,
@@ -711,7 +731,9 @@ impl<R: Renderer> ArmFitter<R> {
     }
 
     /// The torso's score at each of `candidates` (trunk joint values): its gain, less the
-    /// depth term where `with_depth` and the target has a depth image.
+    /// depth term where `with_depth` and the target has a depth image. With the depth term
+    /// each candidate is drawn once, as a depth image, whose covered pixels are its mask
+    /// (the same triangles and rule as [`Renderer::render_masks`]); without it, as masks.
     fn trunk_scores(
         &mut self,
         trunk: &TrunkModel,
@@ -731,55 +753,58 @@ impl<R: Renderer> ArmFitter<R> {
             self.poses.push(X_CW * *k.link_pose(trunk.torso));
         }
         let poses = std::mem::take(&mut self.poses);
-        let rendered = self
-            .renderer
-            .render_masks(&trunk.mesh, camera, &poses, &mut self.batch);
-        rendered?;
-        self.renders += candidates.len();
-        let mut scores: Vec<f64> = (0..candidates.len())
-            .map(|k| {
-                let mask = self.batch.mask(k);
-                // The covered pixels' sum without a branch: an uncovered one adds -0, which
-                // leaves any sum as it was, to the bit.
-                let sum: f64 = mask
-                    .iter()
-                    .zip(&target.s)
-                    .map(|(&m, &v)| if m > 0 { f64::from(v) } else { -0.0 })
-                    .sum();
-                sum / target.mass
-            })
-            .collect();
+        let mass = target.mass;
+        let gain = move |sum: i64| sum as f64 / f64::from(TORSO_FIXED_SCALE) / mass;
+        let mut scores = Vec::with_capacity(candidates.len());
         if with_depth && target.depth.is_some() {
-            for (score, X_CT) in scores.iter_mut().zip(&poses) {
-                *score -= self.trunk_depth_cost(camera, target, X_CT)?;
+            for X_CT in &poses {
+                self.render_trunk_depth(camera, target, X_CT)?;
+                let sum = covered_sum(&self.trunk_depth, &target.s, |z| z > 0.0);
+                scores.push(gain(sum) - self.trunk_depth_cost(target));
+            }
+        } else {
+            let rendered = self
+                .renderer
+                .render_masks(&trunk.mesh, camera, &poses, &mut self.batch);
+            rendered?;
+            self.renders += candidates.len();
+            for k in 0..candidates.len() {
+                scores.push(gain(covered_sum(self.batch.mask(k), &target.s, |m| m > 0)));
             }
         }
         self.poses = poses;
         Ok(scores)
     }
 
-    /// The depth term of the trunk's score: the torso rendered at the candidate against the
-    /// depth image where both show the torso: `min((dz / sigma)^2, 9)`, the mean over those
-    /// pixels, times [`ArmFitConfig::trunk_depth_weight`] (the arm's parts' depth term's
-    /// form). The silhouette alone leaves the trunk's turn and side bend to a tenth of a
-    /// radian either way, which the shoulder and the head carry 2 and 6 cm; the depth image
-    /// shows one shoulder nearer.
+    /// The torso alone at `X_CT` (camera frame) drawn as a depth image into `trunk_depth`.
     ///
     /// # Errors
     /// A renderer failure.
-    fn trunk_depth_cost(
+    fn render_trunk_depth(
         &mut self,
         camera: &Camera,
         target: &mut TorsoTarget<'_>,
         X_CT: &Pose,
-    ) -> Result<f64> {
-        let Some(depth) = target.depth else {
-            return Ok(0.0);
-        };
-        let sigma = self.config.depth_sigma_m.max(1e-4);
+    ) -> Result<()> {
         target.scene.objects[0].X_WO = camera.X_WC * *X_CT;
         self.renderer
             .render_depth(&target.scene, camera, &mut self.trunk_depth)?;
+        self.renders += 1;
+        Ok(())
+    }
+
+    /// The depth term of the trunk's score, of the torso as `trunk_depth` holds it
+    /// ([`Self::render_trunk_depth`]) against the depth image where both show the torso:
+    /// `min((dz / sigma)^2, 9)`, the mean over those pixels, times
+    /// [`ArmFitConfig::trunk_depth_weight`] (the arm's parts' depth term's form). The
+    /// silhouette alone leaves the trunk's turn and side bend to a tenth of a radian either
+    /// way, which the shoulder and the head carry 2 and 6 cm; the depth image shows one
+    /// shoulder nearer.
+    fn trunk_depth_cost(&self, target: &TorsoTarget<'_>) -> f64 {
+        let Some(depth) = target.depth else {
+            return 0.0;
+        };
+        let sigma = self.config.depth_sigma_m.max(1e-4);
         let (mut sum, mut n) = (0.0, 0usize);
         for &p in &target.depth_pixels {
             let (rendered, measured) = (self.trunk_depth[p], depth[p]);
@@ -788,12 +813,37 @@ impl<R: Renderer> ArmFitter<R> {
                 n += 1;
             }
         }
-        Ok(if n == 0 {
+        if n == 0 {
             0.0
         } else {
             self.config.trunk_depth_weight * sum / n as f64
-        })
+        }
     }
+}
+
+/// The fixed-point scale of [`TorsoTarget::s`]: `m_torso - m_background` in [-1, 1] times
+/// 2^24, within an `i32` and as fine as an `f32` probability near 1. Integer sums do not
+/// depend on their order, so the covered pixels' sum vectorizes and any order gives the
+/// same score to the bit.
+pub(super) const TORSO_FIXED_SCALE: f32 = 16_777_216.0;
+
+/// `m_torso - m_background` of one pixel in [`TORSO_FIXED_SCALE`]'s fixed point.
+pub(super) fn torso_fixed(torso: f32, background: f32) -> i32 {
+    // Probabilities are checked to lie in [0, 1] before the fit; a NaN becomes 0.
+    ((torso - background).clamp(-1.0, 1.0) * TORSO_FIXED_SCALE).round() as i32
+}
+
+/// The sum of `values` over the pixels that `covered` marks in `cover` (both row-major).
+pub(super) fn covered_sum<T: Copy>(
+    cover: &[T],
+    values: &[i32],
+    covered: impl Fn(T) -> bool,
+) -> i64 {
+    cover
+        .iter()
+        .zip(values)
+        .map(|(&c, &v)| if covered(c) { i64::from(v) } else { 0 })
+        .sum()
 }
 
 /// Torso mask pixels with depth below which [`measured_spine`] gives no axis.
