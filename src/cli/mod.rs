@@ -186,7 +186,17 @@ pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(len).with_style(
         indicatif::ProgressStyle::with_template(template)
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
+            .progress_chars("=> ")
+            .with_key(
+                "eta",
+                |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                    let eta = mean_rate_eta(state.elapsed(), state.pos(), state.len());
+                    let _ = match eta {
+                        Some(eta) => write!(w, "{:#}", indicatif::HumanDuration(eta)),
+                        None => write!(w, "-"),
+                    };
+                },
+            ),
     );
     if !std::io::stderr().is_terminal() {
         bar.set_draw_target(indicatif::ProgressDrawTarget::term_like_with_hz(
@@ -195,6 +205,23 @@ pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
         ));
     }
     bar
+}
+
+/// The time left at the mean rate since the start: `elapsed` for `done` steps, so many more
+/// for the rest of `len`; `None` before the first step. Indicatif's own estimate weighs the
+/// last seconds and decays while no step comes, which in work of long, uneven steps run in
+/// parallel (an evaluation's episodes) read hours in a run of minutes.
+fn mean_rate_eta(
+    elapsed: std::time::Duration,
+    done: u64,
+    len: Option<u64>,
+) -> Option<std::time::Duration> {
+    let len = len?;
+    if done == 0 {
+        return None;
+    }
+    let left = len.saturating_sub(done) as f64 / done as f64;
+    std::time::Duration::try_from_secs_f64(elapsed.as_secs_f64() * left).ok()
 }
 
 /// How often a progress bar writes a line where standard error is not a terminal.
@@ -338,6 +365,19 @@ pub fn write_stdout(text: std::fmt::Arguments<'_>) {
 
 #[cfg(test)]
 mod tests {
+    /// The time left at the mean rate: a quarter done in 10 s leaves 30 s; nothing done, no
+    /// estimate; all done, none left; more steps than the length (a bar that overran), none.
+    #[test]
+    fn the_time_left_is_at_the_mean_rate() {
+        use std::time::Duration;
+        let eta = |secs: u64, done, len| super::mean_rate_eta(Duration::from_secs(secs), done, len);
+        assert_eq!(eta(10, 25, Some(100)), Some(Duration::from_secs(30)));
+        assert_eq!(eta(10, 0, Some(100)), None);
+        assert_eq!(eta(10, 5, None), None);
+        assert_eq!(eta(10, 100, Some(100)), Some(Duration::ZERO));
+        assert_eq!(eta(10, 120, Some(100)), Some(Duration::ZERO));
+    }
+
     use super::*;
 
     /// A writer into a buffer the test reads back.
