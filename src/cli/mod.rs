@@ -365,6 +365,8 @@ pub fn write_stdout(text: std::fmt::Arguments<'_>) {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     /// The time left at the mean rate: a quarter done in 10 s leaves 30 s; nothing done, no
     /// estimate; all done, none left; more steps than the length (a bar that overran), none.
     #[test]
@@ -377,8 +379,6 @@ mod tests {
         assert_eq!(eta(10, 100, Some(100)), Some(Duration::ZERO));
         assert_eq!(eta(10, 120, Some(100)), Some(Duration::ZERO));
     }
-
-    use super::*;
 
     /// A writer into a buffer the test reads back.
     #[derive(Clone, Default)]

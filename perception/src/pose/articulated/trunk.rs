@@ -829,7 +829,8 @@ pub(super) const TORSO_FIXED_SCALE: f32 = 16_777_216.0;
 
 /// `m_torso - m_background` of one pixel in [`TORSO_FIXED_SCALE`]'s fixed point.
 pub(super) fn torso_fixed(torso: f32, background: f32) -> i32 {
-    // Probabilities are checked to lie in [0, 1] before the fit; a NaN becomes 0.
+    // The trunk's stage runs before the arm's fit refuses masks that are not probabilities:
+    // the clamp keeps any value within the scale, and a NaN becomes 0.
     ((torso - background).clamp(-1.0, 1.0) * TORSO_FIXED_SCALE).round() as i32
 }
 
