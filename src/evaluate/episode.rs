@@ -366,11 +366,14 @@ impl<'a> Run<'a> {
     /// The metrics and the trace, with what is formatted once per episode.
     fn finish(self, started: Instant) -> (EpisodeMetrics, EpisodeTrace) {
         let robot = &self.model.robot;
-        self.tally.finish(
+        let fit_error_m = self.perception.fit_error_m().unwrap_or(f64::NAN);
+        let (mut metrics, trace) = self.tally.finish(
             |link| robot.links()[link].name.clone(),
             self.state.time_s(),
             started,
-        )
+        );
+        metrics.fit_error_m = fit_error_m;
+        (metrics, trace)
     }
 }
 
@@ -421,7 +424,7 @@ fn robot_point_velocity(
 /// The mean distance of the estimated parts' end points from the true ones, m, and that of
 /// each part ([`HumanPart::ALL`]'s order; `None` for a part the human lacks); `None` when
 /// perception delivers no human (or other parts than the truth has).
-fn perception_error(
+pub(super) fn perception_error(
     estimate: &HumanEstimate,
     truth: &HumanEstimate,
 ) -> Option<(f64, [Option<f64>; HumanPart::ALL.len()])> {

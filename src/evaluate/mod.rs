@@ -430,6 +430,12 @@ pub fn no_part_errors() -> Vec<f64> {
     vec![f64::NAN; HumanPart::ALL.len()]
 }
 
+/// A distance not measured (files from before [`EpisodeMetrics::fit_error_m`]).
+#[must_use]
+pub fn no_error() -> f64 {
+    f64::NAN
+}
+
 /// What happened in one episode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeMetrics {
@@ -499,6 +505,13 @@ pub struct EpisodeMetrics {
     /// goes: a trunk turned wrong shows at the head, an arm fitted wrong at the hand.
     #[serde(default = "no_part_errors", with = "lossless::vec")]
     pub perception_error_by_part_m: Vec<f64>,
+    /// Mean distance between the fitted and the true part end points at each fit's
+    /// exposure, over the frames with a fit, m: what perception gets wrong before its
+    /// estimate ages. The rest of `perception_error_m` is the ageing's (the latency and the
+    /// frames since, bridged by the joints' velocity). NaN where perception fits no frames
+    /// (the noisy camera, the oracles) or fitted none.
+    #[serde(default = "no_error", with = "lossless::f64")]
+    pub fit_error_m: f64,
     #[serde(with = "lossless::f64")]
     pub simulated_s: f64,
     /// The episode's wall time, building the cell and the perception included, s.

@@ -343,6 +343,12 @@ fn check_episode(m: &EpisodeMetrics, s: &RunSettings) -> std::result::Result<(),
             m.perception_error_m
         ));
     }
+    if !(m.fit_error_m.is_nan() || (m.fit_error_m.is_finite() && m.fit_error_m >= 0.0)) {
+        return Err(format!(
+            "fit_error_m = {}: a distance (or NaN without fits)",
+            m.fit_error_m
+        ));
+    }
     if m.perception_error_by_part_m.len() != workcell_safety::HumanPart::ALL.len()
         || m.perception_error_by_part_m
             .iter()

@@ -137,7 +137,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,simulated_s,wall_s,setup_s";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,fit_error_m,simulated_s,wall_s,setup_s";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -152,7 +152,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3}",
             e.episode,
             e.seed,
             e.filter,
@@ -186,6 +186,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             part_error(e, HumanPart::Forearm),
             part_error(e, HumanPart::Hand),
             part_error(e, HumanPart::Head),
+            e.fit_error_m,
             e.simulated_s,
             e.wall_s,
             e.setup_s
@@ -204,34 +205,43 @@ fn part_error(e: &EpisodeMetrics, part: HumanPart) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
+/// The median of the finite values of `values`; `None` without one.
+fn finite_median(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let mut v: Vec<f64> = values.filter(|e| e.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    })
+}
+
 /// Where the perception error goes: each part's error in the median episode (of those that
-/// estimated it), or `None` when no episode had an estimate.
+/// estimated it), and where perception fits frames the fits' own error at their exposure
+/// (the rest is the estimate's ageing), or `None` when no episode had an estimate.
 fn part_error_line(episodes: &[EpisodeMetrics]) -> Option<String> {
     let parts: Vec<String> = HumanPart::ALL
         .iter()
         .filter_map(|&part| {
-            let mut errors: Vec<f64> = episodes
-                .iter()
-                .map(|e| part_error(e, part))
-                .filter(|e| e.is_finite())
-                .collect();
-            if errors.is_empty() {
-                return None;
-            }
-            errors.sort_by(f64::total_cmp);
-            let n = errors.len();
-            let median = if n % 2 == 1 {
-                errors[n / 2]
-            } else {
-                0.5 * (errors[n / 2 - 1] + errors[n / 2])
-            };
+            let median = finite_median(episodes.iter().map(|e| part_error(e, part)))?;
             Some(format!("{part} {:.1}", median * 1e3))
         })
         .collect();
+    let at_exposure = finite_median(episodes.iter().map(|e| e.fit_error_m)).map(|m| {
+        format!(
+            " The fits' own error at their exposure, before the estimate ages (the latency and the frames since): {:.1} mm in the median episode.",
+            m * 1e3
+        )
+    });
     (!parts.is_empty()).then(|| {
         format!(
-            "Perception error per part, median episode (mm; the mean of its two end points' distances from the truth): {}.",
-            parts.join(", ")
+            "Perception error per part, median episode (mm; the mean of its two end points' distances from the truth): {}.{}",
+            parts.join(", "),
+            at_exposure.unwrap_or_default()
         )
     })
 }
@@ -564,6 +574,10 @@ mod tests {
             0.0,
         );
         let (metrics, _) = tally.finish(|_| String::new(), 1.0, std::time::Instant::now());
+        assert!(
+            metrics.fit_error_m.is_nan(),
+            "no fit measured: none reported"
+        );
         let csv = metrics_csv(std::slice::from_ref(&metrics));
         let mut lines = csv.lines();
         let header: Vec<&str> = lines.next().expect("header").split(',').collect();
@@ -589,12 +603,28 @@ mod tests {
         assert_eq!(field("perception_error_hand_m"), "0.10000");
         assert_eq!(field("perception_error_upper_arm_m"), "NaN");
         assert_eq!(field("perception_error_head_m"), "NaN");
+        assert_eq!(field("fit_error_m"), "NaN");
         assert_eq!(
-            part_error_line(&[metrics]).as_deref(),
+            part_error_line(std::slice::from_ref(&metrics)).as_deref(),
             Some(
                 "Perception error per part, median episode (mm; the mean of its two end points' distances from the truth): torso 0.0, forearm 40.0, hand 100.0."
             )
         );
         assert_eq!(part_error_line(&[]), None);
+        // A perception that fits frames: its fits' error at exposure, the median of the
+        // episodes that fitted (the one without fits left out).
+        let with_fit = |m: f64| EpisodeMetrics {
+            fit_error_m: m,
+            ..metrics.clone()
+        };
+        let episodes = [with_fit(0.02), with_fit(f64::NAN), with_fit(0.03)];
+        let csv = metrics_csv(&episodes[..1]);
+        let row = csv.lines().nth(1).expect("row");
+        assert!(row.contains(",0.02000,"), "{row}");
+        let line = part_error_line(&episodes).expect("a line");
+        assert!(
+            line.ends_with("before the estimate ages (the latency and the frames since): 25.0 mm in the median episode."),
+            "{line}"
+        );
     }
 }

@@ -66,6 +66,7 @@ impl Tally {
                 braking_reasons: Vec::new(),
                 perception_error_m: 0.0,
                 perception_error_by_part_m: super::no_part_errors(),
+                fit_error_m: f64::NAN,
                 simulated_s: 0.0,
                 wall_s: 0.0,
                 setup_s: 0.0,

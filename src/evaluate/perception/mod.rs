@@ -37,6 +37,12 @@ pub trait HumanPerception {
     fn name(&self) -> String;
     /// The estimate available to the controller at `input.t_s`, into `out`.
     fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate);
+    /// The mean error of the fits so far at their exposure, m
+    /// ([`super::EpisodeMetrics::fit_error_m`]); `None` for a perception that fits no
+    /// frames, or before its first fit.
+    fn fit_error_m(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// A perception that reports no human from `at_s` on (`perception.camera_fails_at_s`).
@@ -58,6 +64,10 @@ impl HumanPerception for CameraFailure {
             out.uncertainty_m = 0.0;
             out.uncertainty_rate_m_s = 0.0;
         }
+    }
+
+    fn fit_error_m(&self) -> Option<f64> {
+        self.inner.fit_error_m()
     }
 }
 

@@ -75,6 +75,9 @@ pub struct ProcNetCamera {
     fit_qd: Vec<f64>,
     geometry: HumanGeometry,
     kinematics: KinematicState,
+    /// The fits' errors at their exposure (the sum of each fit's mean over parts, m) and
+    /// the fits counted.
+    fit_error: (f64, usize),
     q: Vec<f64>,
     qd: Vec<f64>,
     counts: FrameCounts,
@@ -187,6 +190,7 @@ impl ProcNetCamera {
             in_flight: VecDeque::new(),
             latest: None,
             fits: VecDeque::new(),
+            fit_error: (0.0, 0),
             fit_qd: vec![0.0; model.human.dof()],
             geometry: HumanGeometry::new(&model.human)?,
             kinematics,
@@ -256,8 +260,16 @@ impl ProcNetCamera {
         Ok(match outcome {
             Ok(estimate) => {
                 self.counts.estimates += 1;
-                if let Some(region) = region {
-                    self.trace_fit(input, &estimate.fit, region);
+                let fitted = self.fitted(input, &estimate.fit.q);
+                if let Some((error, _)) = fitted
+                    .as_ref()
+                    .and_then(|f| super::super::episode::perception_error(f, input.truth))
+                {
+                    self.fit_error.0 += error;
+                    self.fit_error.1 += 1;
+                }
+                if let (Some(region), Some(fitted)) = (region, &fitted) {
+                    self.trace_fit(input, &estimate.fit, fitted, region);
                 }
                 Some(Measured {
                     reacquired: estimate.fit.reacquired,
@@ -276,6 +288,21 @@ impl ProcNetCamera {
         })
     }
 
+    /// The human's parts where the fitted joints `q` put them (no velocity); `None` where
+    /// the model's kinematics fail.
+    fn fitted(&mut self, input: &PerceptionInput<'_>, q: &[f64]) -> Option<HumanEstimate> {
+        input
+            .model
+            .human
+            .forward_kinematics(q, &mut self.kinematics)
+            .ok()?;
+        let mut fitted = HumanEstimate::default();
+        let still = vec![0.0; q.len()];
+        self.geometry
+            .estimate_into(&input.model.human, &self.kinematics, &still, &mut fitted);
+        Some(fitted)
+    }
+
     /// The fit's error per part against the truth at exposure, with its gain, bound and
     /// whether the search found it, and how much of each true part `region` (the region of
     /// interest the frame was read through) showed (trace level: where the closed loop's
@@ -285,19 +312,9 @@ impl ProcNetCamera {
         &mut self,
         input: &PerceptionInput<'_>,
         fit: &workcell_perception::pose::ArmFit,
+        fitted: &HumanEstimate,
         region: (workcell_render::roi::Roi, workcell_render::roi::RoiKind),
     ) {
-        if input
-            .model
-            .human
-            .forward_kinematics(&fit.q, &mut self.kinematics)
-            .is_err()
-        {
-            return;
-        }
-        let mut fitted = HumanEstimate::default();
-        self.geometry
-            .estimate_into(&input.model.human, &self.kinematics, &self.qd, &mut fitted);
         // The trunk's joints' errors (fitted minus true, rad), the pelvis's (m), the true joints.
         let truth_q = input.state.human_q();
         let trunk = self.tracker.articulated().trunk().map(|trunk| {
@@ -328,7 +345,7 @@ impl ProcNetCamera {
             .collect();
         tracing::trace!(
             t = input.t_s,
-            parts = %part_errors(&fitted, input.truth),
+            parts = %part_errors(fitted, input.truth),
             in_region = %shown.join(","),
             region = ?kind,
             hidden = fit.hidden_share,
@@ -457,6 +474,11 @@ impl HumanPerception for ProcNetCamera {
                 "estimate error"
             );
         }
+    }
+
+    fn fit_error_m(&self) -> Option<f64> {
+        let (sum, n) = self.fit_error;
+        (n > 0).then(|| sum / n as f64)
     }
 }
 
@@ -998,6 +1020,8 @@ mod tests {
         }
         assert!(exposures >= 119 && between > 800, "{exposures} / {between}");
         assert_eq!(perception.counts().estimates, perception.counts().frames);
+        // The oracle fits nothing: no fit error to report.
+        assert_eq!(perception.fit_error_m(), None);
     }
 
     /// The oracle of a perfect trunk (`true_trunk`): on the whole body, every fit holds the
@@ -1136,6 +1160,9 @@ mod tests {
         assert!(checked > 320, "{checked} ticks checked");
         let counts = perception.counts();
         assert!(counts.frames >= 119 && counts.estimates + counts.no_pose == counts.frames);
+        // The fits themselves, at their exposure: the arm within a centimetre on average.
+        let at_exposure = perception.fit_error_m().expect("fits measured");
+        assert!(at_exposure > 0.0 && at_exposure < 0.01, "{at_exposure} m");
     }
 
     /// A camera that stops delivering frames: the estimate ages out after `MAX_AGE_S` and
