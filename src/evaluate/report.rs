@@ -581,17 +581,20 @@ mod tests {
         let csv = metrics_csv(std::slice::from_ref(&metrics));
         let mut lines = csv.lines();
         let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-        let row = lines.next().expect("row");
         // Split on the commas outside quotes (the closest pair and the braking reasons).
-        let mut fields = vec![String::new()];
-        let mut quoted = false;
-        for c in row.chars() {
-            match c {
-                '"' => quoted = !quoted,
-                ',' if !quoted => fields.push(String::new()),
-                _ => fields.last_mut().expect("a field").push(c),
+        let split = |row: &str| {
+            let mut fields = vec![String::new()];
+            let mut quoted = false;
+            for c in row.chars() {
+                match c {
+                    '"' => quoted = !quoted,
+                    ',' if !quoted => fields.push(String::new()),
+                    _ => fields.last_mut().expect("a field").push(c),
+                }
             }
-        }
+            fields
+        };
+        let fields = split(lines.next().expect("row"));
         assert_eq!(header.len(), fields.len(), "{csv}");
         let field = |name: &str| -> &str {
             let i = header.iter().position(|h| *h == name).expect(name);
@@ -619,8 +622,12 @@ mod tests {
         };
         let episodes = [with_fit(0.02), with_fit(f64::NAN), with_fit(0.03)];
         let csv = metrics_csv(&episodes[..1]);
-        let row = csv.lines().nth(1).expect("row");
-        assert!(row.contains(",0.02000,"), "{row}");
+        let fields = split(csv.lines().nth(1).expect("row"));
+        let i = header
+            .iter()
+            .position(|h| *h == "fit_error_m")
+            .expect("column");
+        assert_eq!(fields[i], "0.02000", "{csv}");
         let line = part_error_line(&episodes).expect("a line");
         assert!(
             line.ends_with("before the estimate ages (the latency and the frames since): 25.0 mm in the median episode."),

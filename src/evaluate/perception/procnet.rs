@@ -78,6 +78,10 @@ pub struct ProcNetCamera {
     /// The fits' errors at their exposure (the sum of each fit's mean over parts, m) and
     /// the fits counted.
     fit_error: (f64, usize),
+    /// The newest fit's parts, at rest (its joints' velocity zero: `still_qd`), kept
+    /// between frames.
+    fitted: HumanEstimate,
+    still_qd: Vec<f64>,
     q: Vec<f64>,
     qd: Vec<f64>,
     counts: FrameCounts,
@@ -191,6 +195,8 @@ impl ProcNetCamera {
             latest: None,
             fits: VecDeque::new(),
             fit_error: (0.0, 0),
+            fitted: HumanEstimate::default(),
+            still_qd: vec![0.0; model.human.dof()],
             fit_qd: vec![0.0; model.human.dof()],
             geometry: HumanGeometry::new(&model.human)?,
             kinematics,
@@ -260,16 +266,16 @@ impl ProcNetCamera {
         Ok(match outcome {
             Ok(estimate) => {
                 self.counts.estimates += 1;
-                let fitted = self.fitted(input, &estimate.fit.q);
-                if let Some((error, _)) = fitted
-                    .as_ref()
-                    .and_then(|f| super::super::episode::perception_error(f, input.truth))
-                {
-                    self.fit_error.0 += error;
-                    self.fit_error.1 += 1;
-                }
-                if let (Some(region), Some(fitted)) = (region, &fitted) {
-                    self.trace_fit(input, &estimate.fit, fitted, region);
+                if self.place_fitted(input, &estimate.fit.q) {
+                    if let Some((error, _)) =
+                        super::super::episode::perception_error(&self.fitted, input.truth)
+                    {
+                        self.fit_error.0 += error;
+                        self.fit_error.1 += 1;
+                    }
+                    if let Some(region) = region {
+                        self.trace_fit(input, &estimate.fit, region);
+                    }
                 }
                 Some(Measured {
                     reacquired: estimate.fit.reacquired,
@@ -288,22 +294,20 @@ impl ProcNetCamera {
         })
     }
 
-    /// The human's parts where the fitted joints `q` put them (no velocity); `None` where
-    /// the model's kinematics fail.
-    fn fitted(&mut self, input: &PerceptionInput<'_>, q: &[f64]) -> Option<HumanEstimate> {
-        input
-            .model
-            .human
-            .forward_kinematics(q, &mut self.kinematics)
-            .ok()?;
-        let mut fitted = HumanEstimate::default();
-        let still = vec![0.0; q.len()];
+    /// Places the human's parts where the fitted joints `q` put them into `fitted` (at
+    /// rest); false where the model's kinematics fail.
+    fn place_fitted(&mut self, input: &PerceptionInput<'_>, q: &[f64]) -> bool {
+        let human = &input.model.human;
+        if human.forward_kinematics(q, &mut self.kinematics).is_err() {
+            return false;
+        }
         self.geometry
-            .estimate_into(&input.model.human, &self.kinematics, &still, &mut fitted);
-        Some(fitted)
+            .estimate_into(human, &self.kinematics, &self.still_qd, &mut self.fitted);
+        true
     }
 
-    /// The fit's error per part against the truth at exposure, with its gain, bound and
+    /// The fit's error per part (`fitted`, placed by [`Self::place_fitted`]) against the
+    /// truth at exposure, with its gain, bound and
     /// whether the search found it, and how much of each true part `region` (the region of
     /// interest the frame was read through) showed (trace level: where the closed loop's
     /// error comes from, the fit, the region or its ageing, and whether the bound covered
@@ -312,7 +316,6 @@ impl ProcNetCamera {
         &mut self,
         input: &PerceptionInput<'_>,
         fit: &workcell_perception::pose::ArmFit,
-        fitted: &HumanEstimate,
         region: (workcell_render::roi::Roi, workcell_render::roi::RoiKind),
     ) {
         // The trunk's joints' errors (fitted minus true, rad), the pelvis's (m), the true joints.
@@ -345,7 +348,7 @@ impl ProcNetCamera {
             .collect();
         tracing::trace!(
             t = input.t_s,
-            parts = %part_errors(fitted, input.truth),
+            parts = %part_errors(&self.fitted, input.truth),
             in_region = %shown.join(","),
             region = ?kind,
             hidden = fit.hidden_share,
