@@ -100,9 +100,16 @@ def positions(clip, f, reverse, negated):
             if c.endswith("position"):
                 t["XYZ".index(c[0])] += x
             else:
-                rs.append(rot(c[0], math.radians(-x if c[0] in negated else x)))
-        for m in (rs[::-1] if reverse else rs):
-            r = mm(r, m)
+                rs.append((c[0], math.radians(-x if c[0] in negated else x)))
+        if reverse == "fixed_zxy" and len(rs) == 3:
+            # The source's converter (scipy's extrinsic 'zxy'): the three values in the
+            # file's order are angles about the fixed z, x and y axes, whatever the header
+            # lists: R = R_y R_x R_z.
+            rs = [("Y", rs[2][1]), ("X", rs[1][1]), ("Z", rs[0][1])]
+        elif reverse is True:
+            rs = rs[::-1]
+        for axis, a in rs:
+            r = mm(r, rot(axis, a))
         p = joint["parent"]
         if p is None:
             R[j], P[j] = r, t
@@ -149,11 +156,11 @@ def main():
     print(f"{len(paths)} clips, every {args.step}th frame")
     print("| reading | elbows hyperextended > 10 deg | hands > 10 cm ahead | hands > 10 cm behind | head ahead of neck |")
     print("|---|---:|---:|---:|---:|")
-    for reverse in (False, True):
-        for negated in ("", "X", "Y", "Z", "XY", "XZ", "YZ", "XYZ"):
+    for reverse in (False, True, "fixed_zxy"):
+        for negated in ("", "X", "Y", "Z", "XY", "XZ", "YZ", "XYZ") if reverse != "fixed_zxy" else ("",):
             for swap in (True, False):
                 h, a, b, hd = measure(clips, args.step, reverse, negated, swap)
-                name = (f"{'reversed order' if reverse else 'listed order'}"
+                name = (f"{dict([(False, 'listed order'), (True, 'reversed order'), ('fixed_zxy', 'z, x, y about fixed axes (the source converter)')])[reverse]}"
                         f"{', negated ' + negated if negated else ''}"
                         f"{', sides swapped (the hrc preset)' if swap else ', names as written'}")
                 print(f"| {name} | {h:.2f} | {a:.2f} | {b:.2f} | {hd:.2f} |")

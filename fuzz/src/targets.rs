@@ -115,8 +115,15 @@ pub fn run(target: &str, data: &[u8]) {
         "bvh" => {
             if let Some(text) = text() {
                 let path = Path::new("fuzz.bvh");
-                if let Ok(bvh) = workcell::mocap::bvh::Bvh::parse(text, path) {
-                    for preset in ["hrc", "cmu"] {
+                if let Ok(mut bvh) = workcell::mocap::bvh::Bvh::parse(text, path) {
+                    use workcell::mocap::bvh::Euler;
+                    for (preset, euler) in [
+                        ("hrc", Euler::FixedZxy),
+                        ("hrc", Euler::Listed),
+                        ("cmu", Euler::Listed),
+                        ("cmu", Euler::FixedZxy),
+                    ] {
+                        bvh.euler = euler;
                         if let Some(map) = workcell::mocap::bvh::joint_map_preset(preset) {
                             let _ = bvh.clip(
                                 &map,

@@ -1,13 +1,17 @@
 //! BVH (Biovision Hierarchy) files: any hierarchy, each joint's channels in the order its
 //! header lists them, positions in the file's unit; a joint-name map picks the landmarks.
 //!
-//! A joint's frame in its parent's is `T(offset + position channels) R_1 R_2 R_3`, the
-//! rotations in the order the `CHANNELS` line lists them, in degrees: the convention of the
-//! format's writers (Biovision's, and the Vicon and MotionBuilder exports that follow it).
+//! A joint's frame in its parent's is `T(offset + position channels) R`, the rotation made of
+//! the rotation channels (degrees) as [`Euler`] says: by default in the order the `CHANNELS`
+//! line lists them, each about the axis the ones before left (`R_1 R_2 R_3`), the convention of
+//! the format's writers (Biovision's, and the Vicon and MotionBuilder exports that follow it).
+//! Some converters write other angles under the same header; [`Euler::FixedZxy`] reads the
+//! shipped Vicon task clips', whose converter is the source's own.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use serde::{Deserialize, Serialize};
 use workcell_robots::math::{Pose, Rotation, Vector};
 
 use crate::clip::{Axes, Clip, Landmark};
@@ -35,12 +39,45 @@ struct Joint {
     first: usize,
 }
 
+/// How a BVH file's rotation channels make a joint's rotation.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Euler {
+    /// The format's convention: the rotation channels in the order the joint's `CHANNELS`
+    /// line lists them, each about the axis the ones before it left (`R = R_1 R_2 R_3`).
+    #[default]
+    Listed,
+    /// Every joint's three rotation values, in the file's order, are angles about the
+    /// parent's fixed z, x and y axes, whatever its `CHANNELS` line names: `R = R_y(v_3)
+    /// R_x(v_2) R_z(v_1)`. The shipped Vicon task clips' converter wrote them so (SciPy's
+    /// extrinsic `"zxy"` Euler angles under a `Zrotation Xrotation Yrotation` header, the
+    /// root's under `Zrotation Yrotation Xrotation`); read so, the clips give the bone
+    /// directions of the source's Vicon export to 0.3 degrees, read as listed 30 to 67
+    /// degrees off (docs/human.md, "Reading the Vicon clips").
+    FixedZxy,
+}
+
+impl Euler {
+    /// The convention of preset `name`'s files ([`joint_map_preset`]): `hrc`'s are
+    /// [`Euler::FixedZxy`], every other's [`Euler::Listed`].
+    #[must_use]
+    pub fn of_preset(name: &str) -> Self {
+        if name == "hrc" {
+            Self::FixedZxy
+        } else {
+            Self::Listed
+        }
+    }
+}
+
 /// A parsed BVH file: its hierarchy and its frames' channel values.
 #[derive(Debug, Clone)]
 pub struct Bvh {
     joints: Vec<Joint>,
     /// Seconds per frame.
     pub frame_time_s: f64,
+    /// How the rotation channels are read. [`Euler::Listed`] after [`Bvh::parse`].
+    pub euler: Euler,
     /// `frames x channels` values.
     values: Vec<f64>,
     channels: usize,
@@ -51,8 +88,8 @@ pub type JointMap = BTreeMap<Landmark, String>;
 
 /// A named preset of [`JointMap`]: `hrc` (the Vicon task clips shipped in
 /// `data/mocap/hrc-task-clips`: `hip`, `neck`, `head`, `*_upper_arm`, `*_forearm`, `*_hand`,
-/// the sides swapped, as the hierarchy's are mirrored; its `torso` joint sits at the hip, so
-/// it gives no chest of its own) or `cmu`
+/// read with [`Euler::FixedZxy`]; its `torso` joint sits at the hip, so it gives no chest of
+/// its own) or `cmu`
 /// (the CMU motion-capture library's BVH conversions: `Hips`, `Spine1`, `LeftArm`,
 /// `LeftForeArm`, `LeftHand`).
 #[must_use]
@@ -63,16 +100,17 @@ pub fn joint_map_preset(name: &str) -> Option<JointMap> {
             (L::Pelvis, "hip"),
             (L::Neck, "neck"),
             (L::Head, "head"),
-            // Mirrored: the hierarchy's `left_*` arm is the person's right. In its rest pose
-            // the head sits 0.23 m ahead of the neck along +z, so the person faces +z with y
-            // up and their left is +x, where the `right_*` arm is; and with the names as
-            // written the hands would work behind the back in most clips.
-            (L::LeftShoulder, "right_upper_arm"),
-            (L::LeftElbow, "right_forearm"),
-            (L::LeftWrist, "right_hand"),
-            (L::RightShoulder, "left_upper_arm"),
-            (L::RightElbow, "left_forearm"),
-            (L::RightWrist, "left_hand"),
+            // The sides as the hierarchy names them: read with their own Euler angles, the
+            // elbows bend as elbows do with these names (and backwards with the sides
+            // swapped), and the hand the source says holds the handed-over object is the
+            // one that travels farther. The `head` joint sits 12 to 16 cm behind the
+            // shoulders: where the recording's head segment has its origin, not the face.
+            (L::LeftShoulder, "left_upper_arm"),
+            (L::LeftElbow, "left_forearm"),
+            (L::LeftWrist, "left_hand"),
+            (L::RightShoulder, "right_upper_arm"),
+            (L::RightElbow, "right_forearm"),
+            (L::RightWrist, "right_hand"),
         ],
         "cmu" => &[
             (L::Pelvis, "Hips"),
@@ -261,6 +299,7 @@ impl Bvh {
         Ok(Self {
             joints,
             frame_time_s,
+            euler: Euler::Listed,
             values,
             channels,
         })
@@ -284,15 +323,31 @@ impl Bvh {
         for joint in &self.joints {
             let mut translation = joint.offset;
             let mut rotation = Rotation::IDENTITY;
+            // The rotation values in the file's order (FixedZxy: three, checked by `clip`).
+            let mut angles = [0.0; 3];
+            let mut n = 0;
             for (k, channel) in joint.channels.iter().enumerate() {
                 let v = values[joint.first + k];
                 match *channel {
                     Channel::Position(a) => translation[a] += v,
-                    Channel::Rotation(a) => {
-                        let axis = [Vector::X, Vector::Y, Vector::Z][a];
-                        rotation *= Rotation::from_axis_angle(axis, v.to_radians());
-                    }
+                    Channel::Rotation(a) => match self.euler {
+                        Euler::Listed => {
+                            let axis = [Vector::X, Vector::Y, Vector::Z][a];
+                            rotation *= Rotation::from_axis_angle(axis, v.to_radians());
+                        }
+                        Euler::FixedZxy => {
+                            if let Some(slot) = angles.get_mut(n) {
+                                *slot = v.to_radians();
+                            }
+                            n += 1;
+                        }
+                    },
                 }
+            }
+            if self.euler == Euler::FixedZxy && n > 0 {
+                rotation = Rotation::from_axis_angle(Vector::Y, angles[2])
+                    * Rotation::from_axis_angle(Vector::X, angles[1])
+                    * Rotation::from_axis_angle(Vector::Z, angles[0]);
             }
             let local = Pose::from_parts(
                 Vector::new(translation[0], translation[1], translation[2]),
@@ -335,6 +390,25 @@ impl Bvh {
                     ),
                 })?;
             columns.push((landmark, index));
+        }
+        if self.euler == Euler::FixedZxy {
+            let rotations = |j: &Joint| {
+                j.channels
+                    .iter()
+                    .filter(|c| matches!(c, Channel::Rotation(_)))
+                    .count()
+            };
+            if let Some(j) = self.joints.iter().find(|j| !matches!(rotations(j), 0 | 3)) {
+                return Err(MocapError::Invalid {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "joint {:?} has {} rotation channels: euler = \"fixed_zxy\" reads three \
+                         (or none) per joint",
+                        j.name,
+                        rotations(j)
+                    ),
+                });
+            }
         }
         if self.frames() < 2 {
             return Err(MocapError::Invalid {
@@ -427,6 +501,89 @@ Frame Time: 0.01
             .expect("clip");
         // Frame 2 now holds X=90, Z=90 in that order: Rx(90) Rz(90) (2, 0, 0) = (0, 0, 2).
         assert!(near(clip.track(Landmark::RightWrist)[2], [1.0, 0.0, 2.0]));
+    }
+
+    /// A chain as the Vicon task clips' converter writes it: the root's header lists
+    /// `Zrotation Yrotation Xrotation`, the elbow's `Zrotation Xrotation Yrotation`, and both
+    /// hold angles z, x, y about fixed axes.
+    const CHAIN: &str = "HIERARCHY
+ROOT hip
+{
+  OFFSET 1 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation
+  JOINT elbow
+  {
+    OFFSET 2 0 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT hand
+    {
+      OFFSET 0 3 0
+      CHANNELS 0
+      End Site
+      {
+        OFFSET 0 0 0
+      }
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.01
+0 0 0 30 -20 50 -45 60 15
+0 0 0 30 -20 50 -45 60 15
+";
+
+    /// Both conventions against SciPy 1.17.1: `Rotation.from_euler("zxy", ...)` (fixed axes)
+    /// for `fixed_zxy`, `from_euler("ZYX", ...)` and `("ZXY", ...)` (moving axes, the
+    /// headers' orders) for `listed`; the elbow at `hip + A (2, 0, 0)`, the hand at `elbow +
+    /// A B (0, 3, 0)`.
+    #[test]
+    fn fixed_zxy_reads_angles_about_fixed_axes_whatever_the_header_lists() {
+        let path = Path::new("chain.bvh");
+        let map: JointMap = [
+            (Landmark::Pelvis, "hip".to_string()),
+            (Landmark::RightElbow, "elbow".to_string()),
+            (Landmark::RightWrist, "hand".to_string()),
+        ]
+        .into_iter()
+        .collect();
+        let near = |a: Vector, b: [f64; 3]| (a - Vector::new(b[0], b[1], b[2])).length() < 1e-7;
+        let mut bvh = Bvh::parse(CHAIN, path).expect("parses");
+        for (euler, elbow, hand) in [
+            (
+                Euler::FixedZxy,
+                [1.851_338_17, 0.939_692_62, -1.546_674_21],
+                [3.226_551_43, 3.408_130_54, -2.554_445_37],
+            ),
+            (
+                Euler::Listed,
+                [2.627_595_36, 0.939_692_62, 0.684_040_29],
+                [3.409_670_48, -0.119_658_6, 3.379_616_94],
+            ),
+        ] {
+            bvh.euler = euler;
+            let clip = bvh
+                .clip(&map, 1.0, Axes::Z_UP, "chain".into(), path)
+                .expect("clip");
+            let e = clip.track(Landmark::RightElbow)[1];
+            let h = clip.track(Landmark::RightWrist)[1];
+            assert!(near(e, elbow), "{euler:?}: elbow {e:?}");
+            assert!(near(h, hand), "{euler:?}: hand {h:?}");
+        }
+        // Two rotation channels are not three fixed-axis angles.
+        let two = CHAIN
+            .replace(
+                "CHANNELS 3 Zrotation Xrotation Yrotation",
+                "CHANNELS 2 Zrotation Xrotation",
+            )
+            .replace("-45 60 15\n", "-45 60\n");
+        let mut bvh = Bvh::parse(&two, path).expect("parses");
+        bvh.euler = Euler::FixedZxy;
+        let err = bvh
+            .clip(&map, 1.0, Axes::Z_UP, "two".into(), path)
+            .expect_err("two rotation channels")
+            .to_string();
+        assert!(err.contains("\"elbow\" has 2 rotation channels"), "{err}");
     }
 
     #[test]

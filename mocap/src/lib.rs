@@ -45,6 +45,11 @@ pub enum ClipFormat {
         /// The file's axes. Default `y_up`.
         #[serde(default = "y_up")]
         axes: Axes,
+        /// How the rotation channels are read ([`bvh::Euler`]: `listed`, the format's
+        /// convention, or `fixed_zxy`). Left out: the joint preset's (`hrc`: `fixed_zxy`),
+        /// else `listed`.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        euler: Option<bvh::Euler>,
     },
     /// A table of joint positions, three numbers per landmark per row.
     Table {
@@ -158,6 +163,7 @@ pub fn format_of_path(path: &Path) -> Option<ClipFormat> {
         joints: None,
         metres_per_unit: millimetres(),
         axes: y_up(),
+        euler: None,
     })
 }
 
@@ -178,16 +184,24 @@ pub fn read_clip(path: &Path, format: &ClipFormat, name: String) -> Result<Clip>
             joints,
             metres_per_unit,
             axes,
+            euler,
         } => {
-            let file = bvh::Bvh::parse(&text, path)?;
-            let map = match joints {
-                Some(JointsSpec::Map(map)) => map.clone(),
-                Some(JointsSpec::Preset(preset)) => bvh::joint_map_preset(preset)
-                    .ok_or_else(|| invalid(format!("no joint map preset {preset:?} (hrc, cmu)")))?,
+            let mut file = bvh::Bvh::parse(&text, path)?;
+            let (map, preset) = match joints {
+                Some(JointsSpec::Map(map)) => (map.clone(), None),
+                Some(JointsSpec::Preset(preset)) => (
+                    bvh::joint_map_preset(preset).ok_or_else(|| {
+                        invalid(format!("no joint map preset {preset:?} (hrc, cmu)"))
+                    })?,
+                    Some(preset.as_str()),
+                ),
                 None => ["hrc", "cmu"]
                     .into_iter()
-                    .filter_map(bvh::joint_map_preset)
-                    .find(|m| m.values().all(|j| file.joint_names().any(|n| n == j)))
+                    .find_map(|p| {
+                        bvh::joint_map_preset(p)
+                            .filter(|m| m.values().all(|j| file.joint_names().any(|n| n == j)))
+                            .map(|m| (m, Some(p)))
+                    })
                     .ok_or_else(|| {
                         invalid(format!(
                             "its joints ({}) fit no preset (hrc, cmu): give a joint map",
@@ -195,6 +209,8 @@ pub fn read_clip(path: &Path, format: &ClipFormat, name: String) -> Result<Clip>
                         ))
                     })?,
             };
+            file.euler = euler
+                .unwrap_or_else(|| preset.map_or_else(Default::default, bvh::Euler::of_preset));
             file.clip(&map, *metres_per_unit, *axes, name, path)
         }
         ClipFormat::Table {
