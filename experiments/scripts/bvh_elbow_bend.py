@@ -4,8 +4,9 @@
 Reads every BVH clip of data/mocap/hrc-task-clips (standard library only; every `--step`-th
 frame), forward kinematics as the BVH convention has it (each joint's rotations in the order
 its CHANNELS line lists them, degrees), and variants: the rotations composed in reverse order,
-the angles about some axes negated, the hierarchy's sides swapped (what the `hrc` preset of
-mocap/src/bvh.rs does). Per variant, over both arms of every sampled frame, in the torso frame
+the angles about some axes negated, the three values as angles about fixed axes z, x, y (the
+source converter's, what the `hrc` preset of mocap/src/bvh.rs reads), the hierarchy's sides
+swapped (what the preset did before 2026-12-07). Per variant, over both arms of every sampled frame, in the torso frame
 (y from the right shoulder to the left, z from the hip to the neck, x = y x z):
 
 - hyperextended: the elbow bent backwards by more than 10 degrees (the forearm turned about +y
@@ -162,7 +163,7 @@ def main():
                 h, a, b, hd = measure(clips, args.step, reverse, negated, swap)
                 name = (f"{dict([(False, 'listed order'), (True, 'reversed order'), ('fixed_zxy', 'z, x, y about fixed axes (the source converter)')])[reverse]}"
                         f"{', negated ' + negated if negated else ''}"
-                        f"{', sides swapped (the hrc preset)' if swap else ', names as written'}")
+                        f"{', sides swapped' if swap else ', names as written'}")
                 print(f"| {name} | {h:.2f} | {a:.2f} | {b:.2f} | {hd:.2f} |")
 
 

@@ -334,7 +334,7 @@ mod sides {
     }
 
     /// The bone directions of the source's own Vicon export (`CollaborativeHammering/0.csv`
-    /// of human-robot-animations at its SOURCE_COMMIT: the segments' global positions, rows
+    /// of human-robot-animations at its SOURCE_COMMIT: the segments' global positions, frames
     /// 716, 1077 and 1567, the BVH's frames 500, 861 and 1351), turned into the BVH's axes
     /// as the source's converter turns them (SciPy 1.17.1: `Rz(90) Ry(90) Rz(-90)`), unit
     /// vectors: right upper arm, right forearm, left upper arm, left forearm, neck to head.
