@@ -117,11 +117,12 @@ pub fn run(target: &str, data: &[u8]) {
                 let path = Path::new("fuzz.bvh");
                 if let Ok(mut bvh) = workcell::mocap::bvh::Bvh::parse(text, path) {
                     use workcell::mocap::bvh::Euler;
+                    // Listed last: the arbitrary map below reads the format's convention.
                     for (preset, euler) in [
                         ("hrc", Euler::FixedZxy),
+                        ("cmu", Euler::FixedZxy),
                         ("hrc", Euler::Listed),
                         ("cmu", Euler::Listed),
-                        ("cmu", Euler::FixedZxy),
                     ] {
                         bvh.euler = euler;
                         if let Some(map) = workcell::mocap::bvh::joint_map_preset(preset) {

@@ -52,8 +52,8 @@ pub enum Euler {
     /// R_x(v_2) R_z(v_1)`. The shipped Vicon task clips' converter wrote them so (SciPy's
     /// extrinsic `"zxy"` Euler angles under a `Zrotation Xrotation Yrotation` header, the
     /// root's under `Zrotation Yrotation Xrotation`); read so, the clips give the bone
-    /// directions of the source's Vicon export to 0.3 degrees, read as listed 30 to 67
-    /// degrees off (docs/human.md, "Reading the Vicon clips").
+    /// directions of the source's Vicon export to 0.1 degrees at the median frame, read as
+    /// listed 30 to 67 degrees off (docs/human.md, "Reading the Vicon clips").
     FixedZxy,
 }
 
