@@ -8,7 +8,8 @@ use std::time::Instant;
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{Jacobian, KinematicState};
 use workcell_safety::{
-    FilterMode, HumanEstimate, HumanGeometry, HumanPart, Obstacle, SafetyFilter, SignedDistancePair,
+    FilterMode, FilterOutput, HumanEstimate, HumanGeometry, HumanPart, Obstacle, PairConstraint,
+    SafetyFilter, SignedDistancePair,
 };
 use workcell_sim::{CellModel, CellState, RobotCommand, step};
 
@@ -289,6 +290,70 @@ impl<'a> Run<'a> {
         Ok(())
     }
 
+    /// The tick's trace (`RUST_LOG=workcell::evaluate::episode=trace`): the status, the seen
+    /// and the true separation, and the closest human row: its link and part, how fast the
+    /// command moves the robot toward it against its bound, the human's approach, and the
+    /// fastest the joints could move the robot point away along its normal. With
+    /// `workcell::evaluate::rows=trace`, every row of the tick as well.
+    fn trace_tick(&self, t: f64, out: &FilterOutput) {
+        let rows = tracing::enabled!(target: "workcell::evaluate::rows", tracing::Level::TRACE);
+        if !rows && !tracing::enabled!(tracing::Level::TRACE) {
+            return;
+        }
+        let robot = &self.model.robot;
+        let link_name = |c: &PairConstraint| {
+            robot
+                .links()
+                .get(c.pair.link)
+                .map_or("", |l| l.name.as_str())
+        };
+        let safety = self.filter.config();
+        let command = self.filter.command();
+        let bound = |c: &PairConstraint| c.approach_bound_m_s(safety.gamma_per_s, safety.d_min_m);
+        if rows {
+            for c in self.filter.pairs() {
+                tracing::trace!(
+                    target: "workcell::evaluate::rows",
+                    t,
+                    link = link_name(c),
+                    part = if c.obstacle { "obstacle" } else { c.pair.part.name() },
+                    anticipated = c.anticipated,
+                    distance_m = c.pair.distance_m,
+                    approach_m_s = c.approach_m_s(command),
+                    bound_m_s = bound(c),
+                    human_m_s = c.human_normal_speed_m_s,
+                    "row"
+                );
+            }
+        }
+        let closest = (self.filter.pairs().iter())
+            .filter(|c| !c.obstacle)
+            .min_by(|a, b| a.pair.distance_m.total_cmp(&b.pair.distance_m));
+        let escape = closest.map_or(0.0, |c| {
+            (c.normal_jacobian.iter().zip(robot.velocity_limits()))
+                .map(|(a, v)| a.abs() * v)
+                .sum::<f64>()
+        });
+        tracing::trace!(
+            episode = self.tally.episode(),
+            t,
+            status = %out.status.label(),
+            seen_m = out.min_distance_m,
+            true_m = self.tally.last_separation_m(),
+            uncertainty_m = self.estimate.uncertainty_m,
+            pairs = out.active_pairs,
+            slack_m_s = out.slack_m_s,
+            link = closest.map_or("", link_name),
+            part = closest.map_or("", |c| c.pair.part.name()),
+            anticipated = closest.is_some_and(|c| c.anticipated),
+            approach_m_s = closest.map_or(0.0, |c| c.approach_m_s(command)),
+            bound_m_s = closest.map_or(0.0, bound),
+            human_m_s = closest.map_or(0.0, |c| c.human_normal_speed_m_s),
+            escape_m_s = escape,
+            "tick"
+        );
+    }
+
     /// Perception's estimate at `t`, its error against the truth, and the filter's command.
     fn perceive_and_filter(&mut self, t: f64, dt: f64) {
         self.perception.estimate(
@@ -309,16 +374,7 @@ impl<'a> Run<'a> {
             dt,
         );
         self.controller.observe(&out);
-        tracing::trace!(
-            episode = self.tally.episode(),
-            t,
-            status = %out.status.label(),
-            seen_m = out.min_distance_m,
-            true_m = self.tally.last_separation_m(),
-            uncertainty_m = self.estimate.uncertainty_m,
-            pairs = out.active_pairs,
-            "tick"
-        );
+        self.trace_tick(t, &out);
         self.tally.status(out.status);
         let nominal_norm = self
             .controller
