@@ -148,6 +148,8 @@ pub struct ArmFitter<R: Renderer> {
     pub(super) rng: ChaCha8Rng,
     /// The trunk stage's depth renders (`Renderer::render_depth`).
     pub(super) trunk_depth: Vec<f32>,
+    pub(super) trunk_last: Option<f64>,
+    pub(super) trunk_tracked_frames: usize,
 }
 
 impl<R: Renderer> ArmFitter<R> {
@@ -168,6 +170,8 @@ impl<R: Renderer> ArmFitter<R> {
             renders: 0,
             rng: ChaCha8Rng::seed_from_u64(0),
             trunk_depth: Vec::new(),
+            trunk_last: None,
+            trunk_tracked_frames: 0,
         }
     }
 
@@ -183,6 +187,7 @@ impl<R: Renderer> ArmFitter<R> {
 
     /// Forgets the track: the next frame searches globally, from an upright trunk.
     pub fn reset(&mut self) {
+        self.trunk_last = None;
         self.tracks.clear();
         self.last_points = None;
         self.search_next = false;
@@ -272,9 +277,14 @@ impl<R: Renderer> ArmFitter<R> {
         }
         let last_points = self.last_points.take();
         let outcome = self.fit_inner(camera, masks, last_points);
-        // A frame without a pose ends the track, unless it left a candidate to confirm.
-        if !matches!(outcome, Ok(Ok(_))) && self.last_points.is_none() {
-            self.tracks.clear();
+        if !matches!(outcome, Ok(Ok(_))) {
+            // The arm found no pose on this trunk: the next frame searches for the trunk
+            // whole, not from its track alone.
+            self.trunk_tracked_frames = super::trunk::TRUNK_SEARCH_EVERY;
+            // A frame without a pose ends the track, unless it left a candidate to confirm.
+            if self.last_points.is_none() {
+                self.tracks.clear();
+            }
         }
         outcome
     }

@@ -7,7 +7,9 @@ use workcell_robots::RobotModel;
 use workcell_robots::math::{Pose, Vector};
 
 use super::fit::{MeasuredForearm, grid_points, measured_forearm};
-use super::trunk::{TORSO_FIXED_SCALE, covered_sum, measured_spine, torso_fixed};
+use super::trunk::{
+    TORSO_FIXED_SCALE, TRUNK_SEARCH_EVERY, covered_sum, measured_spine, torso_fixed,
+};
 use super::*;
 use crate::pose::{NoPose, POSE_MESH_SEGMENTS};
 use workcell_render::CpuRenderer;
@@ -761,8 +763,8 @@ fn the_trunks_stage_finds_where_the_person_stands() {
 /// 0.05 rad per joint and 2 cm at the pelvis in every frame (measured at most 0.004 rad and
 /// 0.1 cm). Without the track among the stage's finalists and starts, the stage left the
 /// person by 1.4 rad in the third frame.
-#[test]
-fn the_trunks_stage_follows_a_turned_person_who_steps() {
+/// The whole body's arm and trunk, `setup`'s camera, and a fitter that fits the trunk.
+fn trunk_stage() -> (ArticulatedArm, TrunkModel, Camera, ArmFitter<CpuRenderer>) {
     let human = RobotModel::from_catalogue("human").expect("catalogue human");
     let arm = ArticulatedArm::new(&human, &Pose::IDENTITY).expect("arm");
     let trunk = arm.trunk().expect("the whole body's trunk").clone();
@@ -771,6 +773,28 @@ fn the_trunks_stage_follows_a_turned_person_who_steps() {
         fit_trunk: true,
         ..ArmFitConfig::default()
     };
+    let fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
+    (arm, trunk, camera, fitter)
+}
+
+/// The trunk's stage on the whole body drawn at `truth` (its classes and depth): how far
+/// the fitted trunk is from the truth (rad, m; [`TrunkModel::error`]).
+fn fit_trunk_to(
+    fitter: &mut ArmFitter<CpuRenderer>,
+    (arm, trunk, camera): (&ArticulatedArm, &TrunkModel, &Camera),
+    truth: &[f64],
+) -> [f64; 2] {
+    let (classes, depth) = observe_body(arm, camera, truth);
+    let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
+    masks.depth_m = Some(depth);
+    assert!(fitter.fit_trunk(camera, &masks).expect("fit").is_some());
+    let fitted = fitter.arm().configuration(&arm.fitted_of(truth));
+    trunk.error(&fitted, truth).expect("the model's length")
+}
+
+#[test]
+fn the_trunks_stage_follows_a_turned_person_who_steps() {
+    let (arm, trunk, camera, mut fitter) = trunk_stage();
     let mut truth = arm.configuration(&[0.9, 0.4, 0.3, 1.0, 1.2]);
     let all: Vec<usize> = trunk
         .joints()
@@ -781,19 +805,13 @@ fn the_trunks_stage_follows_a_turned_person_who_steps() {
     for (&i, v) in all.iter().zip([0.8, 0.45, 0.0, 0.0, 0.0]) {
         truth[i] = v;
     }
-    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
     // The frame before's fit.
     assert!(fitter.hold_trunk_at(&truth).expect("held"));
     let [turn, slide] = [trunk.joints()[0], trunk.slides()[1]];
     for frame in 1..=5 {
         truth[turn] += 0.01;
         truth[slide] += 0.05;
-        let (classes, depth) = observe_body(&arm, &camera, &truth);
-        let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
-        masks.depth_m = Some(depth);
-        assert!(fitter.fit_trunk(&camera, &masks).expect("fit").is_some());
-        let fitted = fitter.arm().configuration(&arm.fitted_of(&truth));
-        let [angle, pelvis] = trunk.error(&fitted, &truth).expect("the model's length");
+        let [angle, pelvis] = fit_trunk_to(&mut fitter, (&arm, &trunk, &camera), &truth);
         eprintln!(
             "frame {frame}: {angle:.3} rad, pelvis {:.1} cm",
             100.0 * pelvis
@@ -804,6 +822,55 @@ fn the_trunks_stage_follows_a_turned_person_who_steps() {
             100.0 * pelvis
         );
     }
+}
+
+/// Once it has a trunk, the stage climbs from the track alone and keeps it while it scores
+/// nearly as well as the frame before: a person who turns 0.02 rad between frames is
+/// followed within 0.05 rad from a fraction of the whole search's renders. Where the person
+/// has turned 0.9 rad the other way between two frames, the track's climb falls short and the
+/// stage runs the whole search, which finds them.
+#[test]
+fn the_trunks_stage_keeps_its_track_and_searches_when_it_is_lost() {
+    let (arm, trunk, camera, mut fitter) = trunk_stage();
+    let mut truth = arm.configuration(&[0.9, 0.4, 0.3, 1.0, 1.2]);
+    let [turn, lean] = [trunk.joints()[0], trunk.joints()[1]];
+    truth[turn] = 0.5;
+    truth[lean] = 0.3;
+    let fit = |fitter: &mut ArmFitter<CpuRenderer>, truth: &[f64]| {
+        let before = fitter.renders;
+        let [angle, _] = fit_trunk_to(fitter, (&arm, &trunk, &camera), truth);
+        (angle, fitter.renders - before)
+    };
+    // The first frame has no trunk to follow: the whole search.
+    let (angle, whole) = fit(&mut fitter, &truth);
+    assert!(angle < 0.05, "first frame: {angle:.3} rad off");
+    truth[turn] += 0.02;
+    let (angle, tracked) = fit(&mut fitter, &truth);
+    eprintln!("renders: whole search {whole}, the track alone {tracked}");
+    assert!(angle < 0.05, "tracked frame: {angle:.3} rad off");
+    assert!(
+        2 * tracked < whole,
+        "the track alone took {tracked} renders, the search {whole}"
+    );
+    assert_eq!(fitter.trunk_tracked_frames, 1, "the track alone was kept");
+    truth[turn] = -0.4;
+    let (angle, lost) = fit(&mut fitter, &truth);
+    eprintln!("renders where the track was lost: {lost}");
+    assert!(angle < 0.05, "after the turn: {angle:.3} rad off");
+    assert_eq!(fitter.trunk_tracked_frames, 0, "the whole search ran");
+    // A frame whose arm finds no pose (its parts' masks empty) sends the next one to the
+    // whole search, however well the track scored.
+    let (classes, depth) = observe_body(&arm, &camera, &truth);
+    let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
+    masks.depth_m = Some(depth);
+    for part in &mut masks.parts {
+        part.fill(0.0);
+    }
+    assert!(
+        fitter.fit(&camera, &masks).expect("fit").is_err(),
+        "no arm, no pose"
+    );
+    assert_eq!(fitter.trunk_tracked_frames, TRUNK_SEARCH_EVERY);
 }
 
 /// A track that explains the masks poorly (a gain between `min_gain` and
