@@ -148,7 +148,10 @@ pub struct ArmFitter<R: Renderer> {
     pub(super) rng: ChaCha8Rng,
     /// The trunk stage's depth renders (`Renderer::render_depth`).
     pub(super) trunk_depth: Vec<f32>,
+    /// The trunk's stage's score of the last frame's trunk; `None` where the next frame has
+    /// no track to keep (no trunk yet, a reset, or a frame whose arm found no pose).
     pub(super) trunk_last: Option<f64>,
+    /// Frames since the trunk's stage last ran its whole search.
     pub(super) trunk_tracked_frames: usize,
 }
 
@@ -280,7 +283,7 @@ impl<R: Renderer> ArmFitter<R> {
         if !matches!(outcome, Ok(Ok(_))) {
             // The arm found no pose on this trunk: the next frame searches for the trunk
             // whole, not from its track alone.
-            self.trunk_tracked_frames = super::trunk::TRUNK_SEARCH_EVERY;
+            self.trunk_last = None;
             // A frame without a pose ends the track, unless it left a candidate to confirm.
             if self.last_points.is_none() {
                 self.tracks.clear();
