@@ -164,6 +164,17 @@ impl PairConstraint {
             .min(self.max_approach_m_s)
     }
 
+    /// The fastest joints within `velocity_limits` (rad/s or m/s, one per joint) can move
+    /// the robot's witness point along the normal, either way, m/s.
+    #[must_use]
+    pub fn escape_m_s(&self, velocity_limits: &[f64]) -> f64 {
+        self.normal_jacobian
+            .iter()
+            .zip(velocity_limits)
+            .map(|(a, v)| a.abs() * v)
+            .sum()
+    }
+
     /// How fast joint velocities `qdot` move the robot's witness point toward the part, m/s.
     #[must_use]
     #[inline]

@@ -603,13 +603,7 @@ impl SafetyFilter {
         }
         if self.config.escape_horizon_s > 0.0 {
             for c in &mut self.pairs {
-                // The fastest the joints can move the witness point along the normal.
-                let escape: f64 = c
-                    .normal_jacobian
-                    .iter()
-                    .zip(&self.velocity_limit)
-                    .map(|(a, v)| a.abs() * v)
-                    .sum();
+                let escape = c.escape_m_s(&self.velocity_limit);
                 c.escape_margin_m =
                     self.config.escape_horizon_s * (DETECTION_APPROACH_M_S - escape).max(0.0);
             }

@@ -329,11 +329,7 @@ impl<'a> Run<'a> {
         let closest = (self.filter.pairs().iter())
             .filter(|c| !c.obstacle)
             .min_by(|a, b| a.pair.distance_m.total_cmp(&b.pair.distance_m));
-        let escape = closest.map_or(0.0, |c| {
-            (c.normal_jacobian.iter().zip(robot.velocity_limits()))
-                .map(|(a, v)| a.abs() * v)
-                .sum::<f64>()
-        });
+        let escape = closest.map_or(0.0, |c| c.escape_m_s(&robot.velocity_limits()));
         tracing::trace!(
             episode = self.tally.episode(),
             t,

@@ -755,12 +755,6 @@ fn the_trunks_stage_finds_where_the_person_stands() {
     assert!(err > 10.0, "slides held: {err:.2} cm");
 }
 
-/// The track: a person turned 0.8 rad and bent forward 0.45 rad (beyond the grid's turns, as
-/// a recorded person at a table stands) who steps 5 cm sideways a frame (1.5 m/s at 30 Hz)
-/// and turns on. From the trunk of the frame before, the trunk's stage follows them: within
-/// 0.05 rad per joint and 2 cm at the pelvis in every frame (measured at most 0.004 rad and
-/// 0.1 cm). Without the track among the stage's finalists and starts, the stage left the
-/// person by 1.4 rad in the third frame.
 /// The whole body's arm and trunk, `setup`'s camera, and a fitter that fits the trunk.
 fn trunk_stage() -> (ArticulatedArm, TrunkModel, Camera, ArmFitter<CpuRenderer>) {
     let human = RobotModel::from_catalogue("human").expect("catalogue human");
@@ -775,21 +769,33 @@ fn trunk_stage() -> (ArticulatedArm, TrunkModel, Camera, ArmFitter<CpuRenderer>)
     (arm, trunk, camera, fitter)
 }
 
-/// The trunk's stage on the whole body drawn at `truth` (its classes and depth): how far
-/// the fitted trunk is from the truth (rad, m; [`TrunkModel::error`]).
+/// The whole body drawn at `truth` as the fit reads it: its classes' masks and its depth.
+fn body_masks(arm: &ArticulatedArm, camera: &Camera, truth: &[f64]) -> ArmMasks {
+    let (classes, depth) = observe_body(arm, camera, truth);
+    let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
+    masks.depth_m = Some(depth);
+    masks
+}
+
+/// The trunk's stage on the whole body drawn at `truth` ([`body_masks`]): how far the
+/// fitted trunk is from the truth (rad, m; [`TrunkModel::error`]).
 fn fit_trunk_to(
     fitter: &mut ArmFitter<CpuRenderer>,
     (arm, trunk, camera): (&ArticulatedArm, &TrunkModel, &Camera),
     truth: &[f64],
 ) -> [f64; 2] {
-    let (classes, depth) = observe_body(arm, camera, truth);
-    let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
-    masks.depth_m = Some(depth);
+    let masks = body_masks(arm, camera, truth);
     assert!(fitter.fit_trunk(camera, &masks).expect("fit").is_some());
     let fitted = fitter.arm().configuration(&arm.fitted_of(truth));
     trunk.error(&fitted, truth).expect("the model's length")
 }
 
+/// The track: a person turned 0.8 rad and bent forward 0.45 rad (beyond the grid's turns, as
+/// a recorded person at a table stands) who steps 5 cm sideways a frame (1.5 m/s at 30 Hz)
+/// and turns on. From the trunk of the frame before, the trunk's stage follows them: within
+/// 0.05 rad per joint and 2 cm at the pelvis in every frame (measured at most 0.004 rad and
+/// 0.1 cm). Without the track among the stage's finalists and starts, the stage left the
+/// person by 1.4 rad in the third frame.
 #[test]
 fn the_trunks_stage_follows_a_turned_person_who_steps() {
     let (arm, trunk, camera, mut fitter) = trunk_stage();
@@ -858,9 +864,7 @@ fn the_trunks_stage_keeps_its_track_and_searches_when_it_is_lost() {
     assert_eq!(fitter.trunk_tracked_frames, 0, "the whole search ran");
     // A frame whose arm finds no pose (its parts' masks empty) sends the next one to the
     // whole search, however well the track scored.
-    let (classes, depth) = observe_body(&arm, &camera, &truth);
-    let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
-    masks.depth_m = Some(depth);
+    let mut masks = body_masks(&arm, &camera, &truth);
     for part in &mut masks.parts {
         part.fill(0.0);
     }

@@ -52,9 +52,9 @@
 //! climbs from the track alone (the last frame's trunk, at the centred slides too) and keeps
 //! what it finds when it scores at most [`TRUNK_TRACK_DROP`] below the last frame's fit; only
 //! otherwise, after a frame whose arm found no pose, and at least once in
-//! [`TRUNK_SEARCH_EVERY`] frames, does it run the whole search below. On recorded people the whole search ends where the track's climb does in
-//! nearly every frame, and the grid, the finalists' depth and a second climb are most of
-//! the stage's renders.
+//! [`TRUNK_SEARCH_EVERY`] frames, does it run the whole search below. On recorded people the
+//! whole search ends where the track's climb does in nearly every frame, and the grid, the
+//! finalists' depth and a second climb are most of the stage's renders.
 //!
 //! **Beyond the grid** ([`ArmFitConfig::spine_start`]). Recorded people bend 0.9-1.3 rad to
 //! reach down and lean back to the lean's limit, far outside the grid, and the climb from
