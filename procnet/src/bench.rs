@@ -36,6 +36,8 @@ pub fn time(
     let device = inner.clone().autodiff();
     let s = config.input_size;
     let c = config.num_classes();
+    // RGB, or RGB and depth: what the first layer reads.
+    let planes = if config.reads_depth() { 4 } else { 3 };
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut random = |shape: [usize; 4], binary: bool| {
         let n = shape.iter().product();
@@ -52,7 +54,7 @@ pub fn time(
         TensorData::new(v, shape)
     };
     let x: Vec<TensorData> = (0..frames)
-        .map(|_| random([batch, 3, s, s], false))
+        .map(|_| random([batch, planes, s, s], false))
         .collect();
     let y: Vec<TensorData> = (0..frames)
         .map(|_| random([batch, c, s, s], true))
@@ -92,7 +94,7 @@ pub fn time(
     }
 
     let model = model.valid();
-    let frame = Tensor::<4>::from_data(random([1, 3, s, s], false), &inner);
+    let frame = Tensor::<4>::from_data(random([1, planes, s, s], false), &inner);
     let mut state = model.initial_state(1, s, s, &inner);
     let infer = |state| {
         let (out, next) = model.step(frame.clone(), state);
