@@ -194,15 +194,12 @@ pub fn decoder_groups(channels: usize) -> usize {
         .unwrap_or(1)
 }
 
-/// Nearest-neighbour upsampling by 2.
+/// Nearest-neighbour upsampling by 2 ([`crate::ops::upsample2`]).
 ///
 /// # Shapes
 /// `[b, c, h, w] -> [b, c, 2h, 2w]`
 pub fn upsample2(x: Tensor<4>) -> Tensor<4> {
-    let [b, c, h, w] = x.dims();
-    x.reshape([b, c, h, 1, w, 1])
-        .expand([b, c, h, 2, w, 2])
-        .reshape([b, c, 2 * h, 2 * w])
+    crate::ops::upsample2(x)
 }
 
 /// Per-channel scalars broadcast over a feature map.

@@ -101,20 +101,25 @@ fn area_mean(src: &[f32], planes: usize, w: usize, h: usize, ow: usize, oh: usiz
 /// Bilinear interpolation at the output's pixel centres.
 fn bilinear(src: &[f32], planes: usize, w: usize, h: usize, ow: usize, oh: usize) -> Vec<f32> {
     let mut out = vec![0.0; planes * ow * oh];
-    let (sx, sy) = (w as f64 / ow as f64, h as f64 / oh as f64);
-    for p in 0..planes {
-        let plane = &src[p * w * h..(p + 1) * w * h];
-        for y in 0..oh {
-            let fy = ((y as f64 + 0.5) * sy - 0.5).clamp(0.0, (h - 1) as f64);
-            let (y0, ty) = (fy.floor() as usize, fy.fract() as f32);
-            let y1 = (y0 + 1).min(h - 1);
-            for x in 0..ow {
-                let fx = ((x as f64 + 0.5) * sx - 0.5).clamp(0.0, (w - 1) as f64);
-                let (x0, tx) = (fx.floor() as usize, fx.fract() as f32);
-                let x1 = (x0 + 1).min(w - 1);
-                let top = plane[y0 * w + x0] * (1.0 - tx) + plane[y0 * w + x1] * tx;
-                let bottom = plane[y1 * w + x0] * (1.0 - tx) + plane[y1 * w + x1] * tx;
-                out[p * ow * oh + y * ow + x] = top * (1.0 - ty) + bottom * ty;
+    // Each output column's (and row's) two input pixels and weight, once for every plane.
+    let taps = |n_out: usize, n_in: usize| -> Vec<(usize, usize, f32)> {
+        let scale = n_in as f64 / n_out as f64;
+        (0..n_out)
+            .map(|k| {
+                let f = ((k as f64 + 0.5) * scale - 0.5).clamp(0.0, (n_in - 1) as f64);
+                let i0 = f.floor() as usize;
+                (i0, (i0 + 1).min(n_in - 1), f.fract() as f32)
+            })
+            .collect()
+    };
+    let (xs, ys) = (taps(ow, w), taps(oh, h));
+    for (plane, out) in src.chunks_exact(w * h).zip(out.chunks_exact_mut(ow * oh)) {
+        for (&(y0, y1, ty), out) in ys.iter().zip(out.chunks_exact_mut(ow)) {
+            let (r0, r1) = (&plane[y0 * w..][..w], &plane[y1 * w..][..w]);
+            for (&(x0, x1, tx), out) in xs.iter().zip(out) {
+                let top = r0[x0] * (1.0 - tx) + r0[x1] * tx;
+                let bottom = r1[x0] * (1.0 - tx) + r1[x1] * tx;
+                *out = top * (1.0 - ty) + bottom * ty;
             }
         }
     }
