@@ -280,6 +280,14 @@ impl<R: Renderer> ArmFitter<R> {
         }
         let last_points = self.last_points.take();
         let outcome = self.fit_inner(camera, masks, last_points);
+        if let Ok(Ok(fit)) = &outcome {
+            tracing::trace!(
+                gain = fit.gain,
+                reacquired = fit.reacquired,
+                renders = fit.renders,
+                "arm fit"
+            );
+        }
         if !matches!(outcome, Ok(Ok(_))) {
             // The arm found no pose on this trunk: the next frame searches for the trunk
             // whole, not from its track alone.
@@ -333,11 +341,20 @@ impl<R: Renderer> ArmFitter<R> {
             .iter()
             .map(|(climb, _)| climb.score.gain)
             .fold(f64::NEG_INFINITY, f64::max);
-        let reacquired = climbs.is_empty()
-            || tracked_gain < c.search_below_gain
-            || std::mem::take(&mut self.search_next);
+        let poor = climbs.is_empty() || tracked_gain < c.search_below_gain;
+        let reacquired = poor || std::mem::take(&mut self.search_next);
         if reacquired {
-            for climb in self.search(coarse)? {
+            let searched = self.search(coarse)?;
+            if tracing::enabled!(tracing::Level::TRACE) {
+                let moved_m = self.search_moved_m(&climbs, &searched, &target.X_WC)?;
+                tracing::trace!(
+                    tracked_gain,
+                    requested = !poor,
+                    moved_m = ?moved_m,
+                    "arm search"
+                );
+            }
+            for climb in searched {
                 sort_climb(&c, climb, Vec::new(), &mut climbs, &mut faint);
             }
         }
@@ -500,6 +517,31 @@ impl<R: Renderer> ArmFitter<R> {
             confirmed,
             renders: self.renders,
         }))
+    }
+
+    /// How far the search's best fit (by objective) puts the forearm's centre and end from
+    /// the tracked fits' best, m; `None` without either (the trace of a search: whether it
+    /// found another pose than the track's).
+    fn search_moved_m(
+        &self,
+        tracked: &[Tracked],
+        searched: &[Climb],
+        X_WC: &Pose,
+    ) -> Result<Option<[f64; 2]>> {
+        fn best<'a>(climbs: impl Iterator<Item = &'a Climb>) -> Option<&'a Climb> {
+            climbs.max_by(|a, b| a.score.objective.total_cmp(&b.score.objective))
+        }
+        let (Some(track), Some(search)) = (
+            best(tracked.iter().map(|(climb, _)| climb)),
+            best(searched.iter()),
+        ) else {
+            return Ok(None);
+        };
+        let (a, b) = (
+            self.forearm_points(&track.q, X_WC)?,
+            self.forearm_points(&search.q, X_WC)?,
+        );
+        Ok(Some([(a[0] - b[0]).length(), (a[1] - b[1]).length()]))
     }
 
     /// The gain of configuration `q` in `masks`, all parts together and each part's share
