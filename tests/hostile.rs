@@ -56,7 +56,9 @@ fn counts_beyond_their_limits_are_refused_by_the_parser() {
             vec!["bench", "--batch", "100000"],
             "100000 is not from 1 to 64",
         ),
-        (vec!["bench", "--frames", "0"], "0 is not from 1 to 100"),
+        (vec!["bench", "--frames", "0"], "0 is not from 2 to 100"),
+        // One frame left the timed training step no loss to differentiate: a panic.
+        (vec!["bench", "--frames", "1"], "1 is not from 2 to 100"),
         (
             vec!["bench", "--threads", "100000"],
             "100000 is not from 1 to 256",

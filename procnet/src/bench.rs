@@ -32,6 +32,12 @@ pub fn time(
     frames: usize,
     iters: usize,
 ) -> Result<Timing> {
+    if frames < 2 {
+        // As a training window: frame 0 has weight 0, and one frame leaves nothing to fit.
+        return Err(crate::error::ProcNetError::Input {
+            message: format!("a timed training step needs at least 2 frames, got {frames}"),
+        });
+    }
     let inner = backend.device()?;
     let device = inner.clone().autodiff();
     let s = config.input_size;

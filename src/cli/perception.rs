@@ -517,8 +517,8 @@ pub struct BenchArgs {
     /// Sequences per batch (1 to 64).
     #[arg(long, default_value_t = 4, value_parser = super::count_in::<1, 64>)]
     pub batch: usize,
-    /// Frames per sequence (1 to 100).
-    #[arg(long, default_value_t = 10, value_parser = super::count_in::<1, 100>)]
+    /// Frames per sequence (2 to 100: as in training, the first frame is not scored).
+    #[arg(long, default_value_t = 10, value_parser = super::count_in::<2, 100>)]
     pub frames: usize,
     /// Timed repetitions (1 to 1000).
     #[arg(long, default_value_t = 5, value_parser = super::count_in::<1, 1000>)]
