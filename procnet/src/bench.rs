@@ -42,8 +42,7 @@ pub fn time(
     let device = inner.clone().autodiff();
     let s = config.input_size;
     let c = config.num_classes();
-    // RGB, or RGB and depth: what the first layer reads.
-    let planes = if config.reads_depth() { 4 } else { 3 };
+    let planes = config.input_planes();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut random = |shape: [usize; 4], binary: bool| {
         let n = shape.iter().product();

@@ -11,7 +11,8 @@ use rand_chacha::ChaCha8Rng;
 use crate::cells::{Cell, CellState};
 use crate::config::{Activation, ProcNetConfig};
 use crate::error::{ProcNetError, Result};
-use crate::nn::{Conv, Init, Norm, UpConv, decoder_groups, relu, upsample2};
+use crate::nn::{Conv, Init, Norm, UpConv, decoder_groups, relu};
+use crate::ops::upsample2;
 
 /// One predictive-coding layer: its prediction of its input, its representation cell and
 /// (below the top) the convolution that makes the next layer's input from its error.

@@ -194,14 +194,6 @@ pub fn decoder_groups(channels: usize) -> usize {
         .unwrap_or(1)
 }
 
-/// Nearest-neighbour upsampling by 2 ([`crate::ops::upsample2`]).
-///
-/// # Shapes
-/// `[b, c, h, w] -> [b, c, 2h, 2w]`
-pub fn upsample2(x: Tensor<4>) -> Tensor<4> {
-    crate::ops::upsample2(x)
-}
-
 /// Per-channel scalars broadcast over a feature map.
 pub(crate) fn per_channel(p: &Param<Tensor<1>>) -> Tensor<4> {
     let c = p.dims()[0];
