@@ -157,8 +157,8 @@ fn simulate_writes_csv_and_plot_and_replays_by_seed() {
     let human = std::fs::read_to_string(a.join("human_poses.csv")).expect("csv");
     assert_eq!(
         human.lines().count(),
-        1 + 21 * 5,
-        "5 human links per sample"
+        1 + 21 * 13,
+        "13 human links per sample (the default cell's whole body)"
     );
     assert!(
         std::fs::read_to_string(a.join("trajectories.svg"))
@@ -302,9 +302,12 @@ fn dataset_generate_reads_frames_through_the_trackers_region() {
     let said = text(&run.stdout);
     assert!(said.contains("the tracker read 27 new frames"), "{said}");
     let stamp = std::fs::read_to_string(out.join("config.toml")).expect("stamp");
-    // The shipped network for a camera with depth, which the tracker has here.
+    // The shipped network for a camera with depth, which the tracker has here, for the
+    // default cell's whole body.
     assert!(
-        stamp.contains("# crop: tracker (ArmTracker, RGB-D, weights procnet-depth.safetensors"),
+        stamp.contains(
+            "# crop: tracker (ArmTracker, RGB-D, weights procnet-depth-human.safetensors"
+        ),
         "{stamp}"
     );
     // Every frame's label names the region the tracker read it through.
@@ -366,7 +369,8 @@ fn train_resumes_then_eval_segmentation_prints_the_table() {
     std::fs::write(
         &data_cfg,
         format!(
-            "scenario = {:?}\nsequences_per_pair = 2\nframes = 4\nwidth_px = 32\nheight_px = 32\ninput_px = 32\nstart_s = [0.5, 1.0]\nsplits = [0.5, 0.0, 0.5]\n[cell_cameras]\nenabled = false\n",
+            // The paper's arm: the tables of its method.
+            "scenario = {:?}\nhuman_model = \"human_arm\"\nsequences_per_pair = 2\nframes = 4\nwidth_px = 32\nheight_px = 32\ninput_px = 32\nstart_s = [0.5, 1.0]\nsplits = [0.5, 0.0, 0.5]\n[cell_cameras]\nenabled = false\n",
             scenario.display().to_string()
         ),
     )
@@ -1203,7 +1207,8 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
     // fitted at its rate, and the report says so.
     for (perception, set, name) in [
         // The shipped weights by default, wherever the evaluation file is: the RGB network
-        // for an RGB camera, the network that reads depth for an RGB-D one.
+        // for an RGB camera, for an RGB-D one the network that reads depth and was trained
+        // on the default cell's whole body.
         (
             "procnet",
             "perception.depth=false",
@@ -1212,8 +1217,8 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         (
             "procnet",
             "perception.depth=true",
-            "procnet/weights/procnet-depth.safetensors) + articulated render-and-compare \
-             with depth (RGB-D)",
+            "procnet/weights/procnet-depth-human.safetensors) + articulated \
+             render-and-compare with depth (RGB-D)",
         ),
         (
             "pose-gt-masks",
@@ -1827,9 +1832,10 @@ fn bench_perception_prints_each_stage() {
         "| render (the simulator's camera) | 4 |",
         "| network (region of interest + ProcNet) | 4 |",
         "| **network + fit** | 4 |",
-        // With depth and no weights named, the shipped network that reads depth.
+        // With depth and no weights named, the shipped network that reads depth, for the
+        // default cell's whole body.
         "RGB-D, weights ",
-        "procnet/weights/procnet-depth.safetensors, network and fit on 2 thread(s)",
+        "procnet/weights/procnet-depth-human.safetensors, network and fit on 2 thread(s)",
     ] {
         assert!(table.contains(row), "no {row:?} in\n{table}");
     }

@@ -212,16 +212,18 @@ fn episodes_are_deterministic() {
     );
 }
 
-/// The README's evaluation (`configs/evaluate.toml`) with the noisy camera model its filter
-/// cases were found with (`--perception noisy`): these tests are about the filter and the
-/// controller, at the simulator's speed; ProcNet perception has its own case in
-/// tests/scenarios/expectations.toml.
+/// The README's evaluation (`configs/evaluate.toml`) with the noisy camera model and the
+/// human its filter cases were found with (`--perception noisy --set
+/// human_model='"human_arm"'`: the paper's arm, the default cell's human until 2026-12-07;
+/// each case's seed is an episode of that arm's motion): these tests are about the filter
+/// and the controller, at the simulator's speed; the default cell's whole body and ProcNet
+/// perception have their cases in tests/scenarios/expectations.toml.
 fn readme_evaluation() -> Evaluation {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     Evaluation::from_file_as(
         &root.join("configs/evaluate.toml"),
         Some(PerceptionKind::Noisy),
-        &[],
+        &["human_model=\"human_arm\"".to_string()],
     )
     .expect("evaluation loads")
     .0
@@ -530,7 +532,9 @@ fn the_reported_human_acceleration_is_the_second_derivative_of_its_motion() {
 /// Perception switched off mid-episode (`perception.camera_fails_at_s`): from then on the
 /// filter sees no human and brakes: every joint decelerates at its acceleration bound, so the
 /// command's norm never grows again and is zero within half a second; the task is left
-/// unfinished, and no episode comes within d_min.
+/// unfinished, and the robot never moves within d_min. The person may still walk into the
+/// robot that stands (the whole body of seed 2 reaches link 6 at 16.24 s, 0.096 m, the robot
+/// at rest for 12 s): what speed and separation monitoring allows.
 #[test]
 fn a_camera_that_fails_mid_episode_stops_the_robot_without_a_violation() {
     let mut evaluation = Evaluation::from_file(&scenarios().join("shared_space_noisy.toml"))
@@ -542,7 +546,7 @@ fn a_camera_that_fails_mid_episode_stops_the_robot_without_a_violation() {
     camera.camera_fails_at_s = Some(fails_at);
     for seed in 1..=3 {
         let (metrics, trace) = run_qp(&evaluation, seed);
-        assert_eq!(metrics.violations, 0, "seed {seed}: {metrics:?}");
+        assert_eq!(metrics.violation_moving_s, 0.0, "seed {seed}: {metrics:?}");
         assert!(
             metrics.task_time_s.is_none(),
             "seed {seed} finished its task"

@@ -161,7 +161,8 @@ fn velocity_commands_stop_at_position_limits() {
 fn human_links_follow_the_motion() {
     let model = default_model();
     let mut state = CellState::new(&model).expect("state");
-    let (mut q, mut qd) = (vec![0.0; 3], vec![0.0; 3]);
+    let dof = model.human.dof();
+    let (mut q, mut qd) = (vec![0.0; dof], vec![0.0; dof]);
     for _ in 0..1500 {
         step(&model, &mut state, &RobotCommand::Nominal).expect("step");
     }

@@ -73,8 +73,8 @@ fn a_datasets_human_model_replaces_the_scenarios() {
         std::fs::write(&path, config.to_toml()).unwrap();
         Generator::from_file(&path).unwrap().human().model
     };
-    assert_eq!(write("own.toml", None), "human_arm");
-    assert_eq!(write("body.toml", Some("human")), "human");
+    assert_eq!(write("own.toml", None), "human");
+    assert_eq!(write("arm.toml", Some("human_arm")), "human_arm");
     let urdf = write("urdf.toml", Some("people/me.urdf"));
     assert_eq!(
         std::path::Path::new(&urdf),
@@ -140,8 +140,8 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
 
     let config = &generator.config;
     let forearm = Class::Forearm as u8;
-    // The forearm as the frames show it: the built-in human in the default (flesh) look.
-    let mut human = workcell_robots::RobotModel::from_catalogue("human_arm").unwrap();
+    // The forearm as the frames show it: the dataset's human in the default (flesh) look.
+    let mut human = workcell_robots::RobotModel::from_catalogue(&generator.human().model).unwrap();
     human.retain_visuals(|g| workcell_robots::HumanLook::Flesh.shows(g.name.as_deref()));
     let mut forearm_mesh = RenderMesh::default();
     for g in &human.links()[human.link_id("forearm").unwrap()].visuals {
@@ -278,9 +278,25 @@ fn a_dataset_is_reproducible_and_its_labels_match_its_masks() {
                     .filter(|&p| rendered[p] != 0 || amodal[p] == 1)
                     .count();
                 let iou = both as f64 / either as f64;
+                // They differ only on the outline, where resampling from the native camera
+                // moves it by up to a pixel: each pixel they disagree on has a pixel of the
+                // stored forearm and one of the background within one pixel of it. (A
+                // small forearm's IoU says little: one pixel all round is a third of 54.)
+                let on_outline = |p: usize| {
+                    let (x, y) = ((p % side) as i64, (p / side) as i64);
+                    let near: Vec<u8> = (-1..=1)
+                        .flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy)))
+                        .filter(|&(u, v)| u >= 0 && v >= 0 && u < side as i64 && v < side as i64)
+                        .map(|(u, v)| amodal[v as usize * side + u as usize])
+                        .collect();
+                    near.contains(&0) && near.contains(&1)
+                };
+                let inland = (0..n)
+                    .filter(|&p| (rendered[p] != 0) != (amodal[p] == 1) && !on_outline(p))
+                    .count();
                 assert!(
-                    iou > 0.85,
-                    "seq {} frame {t}: IoU {iou} of {all} px",
+                    inland == 0 && iou > 0.7,
+                    "seq {} frame {t}: {inland} px apart off the outline, IoU {iou} of {all} px",
                     s.entry.index
                 );
             }

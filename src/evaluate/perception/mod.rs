@@ -80,7 +80,7 @@ mod tests {
     /// The oracle's look ahead is where the simulated human truly is later: its last
     /// instant, taken in the default cell's first fast movement with 0.3 s of foresight,
     /// matches the arm parts of the simulator's human (its kinematic bodies, stepped 300 ms
-    /// further) to within a micrometre; the first three parts are the present truth.
+    /// further) to within a micrometre; the first parts (one per body part) are the present truth.
     #[test]
     fn foresight_tells_where_the_simulated_human_will_be() {
         use workcell_sim::{CellState, RobotCommand, step};
@@ -117,8 +117,9 @@ mod tests {
             truth: &now,
         };
         oracle.estimate(&input, &mut told);
+        // The default cell's whole body: upper arm, forearm, hand and head.
         let parts = now.parts.len();
-        assert_eq!(parts, 3);
+        assert_eq!(parts, 4);
         assert_eq!(told.parts.len(), parts * (1 + FORESIGHT_INSTANTS));
         assert_eq!(told.parts[..parts], now.parts[..]);
         for _ in 0..300 {

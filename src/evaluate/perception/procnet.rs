@@ -1107,10 +1107,28 @@ mod tests {
 
     /// The loop's conventions end to end: the cell's camera, every arm part's pixels in its
     /// frame, the tracker with the cell's human model, and the arm back in the world where
-    /// the simulated human holds it, delivered after the camera's latency.
+    /// the simulated human holds it, delivered after the camera's latency. On the paper's
+    /// arm, whose fit from true masks is within a centimetre at its exposure.
     #[test]
     fn the_cell_camera_finds_the_arm_it_renders() {
-        let (scenario, model) = cell();
+        finds_the_arm_it_renders("human_arm", 0.01);
+    }
+
+    /// The same on the default cell's whole body, whose trunk is fitted first: its fits'
+    /// mean error at their exposure was 10.4 mm over these four seconds (2026-12-07).
+    #[test]
+    fn the_cell_camera_finds_the_whole_bodys_arm_it_renders() {
+        finds_the_arm_it_renders("human", 0.015);
+    }
+
+    /// [`the_cell_camera_finds_the_arm_it_renders`] on the human `human_model`, its fits'
+    /// mean error at their exposure below `at_exposure_m`.
+    fn finds_the_arm_it_renders(human_model: &str, at_exposure_m: f64) {
+        let path =
+            std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/configs/default.toml"));
+        let mut scenario = Scenario::from_file(path).expect("scenario");
+        scenario.set_human_model(human_model, path);
+        let model = CellModel::new(&scenario, path).expect("cell");
         let mut state = CellState::new(&model).expect("state");
         let config = perfect_masks();
         let mut perception = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
@@ -1163,9 +1181,12 @@ mod tests {
         assert!(checked > 320, "{checked} ticks checked");
         let counts = perception.counts();
         assert!(counts.frames >= 119 && counts.estimates + counts.no_pose == counts.frames);
-        // The fits themselves, at their exposure: the arm within a centimetre on average.
+        // The fits themselves, at their exposure.
         let at_exposure = perception.fit_error_m().expect("fits measured");
-        assert!(at_exposure > 0.0 && at_exposure < 0.01, "{at_exposure} m");
+        assert!(
+            at_exposure > 0.0 && at_exposure < at_exposure_m,
+            "{human_model}: {at_exposure} m"
+        );
     }
 
     /// A camera that stops delivering frames: the estimate ages out after `MAX_AGE_S` and
