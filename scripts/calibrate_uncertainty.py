@@ -253,15 +253,17 @@ def toml_float(x):
 
 
 def toml_value(v):
-    """A fit setting as TOML: a boolean or a number."""
+    """A fit setting as TOML: a boolean, an integer or a float."""
     if isinstance(v, bool):
         return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
     return toml_float(v)
 
 
 FIT_KEYS = {"fit_trunk", "search_below_gain", "reversed_start", "depth_start"}
 # Settings that runs before them do not write (the fit then ran as their defaults say).
-OPTIONAL_FIT_KEYS = {"hull_outlines", "hand_region"}
+OPTIONAL_FIT_KEYS = {"hull_outlines", "hand_region", "trunk_downsample"}
 
 
 def fit_settings(csv_path):

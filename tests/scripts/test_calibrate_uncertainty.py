@@ -239,7 +239,8 @@ class Calibrate(unittest.TestCase):
                 for k in range(100):
                     w.writerow(["", 1.0 if reacquired == "false" else 20.0, 0.0, 0.0, 0.0, reacquired, 0.8])
 
-        fit = "fit_trunk = true\nsearch_below_gain = 0.7\nreversed_start = true\ndepth_start = true\n"
+        fit = ("fit_trunk = true\nsearch_below_gain = 0.7\nreversed_start = true\ndepth_start = true\n"
+               "trunk_downsample = 2\n")
         with tempfile.TemporaryDirectory() as d:
             val, test = os.path.join(d, "val"), os.path.join(d, "test")
             for folder in (val, test):
@@ -251,7 +252,8 @@ class Calibrate(unittest.TestCase):
                     f.write("# a comment\n" + fit)
             self.assertEqual(
                 calibrate_uncertainty.fit_settings(os.path.join(val, "pose_frames.csv")),
-                {"fit_trunk": True, "search_below_gain": 0.7, "reversed_start": True, "depth_start": True},
+                {"fit_trunk": True, "search_below_gain": 0.7, "reversed_start": True, "depth_start": True,
+                 "trunk_downsample": 2},
             )
             self.assertIsNone(calibrate_uncertainty.fit_settings(os.path.join(val, "pose_frames_b.csv")))
             weights = os.path.join(d, "w.safetensors")
@@ -266,6 +268,9 @@ class Calibrate(unittest.TestCase):
                 doc = tomllib.load(f)
             self.assertEqual(doc["with_depth"]["fit"]["search_below_gain"], 0.7)
             self.assertIs(doc["with_depth"]["fit"]["depth_start"], True)
+            # An integer setting stays an integer (the fit's settings read it as one).
+            self.assertEqual(doc["with_depth"]["fit"]["trunk_downsample"], 2)
+            self.assertIsInstance(doc["with_depth"]["fit"]["trunk_downsample"], int)
             self.assertEqual(doc["with_depth"]["tracked_floors_m"], [0.01, 0.01, 0.01, 0.01])
             # The test split measured with another fit is refused.
             with open(os.path.join(test, "fit.toml"), "w") as f:

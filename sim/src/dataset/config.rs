@@ -127,7 +127,7 @@ pub struct DatasetConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub look: Option<HumanLook>,
     /// The human's model (a catalogue name, or a URDF relative to this file) instead of the
-    /// scenario's (`experiments/configs/dataset-human.toml` sets the whole body, `human`).
+    /// scenario's (`configs/dataset.toml` sets the paper's arm, `human_arm`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub human_model: Option<String>,
     pub cell_cameras: CellCameras,

@@ -148,6 +148,11 @@ pub struct ProcNetConfig {
     /// value than the calibration's is warned of.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hand_region: Option<bool>,
+    /// The trunk's stage runs at `1 / trunk_downsample` of the masks' resolution, 1 to 4
+    /// (`ArmFitConfig::trunk_downsample`). Default: the masks' calibration's, else 1; as
+    /// `fit_trunk`, another value than the calibration's is warned of.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trunk_downsample: Option<u32>,
     /// The camera delivers nothing from this time on, s (a failed camera): the last estimate
     /// ages out ([`super::procnet::MAX_AGE_S`]) and the filter then brakes. Left out, never.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -219,6 +224,7 @@ impl PerceptionKind {
                 "velocity_fits",
                 "true_trunk",
                 "hand_region",
+                "trunk_downsample",
                 "camera_fails_at_s",
             ],
         }
@@ -278,6 +284,7 @@ impl Default for ProcNetConfig {
             velocity_fits: 2,
             true_trunk: false,
             hand_region: None,
+            trunk_downsample: None,
             camera_fails_at_s: None,
         }
     }
@@ -461,7 +468,7 @@ impl ProcNetConfig {
             }
         };
         format!(
-            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{}{}",
+            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{}{}{}",
             if self.depth {
                 " with depth (RGB-D)"
             } else {
@@ -481,6 +488,10 @@ impl ProcNetConfig {
                 Some(true) => ", the region holds the hand",
                 Some(false) => ", the region around shoulder, elbow and wrist",
                 None => "",
+            },
+            match self.trunk_downsample {
+                Some(k) => format!(", the trunk's stage at 1/{k} of the masks' resolution"),
+                None => String::new(),
             }
         )
     }
@@ -592,6 +603,14 @@ impl PerceptionConfig {
                 if let Some(g) = c.search_below_gain {
                     check("search_below_gain", g, (0.0..=1.0).contains(&g))?;
                 }
+                if let Some(k) = c.trunk_downsample
+                    && !(1..=4).contains(&k)
+                {
+                    return Err(crate::Error::config(
+                        "perception.trunk_downsample",
+                        format!("out of range: {k} (1 to 4)"),
+                    ));
+                }
                 check_optional("uncertainty_scale", c.uncertainty_scale)?;
                 check_optional("uncertainty_floor_m", c.uncertainty_floor_m)
             }
@@ -675,6 +694,7 @@ mod tests {
                     depth_start: Some(true),
                     search_below_gain: Some(0.7),
                     hand_region: Some(true),
+                    trunk_downsample: Some(2),
                     uncertainty_scale: Some(1.0),
                     uncertainty_floor_m: Some(0.01),
                     camera_fails_at_s: Some(1.0),

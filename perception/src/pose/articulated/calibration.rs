@@ -109,6 +109,13 @@ pub struct FitSettings {
     /// leaves it out).
     #[serde(default)]
     pub hand_region: bool,
+    /// [`ArmFitConfig::trunk_downsample`] (1 where a file leaves it out).
+    #[serde(default = "full_resolution")]
+    pub trunk_downsample: u32,
+}
+
+fn full_resolution() -> u32 {
+    1
 }
 
 impl FitSettings {
@@ -122,6 +129,7 @@ impl FitSettings {
             depth_start: config.depth_start,
             hull_outlines: config.hull_outlines,
             hand_region: config.hand_region,
+            trunk_downsample: config.trunk_downsample,
         }
     }
 
@@ -135,6 +143,7 @@ impl FitSettings {
             depth_start: self.depth_start,
             hull_outlines: self.hull_outlines,
             hand_region: self.hand_region,
+            trunk_downsample: self.trunk_downsample,
             ..config
         }
     }
@@ -151,6 +160,7 @@ impl FitSettings {
                 ("depth_start", f.depth_start.to_string()),
                 ("hull_outlines", f.hull_outlines.to_string()),
                 ("hand_region", f.hand_region.to_string()),
+                ("trunk_downsample", f.trunk_downsample.to_string()),
             ]
         };
         settings(self)

@@ -139,6 +139,11 @@ pub struct ArmFitConfig {
     /// torso's spine along the principal axis of its depth points (at each turn of its
     /// grid): leans beyond the grid's range. Default true.
     pub spine_start: bool,
+    /// The trunk's stage ([`ArmFitter::fit_trunk`]) runs on the torso's planes at `1 /
+    /// trunk_downsample` of the masks' resolution (block means of the masks, block medians
+    /// of the depth image; 1 keeps the masks' own). Its renders are most of the stage's time,
+    /// and their pixels fall with the square. Default 1.
+    pub trunk_downsample: u32,
 }
 
 impl Default for ArmFitConfig {
@@ -181,6 +186,7 @@ impl Default for ArmFitConfig {
             reversed_start: false,
             depth_start: false,
             spine_start: true,
+            trunk_downsample: 1,
         }
     }
 }

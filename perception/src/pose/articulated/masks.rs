@@ -88,6 +88,64 @@ impl ArmMasks {
     pub fn forearm(&self) -> &[f32] {
         &self.parts[1]
     }
+
+    /// The planes the trunk's stage reads (the torso, the background, the depth image) at
+    /// `1/k` of the resolution: each mask pixel the mean of a `k x k` block, each depth the
+    /// median of the block's pixels that have one (0 where none does); the arm's parts left
+    /// empty. `None` unless `k` divides both sides and the torso's plane is whole.
+    pub(super) fn trunk_planes_downsampled(&self, k: usize) -> Option<Self> {
+        let (w, h) = (self.width, self.height);
+        if k < 2 || w % k != 0 || h % k != 0 || self.torso.len() != w * h {
+            return None;
+        }
+        let (sw, sh) = (w / k, h / k);
+        let block = |plane: &[f32]| -> Vec<f32> {
+            let mut out = vec![0.0f32; sw * sh];
+            for (i, o) in out.iter_mut().enumerate() {
+                let (x0, y0) = ((i % sw) * k, (i / sw) * k);
+                let sum: f32 = (y0..y0 + k)
+                    .flat_map(|y| &plane[y * w + x0..y * w + x0 + k])
+                    .sum();
+                *o = sum / (k * k) as f32;
+            }
+            out
+        };
+        // A depth block's median over its pixels that have one: a block on the torso's
+        // outline keeps the torso's depth where most of it shows the torso, not a mean
+        // halfway to the wall behind.
+        let depth_m = match &self.depth_m {
+            Some(d) if d.len() == w * h => {
+                let mut out = vec![0.0f32; sw * sh];
+                let mut zs = Vec::with_capacity(k * k);
+                for (i, o) in out.iter_mut().enumerate() {
+                    let (x0, y0) = ((i % sw) * k, (i / sw) * k);
+                    zs.clear();
+                    for y in y0..y0 + k {
+                        zs.extend(
+                            d[y * w + x0..y * w + x0 + k]
+                                .iter()
+                                .filter(|z| z.is_finite() && **z > 0.0),
+                        );
+                    }
+                    zs.sort_by(f32::total_cmp);
+                    let m = zs.len();
+                    if m > 0 {
+                        *o = 0.5 * (zs[(m - 1) / 2] + zs[m / 2]);
+                    }
+                }
+                Some(out)
+            }
+            _ => None,
+        };
+        Some(Self {
+            width: sw,
+            height: sh,
+            parts: [Vec::new(), Vec::new(), Vec::new()],
+            background: block(&self.background),
+            torso: block(&self.torso),
+            depth_m,
+        })
+    }
 }
 
 pub(super) fn check_len(len: usize, width: usize, height: usize) -> Result<()> {

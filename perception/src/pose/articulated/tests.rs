@@ -658,7 +658,8 @@ fn the_torsos_depth_points_lay_the_spine_beyond_the_grid() {
         }
         let (classes, depth) = observe_body(&arm, &camera, &truth);
         let mut masks = ArmMasks::from_classes(&classes, 128, 128).expect("masks");
-        let spine = measured_spine(&camera, &masks, &depth, f32::NEG_INFINITY).expect("a spine");
+        let spine =
+            measured_spine(&camera, &masks, &depth, f32::NEG_INFINITY, 1.0).expect("a spine");
         let fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), trunk_on.clone());
         let laid = fitter.spine_along(&trunk, spine, turn).expect("laid");
         assert!(
@@ -798,7 +799,24 @@ fn fit_trunk_to(
 /// person by 1.4 rad in the third frame.
 #[test]
 fn the_trunks_stage_follows_a_turned_person_who_steps() {
-    let (arm, trunk, camera, mut fitter) = trunk_stage();
+    follows_a_turned_person_who_steps(1);
+}
+
+/// The same on the torso's planes at half the masks' resolution
+/// ([`ArmFitConfig::trunk_downsample`]): within the same bounds.
+#[test]
+fn the_trunks_stage_at_half_resolution_follows_a_turned_person_who_steps() {
+    follows_a_turned_person_who_steps(2);
+}
+
+fn follows_a_turned_person_who_steps(trunk_downsample: u32) {
+    let (arm, trunk, camera, _) = trunk_stage();
+    let config = ArmFitConfig {
+        fit_trunk: true,
+        trunk_downsample,
+        ..ArmFitConfig::default()
+    };
+    let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config);
     let mut truth = arm.configuration(&[0.9, 0.4, 0.3, 1.0, 1.2]);
     let all: Vec<usize> = trunk
         .joints()
@@ -817,7 +835,7 @@ fn the_trunks_stage_follows_a_turned_person_who_steps() {
         truth[slide] += 0.05;
         let [angle, pelvis] = fit_trunk_to(&mut fitter, (&arm, &trunk, &camera), &truth);
         eprintln!(
-            "frame {frame}: {angle:.3} rad, pelvis {:.1} cm",
+            "1/{trunk_downsample}: frame {frame}: {angle:.3} rad, pelvis {:.1} cm",
             100.0 * pelvis
         );
         assert!(
@@ -1274,6 +1292,7 @@ fn the_floor_follows_the_hidden_share() {
             depth_start: false,
             hull_outlines: true,
             hand_region: true,
+            trunk_downsample: 2,
         }),
     };
     let floors: Vec<f64> = [0.0, 0.24, 0.25, 0.5, 0.74, 0.75, 1.0]
@@ -1361,10 +1380,13 @@ fn the_floor_follows_the_hidden_share() {
         .collect();
     let older = toml::from_str::<Calibration>(&older).expect("parses");
     assert_eq!(
-        older
-            .fit
-            .map(|f| (f.hull_outlines, f.hand_region, f.search_below_gain)),
-        Some((false, false, 0.7))
+        older.fit.map(|f| (
+            f.hull_outlines,
+            f.hand_region,
+            f.search_below_gain,
+            f.trunk_downsample
+        )),
+        Some((false, false, 0.7, 1))
     );
     let other = FitSettings {
         depth_start: true,
@@ -1647,4 +1669,41 @@ fn the_torsos_fixed_point_sum_is_the_masks_sum() {
         covered_sum(&mask, &s, |m| m > 0),
         covered_sum(&depth, &s, |z| z > 0.0)
     );
+}
+
+/// The trunk's planes at half resolution: each mask pixel the mean of its 2x2 block, each
+/// depth the median of the block's pixels with a depth (the mean of the middle two of four;
+/// the one depth where three have none; 0 where none has), the arm's planes dropped; no
+/// planes for a side that the factor does not divide.
+#[test]
+fn the_trunks_planes_downsample_to_block_means_and_depth_medians() {
+    let plane = |v: [f32; 16]| v.to_vec();
+    let masks = ArmMasks {
+        width: 4,
+        height: 4,
+        parts: [vec![0.0; 16], vec![0.0; 16], vec![0.0; 16]],
+        #[rustfmt::skip]
+        torso: plane([
+            1.0, 1.0, 0.0, 1.0,
+            1.0, 0.0, 0.0, 0.0,
+            0.25, 0.5, 1.0, 1.0,
+            0.75, 0.5, 1.0, 1.0,
+        ]),
+        background: plane([0.0; 16]),
+        #[rustfmt::skip]
+        depth_m: Some(plane([
+            2.0, 2.0, 0.0, 0.0,
+            2.0, 4.0, f32::NAN, 0.0,
+            1.0, 3.0, 0.0, 0.0,
+            2.0, 5.0, 0.0, 2.5,
+        ])),
+    };
+    let half = masks.trunk_planes_downsampled(2).expect("4x4 halves");
+    assert_eq!((half.width, half.height), (2, 2));
+    assert_eq!(half.torso, vec![0.75, 0.25, 0.5, 1.0]);
+    assert_eq!(half.background, vec![0.0; 4]);
+    assert_eq!(half.depth_m, Some(vec![2.0, 0.0, 2.5, 2.5]));
+    assert!(half.parts.iter().all(Vec::is_empty));
+    assert!(masks.trunk_planes_downsampled(3).is_none());
+    assert!(masks.trunk_planes_downsampled(1).is_none());
 }

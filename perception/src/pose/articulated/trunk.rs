@@ -373,6 +373,9 @@ struct TorsoTarget<'a> {
     s: Vec<i32>,
     /// The torso mask's pixels.
     mass: f64,
+    /// How many of the masks' pixels one of these covers (the trunk's stage may run on
+    /// coarser planes, [`ArmFitConfig::trunk_downsample`]).
+    px_area: f64,
     torso: &'a [f32],
     background: &'a [f32],
     depth: Option<&'a [f32]>,
@@ -392,6 +395,26 @@ impl<R: Renderer> ArmFitter<R> {
     /// # Errors
     /// A renderer failure.
     pub fn fit_trunk(&mut self, camera: &Camera, masks: &ArmMasks) -> Result<Option<f64>> {
+        let k = self.config.trunk_downsample.max(1) as usize;
+        if k > 1
+            && camera.width as usize == masks.width
+            && camera.height as usize == masks.height
+            && let Some(coarse) = masks.trunk_planes_downsampled(k)
+        {
+            let camera = camera.resized(coarse.width as u32, coarse.height as u32)?;
+            return self.fit_trunk_at(&camera, &coarse, (k * k) as f64);
+        }
+        self.fit_trunk_at(camera, masks, 1.0)
+    }
+
+    /// [`Self::fit_trunk`] on `masks` whose pixels each cover `px_area` of the masks'
+    /// pixels the thresholds are counted in ([`TRUNK_MIN_PIXELS`], [`SPINE_MIN_PIXELS`]).
+    fn fit_trunk_at(
+        &mut self,
+        camera: &Camera,
+        masks: &ArmMasks,
+        px_area: f64,
+    ) -> Result<Option<f64>> {
         let Some(trunk) = self.arm.trunk.clone() else {
             return Ok(None);
         };
@@ -400,10 +423,11 @@ impl<R: Renderer> ArmFitter<R> {
             return Ok(None);
         }
         let mass: f64 = masks.torso.iter().map(|&v| f64::from(v)).sum();
-        if mass < TRUNK_MIN_PIXELS {
+        if mass * px_area < TRUNK_MIN_PIXELS {
             return Ok(None);
         }
         let mut target = TorsoTarget {
+            px_area,
             s: masks
                 .torso
                 .iter()
@@ -515,7 +539,7 @@ impl<R: Renderer> ArmFitter<R> {
             && self.config.spine_start
         {
             let hidden_below_m = (self.arm.nearest_depth_m(&camera.X_WC) - HIDDEN_MARGIN_M) as f32;
-            if let Some(spine_W) = measured_spine(camera, masks, depth, hidden_below_m) {
+            if let Some(spine_W) = measured_spine(camera, masks, depth, hidden_below_m, px_area) {
                 let mut turns: Vec<f64> = trunk.grid.iter().map(|g| g[0]).collect();
                 turns.push(previous[0]);
                 turns.sort_by(f64::total_cmp);
@@ -747,7 +771,7 @@ impl<R: Renderer> ArmFitter<R> {
         };
         let mean = |points: &mut dyn Iterator<Item = Vector>| {
             let (sum, n) = points.fold((Vector::ZERO, 0usize), |(s, n), p| (s + p, n + 1));
-            (n as f64 >= TRUNK_MIN_PIXELS).then(|| sum / n as f64)
+            (n as f64 * target.px_area >= TRUNK_MIN_PIXELS).then(|| sum / n as f64)
         };
         let measured = mean(
             &mut depth
@@ -918,15 +942,17 @@ pub(super) const SPINE_MIN_PIXELS: usize = 64;
 /// The torso's spine where the depth image shows it (world, unit, its sign open): the
 /// principal axis of the points the torso's mask (the head's with it) shows at a depth of at
 /// least `hidden_below_m`, where it is at least [`SPINE_ELONGATION`] times as long (in
-/// variance) as across. `None` with fewer than [`SPINE_MIN_PIXELS`] such points.
+/// variance) as across. `None` with fewer than [`SPINE_MIN_PIXELS`] such points, each
+/// counted as `px_area` pixels.
 pub(super) fn measured_spine(
     camera: &Camera,
     masks: &ArmMasks,
     depth: &[f32],
     hidden_below_m: f32,
+    px_area: f64,
 ) -> Option<Vector> {
     let points = plane_points(camera, masks.width, &masks.torso, depth, hidden_below_m);
-    if points.len() < SPINE_MIN_PIXELS {
+    if (points.len() as f64 * px_area) < SPINE_MIN_PIXELS as f64 {
         return None;
     }
     let (_, covariance) = mean_and_covariance(points.iter().copied())?;
