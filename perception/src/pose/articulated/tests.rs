@@ -1371,11 +1371,16 @@ fn the_floor_follows_the_hidden_share() {
         "{text}"
     );
     assert_eq!(toml::from_str::<Calibration>(&text).expect("parses"), c);
-    // A file from before the outlines and the hand's region: the fit as it was then, the
-    // pieces, read through the region around shoulder, elbow and wrist.
+    // A file from before the outlines, the hand's region and the trunk's resolution: the
+    // fit as it was then, the pieces, read through the region around shoulder, elbow and
+    // wrist, the trunk at the masks' resolution.
     let older: String = text
         .lines()
-        .filter(|l| !l.starts_with("hull_outlines") && !l.starts_with("hand_region"))
+        .filter(|l| {
+            !l.starts_with("hull_outlines")
+                && !l.starts_with("hand_region")
+                && !l.starts_with("trunk_downsample")
+        })
         .map(|l| format!("{l}\n"))
         .collect();
     let older = toml::from_str::<Calibration>(&older).expect("parses");
