@@ -148,6 +148,11 @@ pub struct ProcNetConfig {
     /// value than the calibration's is warned of.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hand_region: Option<bool>,
+    /// The fit renders each part's convex hull instead of its mesh
+    /// (`ArmFitConfig::hull_outlines`). Default: the masks' calibration's, else false; as
+    /// `fit_trunk`, another value than the calibration's is warned of.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hull_outlines: Option<bool>,
     /// The trunk's stage runs at `1 / trunk_downsample` of the masks' resolution, 1 to 4
     /// (`ArmFitConfig::trunk_downsample`). Default: the masks' calibration's, else 1; as
     /// `fit_trunk`, another value than the calibration's is warned of.
@@ -224,6 +229,7 @@ impl PerceptionKind {
                 "velocity_fits",
                 "true_trunk",
                 "hand_region",
+                "hull_outlines",
                 "trunk_downsample",
                 "camera_fails_at_s",
             ],
@@ -284,6 +290,7 @@ impl Default for ProcNetConfig {
             velocity_fits: 2,
             true_trunk: false,
             hand_region: None,
+            hull_outlines: None,
             trunk_downsample: None,
             camera_fails_at_s: None,
         }
@@ -468,7 +475,7 @@ impl ProcNetConfig {
             }
         };
         format!(
-            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{}{}{}",
+            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{}{}{}{}",
             if self.depth {
                 " with depth (RGB-D)"
             } else {
@@ -487,6 +494,11 @@ impl ProcNetConfig {
             match self.hand_region {
                 Some(true) => ", the region holds the hand",
                 Some(false) => ", the region around shoulder, elbow and wrist",
+                None => "",
+            },
+            match self.hull_outlines {
+                Some(true) => ", the parts' hulls",
+                Some(false) => ", the parts' meshes",
                 None => "",
             },
             match self.trunk_downsample {
@@ -694,6 +706,7 @@ mod tests {
                     depth_start: Some(true),
                     search_below_gain: Some(0.7),
                     hand_region: Some(true),
+                    hull_outlines: Some(true),
                     trunk_downsample: Some(2),
                     uncertainty_scale: Some(1.0),
                     uncertainty_floor_m: Some(0.01),

@@ -161,12 +161,14 @@ impl ProcNetCamera {
         fit.search_below_gain = config.search_below_gain.unwrap_or(fit.search_below_gain);
         fit.hand_region = config.hand_region.unwrap_or(fit.hand_region);
         fit.trunk_downsample = config.trunk_downsample.unwrap_or(fit.trunk_downsample);
+        fit.hull_outlines = config.hull_outlines.unwrap_or(fit.hull_outlines);
         let overridden = config.fit_trunk.is_some()
             || config.reversed_start.is_some()
             || config.depth_start.is_some()
             || config.search_below_gain.is_some()
             || config.hand_region.is_some()
-            || config.trunk_downsample.is_some();
+            || config.trunk_downsample.is_some()
+            || config.hull_outlines.is_some();
         if overridden && let Some(measured_fit) = measured.fit {
             let differences = measured_fit.differences(&FitSettings::of(&fit));
             if !differences.is_empty() {
