@@ -80,7 +80,8 @@ mod tests {
     /// The oracle's look ahead is where the simulated human truly is later: its last
     /// instant, taken in the default cell's first fast movement with 0.3 s of foresight,
     /// matches the arm parts of the simulator's human (its kinematic bodies, stepped 300 ms
-    /// further) to within a micrometre; the first parts (one per body part) are the present truth.
+    /// further) to within a micrometre; the first parts (one per body part) are the present
+    /// truth.
     #[test]
     fn foresight_tells_where_the_simulated_human_will_be() {
         use workcell_sim::{CellState, RobotCommand, step};

@@ -92,24 +92,21 @@ impl ArmMasks {
     /// The planes the trunk's stage reads (the torso, the background, the depth image) at
     /// `1/k` of the resolution: each mask pixel the mean of a `k x k` block, each depth the
     /// median of the block's pixels that have one (0 where none does); the arm's parts left
-    /// empty. `None` unless `k` divides both sides and the torso's plane is whole.
+    /// empty. `None` unless `k` divides both sides and the torso's and background's planes are
+    /// whole.
     pub(super) fn trunk_planes_downsampled(&self, k: usize) -> Option<Self> {
         let (w, h) = (self.width, self.height);
-        if k < 2 || w % k != 0 || h % k != 0 || self.torso.len() != w * h {
+        if k < 2
+            || !w.is_multiple_of(k)
+            || !h.is_multiple_of(k)
+            || self.torso.len() != w * h
+            || self.background.len() != w * h
+        {
             return None;
         }
         let (sw, sh) = (w / k, h / k);
-        let block = |plane: &[f32]| -> Vec<f32> {
-            let mut out = vec![0.0f32; sw * sh];
-            for (i, o) in out.iter_mut().enumerate() {
-                let (x0, y0) = ((i % sw) * k, (i / sw) * k);
-                let sum: f32 = (y0..y0 + k)
-                    .flat_map(|y| &plane[y * w + x0..y * w + x0 + k])
-                    .sum();
-                *o = sum / (k * k) as f32;
-            }
-            out
-        };
+        // The masks' block means: the region's own box filter.
+        let block = |plane: &[f32]| workcell_render::roi::resample(plane, 1, w, h, sw, sh);
         // A depth block's median over its pixels that have one: a block on the torso's
         // outline keeps the torso's depth where most of it shows the torso, not a mean
         // halfway to the wall behind.

@@ -1711,4 +1711,9 @@ fn the_trunks_planes_downsample_to_block_means_and_depth_medians() {
     assert!(half.parts.iter().all(Vec::is_empty));
     assert!(masks.trunk_planes_downsampled(3).is_none());
     assert!(masks.trunk_planes_downsampled(1).is_none());
+    let short_background = ArmMasks {
+        background: vec![0.0; 15],
+        ..masks
+    };
+    assert!(short_background.trunk_planes_downsampled(2).is_none());
 }
