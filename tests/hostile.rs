@@ -115,6 +115,15 @@ fn counts_beyond_their_limits_are_refused_by_the_parser() {
             ],
             "perception.uncertainty_floor_m: out of range: -1 (>= 0; leave the key out",
         ),
+        (
+            vec![
+                "evaluate",
+                "configs/evaluate.toml",
+                "--set",
+                "perception.frame_stride=0",
+            ],
+            "perception.frame_stride: out of range: 0 (1 to 8)",
+        ),
     ] {
         refused(&args, needle);
     }

@@ -232,6 +232,27 @@ struct Playback {
     end: ClipEnd,
 }
 
+impl Playback {
+    /// The clip's time at played time `t_s` (the speed applied), and the sign of its
+    /// velocity there (0 holding after the end, -1 played backwards).
+    fn clip_time(&self, t_s: f64) -> (f64, f64) {
+        let duration = self.motion.duration_s();
+        let t = self.start_s + t_s;
+        match self.end {
+            ClipEnd::Hold => (t.min(duration), if t < duration { 1.0 } else { 0.0 }),
+            ClipEnd::Loop => (t.rem_euclid(duration.max(1e-9)), 1.0),
+            ClipEnd::Reverse => {
+                let u = t.rem_euclid(2.0 * duration.max(1e-9));
+                if u <= duration {
+                    (u, 1.0)
+                } else {
+                    (2.0 * duration - u, -1.0)
+                }
+            }
+        }
+    }
+}
+
 impl HumanMotion {
     /// Generates the motion of `arm` (its joints found by name, see the module's summary;
     /// every joint within its position limits), cycling through `kinds`.
@@ -399,6 +420,15 @@ impl HumanMotion {
         }
     }
 
+    /// The recorded person's other arm, the one the model does not have or follow, at `t_s`
+    /// (`RecordedMotion::other_arm`): shoulder, elbow and wrist in the model's `torso`
+    /// frame. `None` for the generator's motion and for a clip without that arm.
+    #[must_use]
+    pub fn other_arm(&self, t_s: f64) -> Option<[Vector; 3]> {
+        let p = self.recorded.as_ref()?;
+        p.motion.other_arm_at(p.clip_time(t_s * self.speed).0)
+    }
+
     /// The recorded clip's name, when a clip drives the human.
     #[must_use]
     pub fn clip(&self) -> Option<&str> {
@@ -444,20 +474,7 @@ impl HumanMotion {
     pub fn sample(&self, t_s: f64, q: &mut [f64], qd: &mut [f64]) {
         if let Some(p) = &self.recorded {
             let n = self.dof.min(q.len());
-            let duration = p.motion.duration_s();
-            let t = p.start_s + t_s * self.speed;
-            let (clip_t, sign) = match p.end {
-                ClipEnd::Hold => (t.min(duration), if t < duration { 1.0 } else { 0.0 }),
-                ClipEnd::Loop => (t.rem_euclid(duration.max(1e-9)), 1.0),
-                ClipEnd::Reverse => {
-                    let u = t.rem_euclid(2.0 * duration.max(1e-9));
-                    if u <= duration {
-                        (u, 1.0)
-                    } else {
-                        (2.0 * duration - u, -1.0)
-                    }
-                }
-            };
+            let (clip_t, sign) = p.clip_time(t_s * self.speed);
             p.motion.sample(clip_t, &mut q[..n], &mut qd[..n]);
             for v in &mut qd[..n] {
                 *v *= sign * self.speed;
@@ -641,7 +658,24 @@ mod tests {
             q: (0..=10)
                 .map(|f| vec![0.1 * f64::from(f), 0.0, 0.0])
                 .collect(),
+            // The other arm's wrist moves along x as the joint does.
+            other_arm: (0..=10)
+                .map(|f| [Vector::ZERO, Vector::Z, Vector::X * (0.1 * f64::from(f))])
+                .collect(),
         };
+        // The other arm is played at the same clip time as the joints.
+        let wrist = |end, t: f64| {
+            let m = HumanMotion::recorded(motion.clone(), 0.0, end);
+            m.other_arm(t).expect("the clip has the other arm")[2].x
+        };
+        for (end, t, x) in [
+            (ClipEnd::Hold, 0.5, 0.5),
+            (ClipEnd::Hold, 1.7, 1.0),
+            (ClipEnd::Loop, 1.25, 0.25),
+            (ClipEnd::Reverse, 1.25, 0.75),
+        ] {
+            assert!((wrist(end, t) - x).abs() < 1e-12, "{end:?} at {t} s");
+        }
         let at = |end, t: f64| {
             let m = HumanMotion::recorded(motion.clone(), 0.0, end);
             let (mut q, mut qd) = ([0.0; 3], [0.0; 3]);
@@ -665,6 +699,8 @@ mod tests {
         fast.sample(0.25, &mut q, &mut qd);
         assert!((q[0] - 0.5).abs() < 1e-12 && (qd[0] - 2.0).abs() < 1e-12);
         assert_eq!(fast.clip(), Some("ramp"));
+        let other = fast.other_arm(0.25).expect("the other arm");
+        assert!((other[2].x - 0.5).abs() < 1e-12);
         assert_eq!(fast.kind_at(0.1), None);
     }
 }

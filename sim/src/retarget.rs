@@ -66,6 +66,15 @@ impl Side {
             Self::Right => "right",
         }
     }
+
+    /// The other side.
+    #[must_use]
+    pub fn other(self) -> Self {
+        match self {
+            Self::Left => Self::Right,
+            Self::Right => Self::Left,
+        }
+    }
 }
 
 /// How a clip is retargeted.
@@ -102,6 +111,13 @@ pub struct RecordedMotion {
     pub rate_hz: f64,
     /// Joint positions, frame by frame (`frames x dof`).
     pub q: Vec<Vec<f64>>,
+    /// The arm the model does not follow (the recording's other side), frame by frame: its
+    /// shoulder, elbow and wrist in the model's `torso` frame (its root without one), placed
+    /// as the followed arm's targets are (step 4 of the module's summary: the model's
+    /// shoulder mirrored across the torso's sagittal plane, the recorded directions laid on
+    /// the model's bones). Empty where the clip lacks that side's elbow or wrist. Nothing
+    /// drives or perceives this arm: an evaluation measures only how near the robot it came.
+    pub other_arm: Vec<[Vector; 3]>,
 }
 
 impl RecordedMotion {
@@ -120,6 +136,9 @@ impl RecordedMotion {
     /// Joint positions and velocities at `t_s` in `[0, duration]` (clamped), linearly
     /// between frames: the velocity is the segment's.
     pub fn sample(&self, t_s: f64, q: &mut [f64], qd: &mut [f64]) {
+        if self.q.is_empty() {
+            return;
+        }
         let last = self.frames().saturating_sub(1);
         let x = (t_s * self.rate_hz).clamp(0.0, last as f64);
         let i = (x.floor() as usize).min(last.saturating_sub(1));
@@ -129,6 +148,18 @@ impl RecordedMotion {
             q[j] = a[j] + (b[j] - a[j]) * s;
             qd[j] = (b[j] - a[j]) * self.rate_hz;
         }
+    }
+
+    /// The other arm's shoulder, elbow and wrist ([`Self::other_arm`]) at `t_s` in `[0,
+    /// duration]` (clamped), linearly between frames; `None` without that arm.
+    #[must_use]
+    pub fn other_arm_at(&self, t_s: f64) -> Option<[Vector; 3]> {
+        let last = self.other_arm.len().checked_sub(1)?;
+        let x = (t_s * self.rate_hz).clamp(0.0, last as f64);
+        let i = (x.floor() as usize).min(last.saturating_sub(1));
+        let s = x - i as f64;
+        let (a, b) = (&self.other_arm[i], &self.other_arm[(i + 1).min(last)]);
+        Some(std::array::from_fn(|k| a[k] + (b[k] - a[k]) * s))
     }
 }
 
@@ -360,6 +391,17 @@ pub fn retarget(
         trunk_q.push([travel.x, travel.y, turn, lean, side]);
     }
     let mut targets = Vec::with_capacity(frames);
+    // The other side's landmarks, where the clip has them all.
+    let other_landmarks = config.side.other().landmarks();
+    let other_tracks: Option<[&Vec<Vector>; 3]> = other_landmarks
+        .iter()
+        .map(|l| tracks.get(l))
+        .collect::<Option<Vec<_>>>()
+        .and_then(|v| v.try_into().ok());
+    // The model's shoulder mirrored across its torso's sagittal plane (the torso frame's
+    // x-z plane: x forward, y to the left).
+    let s_other = Vector::new(s_torso.x, -s_torso.y, s_torso.z);
+    let mut other_arm = Vec::with_capacity(if other_tracks.is_some() { frames } else { 0 });
     let (mut upper, mut fore) = (Vec::new(), Vec::new());
     for (f, r) in axes.iter().enumerate() {
         let (s, e, w) = (
@@ -382,6 +424,11 @@ pub fn retarget(
         let e_t = s_torso + to_torso(e - s).normalize_or_zero() * bones[0];
         let w_t = e_t + to_torso(w - e).normalize_or_zero() * bones[1];
         targets.push((X_BT.transform_point(e_t), X_BT.transform_point(w_t)));
+        if let Some([s_o, e_o, w_o]) = other_tracks {
+            let elbow_o = s_other + to_torso(e_o[f] - s_o[f]).normalize_or_zero() * bones[0];
+            let wrist_o = elbow_o + to_torso(w_o[f] - e_o[f]).normalize_or_zero() * bones[1];
+            other_arm.push([s_other, elbow_o, wrist_o]);
+        }
         trunk_q[f] = std::array::from_fn(|k| trunk.0[k].map_or(0.0, |j| q[j]));
     }
     let median = |v: &mut Vec<f64>| Spread::of(v).median;
@@ -482,6 +529,7 @@ pub fn retarget(
             name: clip.name.clone(),
             rate_hz: piece.rate_hz,
             q: out,
+            other_arm,
         },
         report,
     ))
@@ -822,6 +870,8 @@ mod tests {
         assert_eq!(motion.frames(), frames);
         assert!(report.wrist_error_m.peak < 1e-3, "{report:?}");
         assert_eq!(report.clamped_frames, 0);
+        // The clip has no left elbow or wrist: no other arm, nothing sampled.
+        assert!(motion.other_arm.is_empty() && motion.other_arm_at(1.0).is_none());
         // Away from the ends (the filter's padding), the joints are the truth's.
         for (f, (got, want)) in motion
             .q
@@ -892,20 +942,33 @@ mod tests {
             Landmark::RightShoulder,
             Landmark::RightElbow,
             Landmark::RightWrist,
+            Landmark::LeftElbow,
+            Landmark::LeftWrist,
         ];
+        // The left arm is the right one mirrored across the torso's sagittal plane (its
+        // frame's x-z plane): in the torso frame, the right arm's points with y negated.
+        let mirror = |v: Vector| Vector::new(v.x, -v.y, v.z);
         let mut positions = Vec::new();
+        let mut mirrored = Vec::new();
         for q in &truth {
             model.forward_kinematics(q, &mut state).expect("fk");
             let X_BT = *state.link_pose(torso);
-            let s = state.link_pose(links[0]).translation;
+            let [s, e, w] = links.map(|l| state.link_pose(l).translation);
+            let in_torso = [s, e, w].map(|p| X_BT.inverse_transform_point(p));
+            let left_s = s + X_BT.rotation * Vector::new(0.0, 0.38, 0.0);
+            let left_e = left_s + X_BT.rotation * mirror(in_torso[1] - in_torso[0]);
+            let left_w = left_e + X_BT.rotation * mirror(in_torso[2] - in_torso[1]);
             positions.extend([
                 X_BT.translation,
                 X_BT.transform_point(Vector::new(0.0, 0.0, 0.6)),
-                s + X_BT.rotation * Vector::new(0.0, 0.38, 0.0),
+                left_s,
                 s,
-                state.link_pose(links[1]).translation,
-                state.link_pose(links[2]).translation,
+                e,
+                w,
+                left_e,
+                left_w,
             ]);
+            mirrored.push(in_torso.map(mirror));
         }
         let clip = Clip {
             name: "own".into(),
@@ -921,6 +984,18 @@ mod tests {
         let (motion, report) = retarget(&clip, &model, &config).expect("retarget");
         assert!(report.wrist_error_m.peak < 1e-3, "{report:?}");
         assert!(report.elbow_error_m.peak < 1e-3, "{report:?}");
+        // The other arm, placed from the model's mirrored shoulder along the recorded
+        // directions, is the model's own arm mirrored (away from the filter's padding).
+        assert_eq!(motion.other_arm.len(), frames);
+        for (f, (got, want)) in (motion.other_arm.iter().zip(&mirrored))
+            .enumerate()
+            .take(frames - 50)
+            .skip(50)
+        {
+            for (g, w) in got.iter().zip(want) {
+                assert!((*g - *w).length() < 2e-3, "{f}: {g:?} against {w:?}");
+            }
+        }
         let trunk = report.trunk.expect("a trunk");
         assert!(
             trunk.turn_deg[1] > 30.0 && trunk.turn_deg[0] < -30.0,

@@ -9,10 +9,11 @@ use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{Jacobian, KinematicState};
 use workcell_safety::{
     FilterMode, FilterOutput, HumanEstimate, HumanGeometry, HumanPart, Obstacle, PairConstraint,
-    SafetyFilter, SignedDistancePair,
+    PartEstimate, SafetyFilter, SignedDistancePair,
 };
 use workcell_sim::{CellModel, CellState, RobotCommand, step};
 
+use super::other_arm::OtherArm;
 use super::tally::Tally;
 use super::{EpisodeMetrics, EpisodeTrace, Evaluation, EvaluationConfig};
 use super::{HumanPerception, PerceptionInput, TaskController};
@@ -161,6 +162,10 @@ struct Run<'a> {
     tally: Tally,
     /// The sample period and the samples of a 3D replay, when recording.
     recording: Option<(f64, Recording)>,
+    /// A recorded clip's other arm (not modelled, not guarded), measured against the robot,
+    /// and its parts at the last tick.
+    other_arm: Option<OtherArm>,
+    other_parts: Vec<PartEstimate>,
 }
 
 impl<'a> Run<'a> {
@@ -193,6 +198,10 @@ impl<'a> Run<'a> {
         let controller =
             TaskController::new(c.controller, &robot.velocity_limits(), c.safety.d_min_m);
         let tally = Tally::new(episode, seed, mode.to_string(), c.task_s);
+        let other_arm = model
+            .human_motion
+            .other_arm(0.0)
+            .and_then(|_| OtherArm::new(&model.human));
         Ok(Self {
             c,
             filter,
@@ -207,6 +216,8 @@ impl<'a> Run<'a> {
             jacobian: Jacobian::zeros(dof),
             tally,
             recording: None,
+            other_arm,
+            other_parts: Vec::new(),
             model,
             state,
         })
@@ -269,6 +280,26 @@ impl<'a> Run<'a> {
             t,
             closest.as_ref().map(|(pair, _)| pair),
         );
+        // The clip's other arm, where the human plays one: how near the robot it came.
+        if let Some(arm) = &self.other_arm
+            && let Some(joints_T) = model.human_motion.other_arm(t)
+        {
+            let X_WT = self.human_kinematics.link_pose(arm.torso());
+            arm.place_into(X_WT, joints_T, &mut self.other_parts);
+            let separation = (self.other_parts.iter())
+                .filter_map(|part| {
+                    (self.filter.geometry()).min_exact_distance_to(
+                        &self.robot_kinematics,
+                        part,
+                        5.0,
+                    )
+                })
+                .map(|pair| pair.distance_m)
+                .fold(f64::INFINITY, f64::min);
+            if separation.is_finite() {
+                self.tally.other_arm(separation, dt, d_min);
+            }
+        }
         let Some((pair, velocity)) = closest else {
             self.tally.no_pair();
             return Ok(());

@@ -16,6 +16,7 @@ mod controller;
 mod episode;
 pub mod html;
 pub mod lossless;
+pub mod other_arm;
 pub mod perception;
 pub mod record;
 pub mod replay;
@@ -512,6 +513,16 @@ pub struct EpisodeMetrics {
     /// (the noisy camera, the oracles) or fitted none.
     #[serde(default = "no_error", with = "lossless::f64")]
     pub fit_error_m: f64,
+    /// The recorded person's other arm, which the cell's human neither has nor follows
+    /// (`other_arm`): its smallest separation from the robot, m, by the same exact shapes
+    /// as `min_separation_m`. Nothing perceives or guards that arm: these are the approaches
+    /// the rest of the metrics cannot see. NaN without such an arm (the generator's motion,
+    /// a clip with one arm).
+    #[serde(default = "no_error", with = "lossless::f64")]
+    pub other_arm_min_separation_m: f64,
+    /// Time the other arm spent below d_min, s (0 without one).
+    #[serde(default, with = "lossless::f64")]
+    pub other_arm_violation_s: f64,
     #[serde(with = "lossless::f64")]
     pub simulated_s: f64,
     /// The episode's wall time, building the cell and the perception included, s.

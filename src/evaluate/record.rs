@@ -349,6 +349,19 @@ fn check_episode(m: &EpisodeMetrics, s: &RunSettings) -> std::result::Result<(),
             m.fit_error_m
         ));
     }
+    // NaN: no other arm; a signed distance otherwise.
+    if m.other_arm_min_separation_m.is_infinite() {
+        return Err(format!(
+            "other_arm_min_separation_m = {}: a distance (or NaN without the other arm)",
+            m.other_arm_min_separation_m
+        ));
+    }
+    if !(m.other_arm_violation_s.is_finite() && m.other_arm_violation_s >= 0.0) {
+        return Err(format!(
+            "other_arm_violation_s = {}: a time (>= 0)",
+            m.other_arm_violation_s
+        ));
+    }
     if m.perception_error_by_part_m.len() != workcell_safety::HumanPart::ALL.len()
         || m.perception_error_by_part_m
             .iter()

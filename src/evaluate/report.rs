@@ -137,7 +137,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,fit_error_m,simulated_s,wall_s,setup_s";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,fit_error_m,simulated_s,wall_s,setup_s,other_arm_min_separation_m,other_arm_violation_s";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -152,7 +152,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3},{:.5},{:.3}",
             e.episode,
             e.seed,
             e.filter,
@@ -189,7 +189,9 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             e.fit_error_m,
             e.simulated_s,
             e.wall_s,
-            e.setup_s
+            e.setup_s,
+            e.other_arm_min_separation_m,
+            e.other_arm_violation_s
         );
     }
     csv
@@ -242,6 +244,37 @@ fn part_error_line(episodes: &[EpisodeMetrics]) -> Option<String> {
             "Perception error per part, median episode (mm; the mean of its two end points' distances from the truth): {}.{}",
             parts.join(", "),
             at_exposure.unwrap_or_default()
+        )
+    })
+}
+
+/// The recorded person's other arm (`EpisodeMetrics::other_arm_min_separation_m`): how near
+/// the robot it came and for how long within `d_min_m`, over the episodes that had one;
+/// `None` when none had.
+fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64) -> Option<String> {
+    let with: Vec<&EpisodeMetrics> = episodes
+        .iter()
+        .filter(|e| !e.other_arm_min_separation_m.is_nan())
+        .collect();
+    let closest = with
+        .iter()
+        .map(|e| e.other_arm_min_separation_m)
+        .fold(f64::INFINITY, f64::min);
+    let below: Vec<&&EpisodeMetrics> = with
+        .iter()
+        .filter(|e| e.other_arm_min_separation_m < d_min_m)
+        .collect();
+    let touched = with
+        .iter()
+        .filter(|e| e.other_arm_min_separation_m <= 0.0)
+        .count();
+    (!with.is_empty()).then(|| {
+        format!(
+            "The recorded person's other arm, which the cell's human does not model (nothing perceives or guards it; {} of {} episodes played one): closest {closest:.4} m, below d_min in {} episodes ({:.3} s), touching the robot in {touched}.",
+            with.len(),
+            episodes.len(),
+            below.len(),
+            below.iter().map(|e| e.other_arm_violation_s).sum::<f64>()
         )
     })
 }
@@ -327,6 +360,9 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         "Contact (true separation down to 0): {} with the robot moving, {} with the robot at standstill (speed and separation monitoring permits only the second).\n",
         a.contacts_moving, a.contacts_standing
     );
+    if let Some(line) = other_arm_line(episodes, context.d_min_m) {
+        let _ = writeln!(md, "{line}\n");
+    }
     let _ = writeln!(
         md,
         "Peak speeds near the human count the robot's closest surface point while the true separation is below {:.2} m (approach: its speed toward the human).\n",

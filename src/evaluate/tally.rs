@@ -67,6 +67,8 @@ impl Tally {
                 perception_error_m: 0.0,
                 perception_error_by_part_m: super::no_part_errors(),
                 fit_error_m: f64::NAN,
+                other_arm_min_separation_m: f64::NAN,
+                other_arm_violation_s: 0.0,
                 simulated_s: 0.0,
                 wall_s: 0.0,
                 setup_s: 0.0,
@@ -237,6 +239,17 @@ impl Tally {
         } else {
             1.0
         });
+    }
+
+    /// The recorded person's other arm (not modelled, not guarded) at `separation_m` from
+    /// the robot over a tick `dt`.
+    pub fn other_arm(&mut self, separation_m: f64, dt: f64, d_min_m: f64) {
+        let m = &mut self.metrics;
+        // NaN (none yet) loses to any number.
+        m.other_arm_min_separation_m = separation_m.min(m.other_arm_min_separation_m);
+        if separation_m < d_min_m {
+            m.other_arm_violation_s += dt;
+        }
     }
 
     /// The task finished at `t`.

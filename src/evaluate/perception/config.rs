@@ -158,6 +158,13 @@ pub struct ProcNetConfig {
     /// `fit_trunk`, another value than the calibration's is warned of.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trunk_downsample: Option<u32>,
+    /// The tracker reads every `frame_stride`-th of the camera's frames (1 to 8): the
+    /// network and the fit run at the camera's rate divided by this, the estimate ages
+    /// between their frames as it does between any two (the joints' velocity, the bound
+    /// growing with `human_acceleration_m_s2`). For a machine that cannot run them at the
+    /// camera's rate (docs/perception.md, "The network at half the camera's rate").
+    /// Default 1.
+    pub frame_stride: usize,
     /// The camera delivers nothing from this time on, s (a failed camera): the last estimate
     /// ages out ([`super::procnet::MAX_AGE_S`]) and the filter then brakes. Left out, never.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -231,6 +238,7 @@ impl PerceptionKind {
                 "hand_region",
                 "hull_outlines",
                 "trunk_downsample",
+                "frame_stride",
                 "camera_fails_at_s",
             ],
         }
@@ -292,6 +300,7 @@ impl Default for ProcNetConfig {
             hand_region: None,
             hull_outlines: None,
             trunk_downsample: None,
+            frame_stride: 1,
             camera_fails_at_s: None,
         }
     }
@@ -457,6 +466,10 @@ impl ProcNetConfig {
             format!(", velocity through the last {} fits", self.velocity_fits)
         };
         let latency_ms = self.latency_s * 1e3;
+        let stride = match self.frame_stride {
+            1 => String::new(),
+            k => format!(", 1 in {k} camera frames read"),
+        };
         let masks = match self.masks {
             // The weights' own header says which network they hold (ProcNet or the
             // feed-forward baseline); an unreadable file fails when it is loaded.
@@ -470,12 +483,12 @@ impl ProcNetConfig {
             // No masks and no fit: nothing else of the table applies.
             MaskKind::TruePose => {
                 return format!(
-                    "the true pose at each frame (an oracle), latency {latency_ms:.0} ms{velocity}"
+                    "the true pose at each frame (an oracle), latency {latency_ms:.0} ms{velocity}{stride}"
                 );
             }
         };
         format!(
-            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{}{}{}{}",
+            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{stride}{}{}{}{}",
             if self.depth {
                 " with depth (RGB-D)"
             } else {
@@ -621,6 +634,12 @@ impl PerceptionConfig {
                     return Err(crate::Error::config(
                         "perception.trunk_downsample",
                         format!("out of range: {k} (1 to 4)"),
+                    ));
+                }
+                if !(1..=8).contains(&c.frame_stride) {
+                    return Err(crate::Error::config(
+                        "perception.frame_stride",
+                        format!("out of range: {} (1 to 8)", c.frame_stride),
                     ));
                 }
                 check_optional("uncertainty_scale", c.uncertainty_scale)?;
