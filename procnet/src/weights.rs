@@ -46,6 +46,21 @@ pub fn shipped_for(depth: bool, human_model: &str) -> &'static str {
     }
 }
 
+/// What a user of [`shipped_for`]'s choice should know: the RGB network has seen only the
+/// paper's arm, so on any other human (the whole body) its masks have not been measured.
+/// `None` where the choice is a network trained on that human.
+#[must_use]
+pub fn shipped_for_warning(depth: bool, human_model: &str) -> Option<String> {
+    (!depth && human_model != PAPER_ARM).then(|| {
+        format!(
+            "no shipped RGB network has seen the human `{human_model}`: {SHIPPED_RGB} was \
+             trained on the paper's arm ({PAPER_ARM}) alone, and its masks of this human are \
+             not measured; a depth camera (perception.depth = true) picks \
+             {SHIPPED_DEPTH_BODY}, trained on the whole body"
+        )
+    })
+}
+
 /// `relative` (a path relative to the source tree's root) in this crate's source tree,
 /// wherever the program runs from.
 fn in_source_tree(relative: &str) -> std::path::PathBuf {

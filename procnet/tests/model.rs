@@ -406,6 +406,17 @@ fn the_shipped_weights_load_and_match_their_recipe() {
                 .unwrap();
         assert_eq!(config.reads_depth(), depth);
     }
+    // The RGB network has seen the paper's arm only: chosen for any other human, it says so;
+    // the depth networks are chosen for the human they were trained on and say nothing.
+    use workcell_procnet::weights::{PAPER_ARM, shipped_for, shipped_for_warning};
+    assert!(shipped_for_warning(true, "human").is_none());
+    assert!(shipped_for_warning(true, PAPER_ARM).is_none());
+    assert!(shipped_for_warning(false, PAPER_ARM).is_none());
+    let warning = shipped_for_warning(false, "human").expect("a warning");
+    assert!(
+        warning.contains(shipped_for(false, "human")) && warning.contains("perception.depth"),
+        "{warning}"
+    );
 }
 
 /// The paper preset has the size of the authors' runs: about 5.4 M parameters for 3 layers

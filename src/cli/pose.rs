@@ -121,6 +121,11 @@ pub struct EvalPoseArgs {
 fn network_weights(kind: &str, args: &EvalPoseArgs, human_model: &str) -> PathBuf {
     args.weights.clone().unwrap_or_else(|| {
         PathBuf::from(if kind == "procnet" {
+            if let Some(warning) =
+                workcell::procnet::weights::shipped_for_warning(args.depth, human_model)
+            {
+                tracing::warn!("{warning}");
+            }
             workcell::procnet::weights::shipped_for(args.depth, human_model)
         } else {
             "procnet/weights/baseline-cpu-64.safetensors"

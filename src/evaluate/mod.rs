@@ -230,6 +230,12 @@ impl Evaluation {
                 p.depth,
                 &scenario.human.model,
             ));
+            if p.masks == MaskKind::Network
+                && let Some(warning) =
+                    crate::procnet::weights::shipped_for_warning(p.depth, &scenario.human.model)
+            {
+                tracing::warn!("perception: {warning}");
+            }
         }
         if let Some(recorded) = &mut config.human_recorded {
             // Relative to this file, wherever the cell's file is.

@@ -137,7 +137,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,fit_error_m,simulated_s,wall_s,setup_s,other_arm_min_separation_m,other_arm_violation_s";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,fit_error_m,other_arm_min_separation_m,other_arm_violation_s,simulated_s,wall_s,setup_s";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -152,7 +152,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3},{:.5},{:.3}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3},{:.3}",
             e.episode,
             e.seed,
             e.filter,
@@ -187,11 +187,11 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             part_error(e, HumanPart::Hand),
             part_error(e, HumanPart::Head),
             e.fit_error_m,
+            e.other_arm_min_separation_m,
+            e.other_arm_violation_s,
             e.simulated_s,
             e.wall_s,
-            e.setup_s,
-            e.other_arm_min_separation_m,
-            e.other_arm_violation_s
+            e.setup_s
         );
     }
     csv
