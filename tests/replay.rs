@@ -5,7 +5,8 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use workcell::evaluate::replay::{
-    HUMAN_PREFIX, MARKER_SUFFIX, PAIR_NODES, ROBOT_PREFIX, ROOT_NODE, episode_glb, pair_class,
+    HUMAN_PREFIX, MARKER_SUFFIX, OTHER_ARM_PARTS, OTHER_ARM_PREFIX, PAIR_NODES, ROBOT_PREFIX,
+    ROOT_NODE, episode_glb, pair_class,
 };
 use workcell::evaluate::{Evaluation, PerceptionKind, record_episode};
 use workcell::robots::math::{Pose, Rotation, Vector};
@@ -27,6 +28,75 @@ fn pose_of(track: &Track, k: usize) -> Pose {
         Vector::from_array(track.translation[k].map(f64::from)),
         Rotation::from_xyzw(x, y, z, w),
     )
+}
+
+/// Every animated node's channels, read back by name.
+fn tracks_of(bytes: &[u8]) -> HashMap<String, Track> {
+    let gltf = gltf::Gltf::from_slice(bytes).expect("a valid glTF");
+    let blob = gltf.blob.clone().expect("binary chunk");
+    let doc = &gltf.document;
+    let mut tracks: HashMap<String, Track> = HashMap::new();
+    let animation = doc.animations().next().expect("an animation");
+    for channel in animation.channels() {
+        let reader = channel.reader(|_| Some(&blob[..]));
+        let name = channel
+            .target()
+            .node()
+            .name()
+            .unwrap_or_default()
+            .to_string();
+        let track = tracks.entry(name).or_default();
+        track.times = reader.read_inputs().expect("inputs").collect();
+        match reader.read_outputs().expect("outputs") {
+            gltf::animation::util::ReadOutputs::Translations(t) => track.translation = t.collect(),
+            gltf::animation::util::ReadOutputs::Rotations(r) => {
+                track.rotation = r.into_f32().collect()
+            }
+            gltf::animation::util::ReadOutputs::Scales(s) => track.scale = s.collect(),
+            gltf::animation::util::ReadOutputs::MorphTargetWeights(_) => panic!("no morphs"),
+        }
+    }
+    tracks
+}
+
+/// A recorded clip's other arm (the one the cell's human does not model) is drawn: each
+/// part's node at every key lies on the recorded capsule's segment (its centre, its axis along
+/// the segment), with the capsule's length; the generator's episodes have none.
+#[test]
+fn a_recorded_clips_other_arm_is_drawn_where_it_was() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate-recorded.toml");
+    let (evaluation, _) =
+        Evaluation::from_file_as(&path, Some(PerceptionKind::Noisy), &["task_s=2".into()])
+            .expect("evaluation");
+    let seed = 1;
+    let (_, _, recording) =
+        record_episode(&evaluation, FilterMode::Qp, 0, seed, 1.0 / 30.0).expect("episode");
+    let mut scenario = evaluation.scenario.clone();
+    scenario.seed = seed;
+    let model = CellModel::new(&scenario, &evaluation.scenario_path).expect("cell");
+    let bytes = episode_glb(&model, &[], &recording, 0.1, "test");
+    let tracks = tracks_of(&bytes);
+    let samples = recording.t_s.len();
+    assert_eq!(recording.other_arm.len(), samples);
+    for (p, part) in OTHER_ARM_PARTS.iter().enumerate() {
+        let track = &tracks[&format!("{OTHER_ARM_PREFIX}{part}")];
+        assert_eq!(track.times.len(), samples);
+        for k in 0..samples {
+            let capsule = recording.other_arm[k]
+                .get(p)
+                .expect("the clip has the other arm");
+            let pose = pose_of(track, k);
+            let centre = (capsule.a_W + capsule.b_W) * 0.5;
+            assert!(
+                (pose.translation - centre).length() < 1e-5,
+                "{part} at key {k}"
+            );
+            let half = (capsule.b_W - capsule.a_W) * 0.5;
+            let tip = pose.translation + pose.rotation * Vector::new(0.0, 0.0, half.length());
+            assert!((tip - capsule.b_W).length() < 1e-5, "{part} at key {k}");
+            assert_eq!(track.scale[k], [1.0; 3]);
+        }
+    }
 }
 
 #[test]
@@ -51,7 +121,6 @@ fn an_episode_reads_back_with_the_simulations_poses() {
     let bytes = episode_glb(&model, &cameras, &recording, d_min, "test");
 
     let gltf = gltf::Gltf::from_slice(&bytes).expect("a valid glTF");
-    let blob = gltf.blob.clone().expect("binary chunk");
     let doc = &gltf.document;
     let names: HashMap<usize, String> = doc
         .nodes()
@@ -69,25 +138,12 @@ fn an_episode_reads_back_with_the_simulations_poses() {
     let below_root = roots[0].children().count();
     assert_eq!(below_root, doc.nodes().count() - 1);
 
-    // Read every channel back.
-    let mut tracks: HashMap<String, Track> = HashMap::new();
-    let animation = doc.animations().next().expect("an animation");
-    for channel in animation.channels() {
-        let reader = channel.reader(|_| Some(&blob[..]));
-        let name = names[&channel.target().node().index()].clone();
-        let track = tracks.entry(name).or_default();
-        track.times = reader.read_inputs().expect("inputs").collect();
-        match reader.read_outputs().expect("outputs") {
-            gltf::animation::util::ReadOutputs::Translations(t) => track.translation = t.collect(),
-            gltf::animation::util::ReadOutputs::Rotations(r) => {
-                track.rotation = r.into_f32().collect()
-            }
-            gltf::animation::util::ReadOutputs::Scales(s) => track.scale = s.collect(),
-            gltf::animation::util::ReadOutputs::MorphTargetWeights(_) => panic!("no morphs"),
-        }
-    }
+    let tracks = tracks_of(&bytes);
     let samples = recording.t_s.len();
     assert!(samples > 80, "3 s at 30 Hz and more: {samples}");
+    // The generator's human has no other arm to draw.
+    assert!(recording.other_arm.iter().all(Vec::is_empty));
+    assert!(!tracks.keys().any(|n| n.starts_with(OTHER_ARM_PREFIX)));
     // Every robot link with visuals is animated, and at every key its pose is the forward
     // kinematics of the joint positions the simulator measured then (to f32).
     let robot = &model.robot;

@@ -753,7 +753,11 @@ fn clip_glb(
         human_link_poses: Vec::new(),
         robot_q: Vec::new(),
         closest: Vec::new(),
+        other_arm: Vec::new(),
     };
+    // The recording's other arm, beside the one the model follows.
+    let other_arm = workcell::evaluate::other_arm::OtherArm::new(&model.human);
+    let mut other_parts = Vec::new();
     let frames = (motion.duration_s() * 30.0).floor() as usize + 1;
     for k in 0..frames {
         let t = k as f64 / 30.0;
@@ -764,6 +768,11 @@ fn clip_glb(
         recording.human_link_poses.push(human.link_poses().to_vec());
         recording.robot_q.push(model.initial_q.clone());
         recording.closest.push(None);
+        other_parts.clear();
+        if let (Some(arm), Some(joints_T)) = (&other_arm, motion.other_arm_at(t)) {
+            arm.place_into(human.link_pose(arm.torso()), joints_T, &mut other_parts);
+        }
+        (recording.other_arm).push(other_parts.iter().map(|p| p.capsule).collect());
     }
     Ok(workcell::evaluate::replay::episode_glb(
         model,

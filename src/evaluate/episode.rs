@@ -8,8 +8,8 @@ use std::time::Instant;
 use workcell_robots::math::{Pose, Vector};
 use workcell_robots::{Jacobian, KinematicState};
 use workcell_safety::{
-    FilterMode, FilterOutput, HumanEstimate, HumanGeometry, HumanPart, Obstacle, PairConstraint,
-    PartEstimate, SafetyFilter, SignedDistancePair,
+    Capsule, FilterMode, FilterOutput, HumanEstimate, HumanGeometry, HumanPart, Obstacle,
+    PairConstraint, PartEstimate, SafetyFilter, SignedDistancePair,
 };
 use workcell_sim::{CellModel, CellState, RobotCommand, step};
 
@@ -76,6 +76,9 @@ pub struct Recording {
     /// Per sample, the closest pair's robot point, human point and signed distance (`None`
     /// when no pair was within 5 m).
     pub closest: Vec<Option<ClosestSample>>,
+    /// Per sample, a recorded clip's other arm (upper arm, forearm, hand; not modelled, not
+    /// guarded: [`super::other_arm`]); empty where the human plays none.
+    pub other_arm: Vec<Vec<Capsule>>,
 }
 
 /// The closest pair at a sample: the robot's point, the human's point (world, m), and the
@@ -274,13 +277,8 @@ impl<'a> Run<'a> {
                 closest = Some((pair, velocity));
             }
         }
-        record(
-            &mut self.recording,
-            state,
-            t,
-            closest.as_ref().map(|(pair, _)| pair),
-        );
         // The clip's other arm, where the human plays one: how near the robot it came.
+        self.other_parts.clear();
         if let Some(arm) = &self.other_arm
             && let Some(joints_T) = model.human_motion.other_arm(t)
         {
@@ -300,6 +298,13 @@ impl<'a> Run<'a> {
                 self.tally.other_arm(separation, dt, d_min);
             }
         }
+        record(
+            &mut self.recording,
+            state,
+            t,
+            closest.as_ref().map(|(pair, _)| pair),
+            &self.other_parts,
+        );
         let Some((pair, velocity)) = closest else {
             self.tally.no_pair();
             return Ok(());
@@ -466,6 +471,7 @@ fn record(
     state: &CellState,
     t: f64,
     closest: Option<&SignedDistancePair>,
+    other_arm: &[PartEstimate],
 ) {
     let Some((period, recording)) = recording else {
         return;
@@ -488,6 +494,9 @@ fn record(
     recording
         .closest
         .push(closest.map(|p| (p.p_WA.to_array(), p.p_WB.to_array(), p.distance_m)));
+    recording
+        .other_arm
+        .push(other_arm.iter().map(|p| p.capsule).collect());
 }
 
 /// Velocity of the robot's witness point of `pair` in the world, m/s.

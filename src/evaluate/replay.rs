@@ -23,6 +23,13 @@ pub const ROOT_NODE: &str = "cell (Z up)";
 /// Prefixes of the animated nodes' names: `robot/<link>`, `human/<link>`.
 pub const ROBOT_PREFIX: &str = "robot/";
 pub const HUMAN_PREFIX: &str = "human/";
+/// Prefix of a recorded clip's other arm's parts (`Recording::other_arm`): the arm the cell's
+/// human does not model, drawn so that what nothing guards can be seen.
+pub const OTHER_ARM_PREFIX: &str = "other arm (not modelled)/";
+/// Its colour: grey, unlike the dressed human.
+const OTHER_ARM_COLOR: [f32; 3] = [0.55, 0.55, 0.6];
+/// The other arm's parts, in `Recording::other_arm`'s order.
+pub const OTHER_ARM_PARTS: [&str; 3] = ["upper_arm", "forearm", "hand"];
 /// The closest pair's line nodes, one per margin class; the inactive ones are scaled to 0.
 pub const PAIR_NODES: [(&str, [f32; 4]); 3] = [
     ("closest pair: below d_min", [0.9, 0.05, 0.05, 1.0]),
@@ -143,6 +150,42 @@ pub fn episode_glb(
                 .map(|p| p.get(l).copied().unwrap_or(object.X_WO))
                 .collect();
             animate_pose(&mut glb, node, times, &series);
+        }
+    }
+
+    // A recorded clip's other arm: each part a capsule of its (fixed) size, placed along its
+    // segment at each sample; hidden (scale 0) where a sample has none.
+    if let Some(times) = times
+        && let Some(first) = recording.other_arm.iter().find(|s| !s.is_empty())
+    {
+        for (k, (part, capsule)) in OTHER_ARM_PARTS.iter().zip(first).enumerate() {
+            let length = (capsule.b_W - capsule.a_W).length();
+            let mesh = RenderMesh::capsule(capsule.radius_m, length, OTHER_ARM_COLOR);
+            let node_name = format!("{OTHER_ARM_PREFIX}{part}");
+            let Some(mesh) = add_render_mesh(&mut glb, &node_name, &mesh) else {
+                continue;
+            };
+            let node = glb.node(&node_name, json!({"mesh": mesh}), false);
+            children.push(node);
+            let mut previous = Pose::IDENTITY;
+            let (mut poses, mut scale) = (Vec::new(), Vec::new());
+            for sample in &recording.other_arm {
+                match sample.get(k) {
+                    Some(c) => {
+                        // The capsule mesh lies along z about its centre.
+                        let axis = (c.b_W - c.a_W).normalize_or(Vector::Z);
+                        previous = Pose::from_parts(
+                            (c.a_W + c.b_W) * 0.5,
+                            Rotation::from_rotation_arc(Vector::Z, axis),
+                        );
+                        scale.extend([1.0_f32; 3]);
+                    }
+                    None => scale.extend([0.0_f32; 3]),
+                }
+                poses.push(previous);
+            }
+            animate_pose(&mut glb, node, times, &poses);
+            glb.animate(node, "scale", times, &scale, "STEP");
         }
     }
 
