@@ -320,7 +320,19 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
     } else {
         "VIOLATIONS"
     };
-    let _ = writeln!(md, "## Verdict: {verdict}\n");
+    // The verdict is the modelled human's; a recorded person's other arm is not in it.
+    let other_arm_below = episodes
+        .iter()
+        .filter(|e| e.other_arm_min_separation_m < context.d_min_m)
+        .count();
+    let unguarded = if other_arm_below > 0 {
+        format!(
+            " (of the modelled human; the recorded person's other arm, which nothing guards, came below d_min in {other_arm_below} episodes)"
+        )
+    } else {
+        String::new()
+    };
+    let _ = writeln!(md, "## Verdict: {verdict}{unguarded}\n");
     let _ = writeln!(
         md,
         "| episodes | min separation (m) | episodes with violation | violations | time below d_min (s) | of it with the robot moving (s) | finished | task time / unfiltered | peak speed near human (m/s) | peak approach speed (m/s) |"
@@ -599,6 +611,56 @@ mod tests {
 
     /// `metrics.csv`'s row has a field per header column, and each part's error lands under
     /// its own name: a tick that saw the forearm 4 cm off and the hand 10 cm off, no head.
+    /// The other arm's tally: its least separation over ticks and its time below d_min; the
+    /// summary states both, beside a verdict that says it is the modelled human's.
+    #[test]
+    fn the_other_arm_is_reported_beside_the_verdict() {
+        let episode = |separations: &[f64]| {
+            let mut tally = crate::evaluate::tally::Tally::new(0, 7, "qp".into(), 10.0);
+            for &d in separations {
+                tally.other_arm(d, 0.004, 0.1);
+            }
+            tally
+                .finish(|_| String::new(), 1.0, std::time::Instant::now())
+                .0
+        };
+        let (near, far, none) = (
+            episode(&[0.3, 0.05, -0.01, 0.2]),
+            episode(&[0.4]),
+            episode(&[]),
+        );
+        assert_eq!(near.other_arm_min_separation_m, -0.01);
+        assert!((near.other_arm_violation_s - 0.008).abs() < 1e-12);
+        assert_eq!(far.other_arm_violation_s, 0.0);
+        assert!(none.other_arm_min_separation_m.is_nan());
+        let context = SummaryContext {
+            evaluation_file: "e.toml",
+            robot: "r",
+            filter: "qp",
+            perception: "p",
+            d_min_m: 0.1,
+            near_m: 0.3,
+            pfl_distance_m: 0.3,
+            contact_speed_limits: &[],
+            command: "c",
+        };
+        let md = summary_markdown(&context, &[near.clone(), far.clone(), none.clone()]);
+        assert!(
+            md.contains("## Verdict: no violation (of the modelled human; the recorded person's other arm, which nothing guards, came below d_min in 1 episodes)"),
+            "{md}"
+        );
+        assert!(
+            md.contains("2 of 3 episodes played one): closest -0.0100 m, below d_min in 1 episodes (0.008 s), touching the robot in 1."),
+            "{md}"
+        );
+        // Without the other arm: the verdict alone, no line.
+        let md = summary_markdown(&context, &[none]);
+        assert!(
+            md.contains("## Verdict: no violation\n") && !md.contains("other arm"),
+            "{md}"
+        );
+    }
+
     #[test]
     fn each_parts_error_has_its_column() {
         let mut tally = crate::evaluate::tally::Tally::new(0, 7, "qp".into(), 10.0);
