@@ -598,6 +598,9 @@ pub fn announce(record: &RunRecord, out: &Path) -> usize {
         a.real_time_with_setup,
         out.join("summary.md").display()
     );
+    if let Some(line) = workcell::evaluate::report::other_arm_line(&record.metrics, s.d_min_m) {
+        say!("{line}");
+    }
     let violating: Vec<_> = record.metrics.iter().filter(|e| e.violations > 0).collect();
     if let Some(first) = violating.first() {
         say!(

@@ -251,7 +251,8 @@ fn part_error_line(episodes: &[EpisodeMetrics]) -> Option<String> {
 /// The recorded person's other arm (`EpisodeMetrics::other_arm_min_separation_m`): how near
 /// the robot it came and for how long within `d_min_m`, over the episodes that had one;
 /// `None` when none had.
-fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64) -> Option<String> {
+#[must_use]
+pub fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64) -> Option<String> {
     let with: Vec<&EpisodeMetrics> = episodes
         .iter()
         .filter(|e| !e.other_arm_min_separation_m.is_nan())
