@@ -8,10 +8,10 @@ use workcell::evaluate::replay::{
     HUMAN_PREFIX, MARKER_SUFFIX, OTHER_ARM_PARTS, OTHER_ARM_PREFIX, PAIR_NODES, ROBOT_PREFIX,
     ROOT_NODE, episode_glb, pair_class,
 };
-use workcell::evaluate::{Evaluation, PerceptionKind, record_episode};
+use workcell::evaluate::{EpisodeMetrics, Evaluation, PerceptionKind, Recording, record_episode};
 use workcell::robots::math::{Pose, Rotation, Vector};
 use workcell::safety::FilterMode;
-use workcell::sim::CellModel;
+use workcell::sim::{CellModel, Scenario};
 
 /// A node's animation, read back: key times and per-key translation, rotation, scale.
 #[derive(Default)]
@@ -28,6 +28,29 @@ fn pose_of(track: &Track, k: usize) -> Pose {
         Vector::from_array(track.translation[k].map(f64::from)),
         Rotation::from_xyzw(x, y, z, w),
     )
+}
+
+/// An episode of the evaluation `file` (relative to the source tree), `task_s` seconds long,
+/// seed `seed`, recorded at 30 Hz, with its cell. The noisy camera model: the replay's poses,
+/// not perception, are under test.
+fn recorded_episode(
+    file: &str,
+    task_s: u32,
+    seed: u64,
+) -> (Evaluation, EpisodeMetrics, Recording, Scenario, CellModel) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
+    let (evaluation, _) = Evaluation::from_file_as(
+        &path,
+        Some(PerceptionKind::Noisy),
+        &[format!("task_s={task_s}")],
+    )
+    .expect("evaluation");
+    let (metrics, _, recording) =
+        record_episode(&evaluation, FilterMode::Qp, 0, seed, 1.0 / 30.0).expect("episode");
+    let mut scenario = evaluation.scenario.clone();
+    scenario.seed = seed;
+    let model = CellModel::new(&scenario, &evaluation.scenario_path).expect("cell");
+    (evaluation, metrics, recording, scenario, model)
 }
 
 /// Every animated node's channels, read back by name.
@@ -64,16 +87,7 @@ fn tracks_of(bytes: &[u8]) -> HashMap<String, Track> {
 /// the segment), with the capsule's length; the generator's episodes have none.
 #[test]
 fn a_recorded_clips_other_arm_is_drawn_where_it_was() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate-recorded.toml");
-    let (evaluation, _) =
-        Evaluation::from_file_as(&path, Some(PerceptionKind::Noisy), &["task_s=2".into()])
-            .expect("evaluation");
-    let seed = 1;
-    let (_, _, recording) =
-        record_episode(&evaluation, FilterMode::Qp, 0, seed, 1.0 / 30.0).expect("episode");
-    let mut scenario = evaluation.scenario.clone();
-    scenario.seed = seed;
-    let model = CellModel::new(&scenario, &evaluation.scenario_path).expect("cell");
+    let (_, _, recording, _, model) = recorded_episode("configs/evaluate-recorded.toml", 2, 1);
     let bytes = episode_glb(&model, &[], &recording, 0.1, "test");
     let tracks = tracks_of(&bytes);
     let samples = recording.t_s.len();
@@ -101,17 +115,8 @@ fn a_recorded_clips_other_arm_is_drawn_where_it_was() {
 
 #[test]
 fn an_episode_reads_back_with_the_simulations_poses() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate.toml");
-    // The noisy camera model: the replay's poses, not perception, are under test.
-    let (evaluation, _) =
-        Evaluation::from_file_as(&path, Some(PerceptionKind::Noisy), &["task_s=3".into()])
-            .expect("evaluation");
-    let seed = 2;
-    let (metrics, _, recording) =
-        record_episode(&evaluation, FilterMode::Qp, 0, seed, 1.0 / 30.0).expect("episode");
-    let mut scenario = evaluation.scenario.clone();
-    scenario.seed = seed;
-    let model = CellModel::new(&scenario, &evaluation.scenario_path).expect("cell");
+    let (evaluation, metrics, recording, scenario, model) =
+        recorded_episode("configs/evaluate.toml", 3, 2);
     let cameras: Vec<_> = scenario
         .cameras
         .iter()

@@ -136,14 +136,10 @@ impl RecordedMotion {
     /// Joint positions and velocities at `t_s` in `[0, duration]` (clamped), linearly
     /// between frames: the velocity is the segment's.
     pub fn sample(&self, t_s: f64, q: &mut [f64], qd: &mut [f64]) {
-        if self.q.is_empty() {
+        let Some((i, j, s)) = self.between(t_s, self.frames()) else {
             return;
-        }
-        let last = self.frames().saturating_sub(1);
-        let x = (t_s * self.rate_hz).clamp(0.0, last as f64);
-        let i = (x.floor() as usize).min(last.saturating_sub(1));
-        let s = x - i as f64;
-        let (a, b) = (&self.q[i], &self.q[(i + 1).min(last)]);
+        };
+        let (a, b) = (&self.q[i], &self.q[j]);
         for j in 0..q.len().min(a.len()) {
             q[j] = a[j] + (b[j] - a[j]) * s;
             qd[j] = (b[j] - a[j]) * self.rate_hz;
@@ -154,12 +150,19 @@ impl RecordedMotion {
     /// duration]` (clamped), linearly between frames; `None` without that arm.
     #[must_use]
     pub fn other_arm_at(&self, t_s: f64) -> Option<[Vector; 3]> {
-        let last = self.other_arm.len().checked_sub(1)?;
+        let (i, j, s) = self.between(t_s, self.other_arm.len())?;
+        let (a, b) = (&self.other_arm[i], &self.other_arm[j]);
+        Some(std::array::from_fn(|k| a[k] + (b[k] - a[k]) * s))
+    }
+
+    /// The frames `t_s` (clamped to `[0, duration]`) lies between in a track of `frames`
+    /// frames at the motion's rate, and how far from the first to the second (0 to 1);
+    /// `None` for an empty track.
+    fn between(&self, t_s: f64, frames: usize) -> Option<(usize, usize, f64)> {
+        let last = frames.checked_sub(1)?;
         let x = (t_s * self.rate_hz).clamp(0.0, last as f64);
         let i = (x.floor() as usize).min(last.saturating_sub(1));
-        let s = x - i as f64;
-        let (a, b) = (&self.other_arm[i], &self.other_arm[(i + 1).min(last)]);
-        Some(std::array::from_fn(|k| a[k] + (b[k] - a[k]) * s))
+        Some((i, (i + 1).min(last), x - i as f64))
     }
 }
 
@@ -392,12 +395,10 @@ pub fn retarget(
     }
     let mut targets = Vec::with_capacity(frames);
     // The other side's landmarks, where the clip has them all.
-    let other_landmarks = config.side.other().landmarks();
-    let other_tracks: Option<[&Vec<Vector>; 3]> = other_landmarks
-        .iter()
-        .map(|l| tracks.get(l))
-        .collect::<Option<Vec<_>>>()
-        .and_then(|v| v.try_into().ok());
+    let other_tracks = match config.side.other().landmarks().map(|l| tracks.get(&l)) {
+        [Some(s), Some(e), Some(w)] => Some([s, e, w]),
+        _ => None,
+    };
     // The model's shoulder mirrored across its torso's sagittal plane (the torso frame's
     // x-z plane: x forward, y to the left).
     let s_other = Vector::new(s_torso.x, -s_torso.y, s_torso.z);
