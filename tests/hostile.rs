@@ -124,6 +124,15 @@ fn counts_beyond_their_limits_are_refused_by_the_parser() {
             ],
             "perception.frame_stride: out of range: 0 (1 to 8)",
         ),
+        (
+            vec![
+                "evaluate",
+                "configs/evaluate.toml",
+                "--set",
+                "perception.search_interval=9",
+            ],
+            "perception.search_interval: out of range: 9 (1 to 8)",
+        ),
     ] {
         refused(&args, needle);
     }

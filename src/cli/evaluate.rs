@@ -431,6 +431,7 @@ pub fn run(args: &EvaluateArgs) -> Result<ExitCode> {
                 c.near_m
             },
             contact_speed_limits,
+            other_arm_seen: c.other_arm_is_seen(),
         },
         shard,
         metrics,
@@ -490,6 +491,7 @@ pub fn write_report(dir: &Path, record: &RunRecord, command: &str, out: &Path) -
         pfl_distance_m: s.pfl_distance_m,
         contact_speed_limits: &s.contact_speed_limits,
         command,
+        other_arm_seen: s.other_arm_seen,
     };
     let write = |name: &str, text: &str| {
         let p = dir.join(name);
@@ -558,11 +560,12 @@ pub fn write_report(dir: &Path, record: &RunRecord, command: &str, out: &Path) -
         &summary_html(&markdown, &page_replays, viewer.is_some()),
     )?;
     let mut replay = format!(
-        "# Episodes that came closer than d_min = {} m: seed, violations, smallest separation, \
+        "# Episodes that came closer than d_min = {} m (the modelled human, or a recorded \
+         person's other arm): seed, violations of the modelled human, its smallest separation, \
          and the command that replays exactly that episode.\n",
         s.d_min_m
     );
-    for e in episodes.iter().filter(|e| e.violations > 0) {
+    for e in episodes.iter().filter(|e| e.violated()) {
         replay.push_str(&format!(
             "{}\t{}\t{:.4}\t{}\n",
             e.seed,
@@ -598,10 +601,12 @@ pub fn announce(record: &RunRecord, out: &Path) -> usize {
         a.real_time_with_setup,
         out.join("summary.md").display()
     );
-    if let Some(line) = workcell::evaluate::report::other_arm_line(&record.metrics, s.d_min_m) {
+    if let Some(line) =
+        workcell::evaluate::report::other_arm_line(&record.metrics, s.d_min_m, s.other_arm_seen)
+    {
         say!("{line}");
     }
-    let violating: Vec<_> = record.metrics.iter().filter(|e| e.violations > 0).collect();
+    let violating: Vec<_> = record.metrics.iter().filter(|e| e.violated()).collect();
     if let Some(first) = violating.first() {
         say!(
             "{} violating episodes (seeds in {}); replay the first: {}",

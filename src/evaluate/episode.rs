@@ -165,10 +165,11 @@ struct Run<'a> {
     tally: Tally,
     /// The sample period and the samples of a 3D replay, when recording.
     recording: Option<(f64, Recording)>,
-    /// A recorded clip's other arm (not modelled, not guarded), measured against the robot,
-    /// and its parts at the last tick.
+    /// A recorded clip's other arm (not modelled), measured against the robot, and its
+    /// parts at this tick and the last (their velocities: the difference over the tick).
     other_arm: Option<OtherArm>,
     other_parts: Vec<PartEstimate>,
+    other_parts_before: Vec<PartEstimate>,
 }
 
 impl<'a> Run<'a> {
@@ -221,6 +222,7 @@ impl<'a> Run<'a> {
             recording: None,
             other_arm,
             other_parts: Vec::new(),
+            other_parts_before: Vec::new(),
             model,
             state,
         })
@@ -278,12 +280,20 @@ impl<'a> Run<'a> {
             }
         }
         // The clip's other arm, where the human plays one: how near the robot it came.
+        std::mem::swap(&mut self.other_parts, &mut self.other_parts_before);
         self.other_parts.clear();
         if let Some(arm) = &self.other_arm
             && let Some(joints_T) = model.human_motion.other_arm(t)
         {
             let X_WT = self.human_kinematics.link_pose(arm.torso());
             arm.place_into(X_WT, joints_T, &mut self.other_parts);
+            // Each end point's velocity over the tick (at rest on the first).
+            if self.other_parts_before.len() == self.other_parts.len() && dt > 0.0 {
+                for (now, before) in self.other_parts.iter_mut().zip(&self.other_parts_before) {
+                    now.v_a_W = (now.capsule.a_W - before.capsule.a_W) / dt;
+                    now.v_b_W = (now.capsule.b_W - before.capsule.b_W) / dt;
+                }
+            }
             let separation = (self.other_parts.iter())
                 .filter_map(|part| {
                     (self.filter.geometry()).min_exact_distance_to(
@@ -394,10 +404,22 @@ impl<'a> Run<'a> {
                 model: &self.model,
                 state: &self.state,
                 truth: &self.truth,
+                other_arm: if self.c.other_arm_seen {
+                    &self.other_parts
+                } else {
+                    &[]
+                },
             },
             &mut self.estimate,
         );
-        let tick_error = perception_error(&self.estimate, &self.truth);
+        // The error is the modelled parts': an estimate of the whole person has the other
+        // arm's after them.
+        let seen = &self.estimate.parts;
+        let modelled = self.truth.parts.len();
+        let tick_error = (seen.len() == modelled
+            || seen.len() == modelled + self.other_parts.len())
+        .then(|| perception_error(&seen[..modelled], &self.truth.parts))
+        .flatten();
         let out = self.filter.tick(
             &self.model.robot,
             self.state.q(),
@@ -517,17 +539,17 @@ fn robot_point_velocity(
 /// each part ([`HumanPart::ALL`]'s order; `None` for a part the human lacks); `None` when
 /// perception delivers no human (or other parts than the truth has).
 pub(super) fn perception_error(
-    estimate: &HumanEstimate,
-    truth: &HumanEstimate,
+    estimate: &[PartEstimate],
+    truth: &[PartEstimate],
 ) -> Option<(f64, [Option<f64>; HumanPart::ALL.len()])> {
-    if estimate.parts.len() != truth.parts.len() || estimate.parts.is_empty() {
+    if estimate.len() != truth.len() || estimate.is_empty() {
         return None;
     }
     // Per part the sum and the count: a part the model has twice (two arms) counts as the
     // mean of both.
     let mut per_part = [(0.0, 0usize); HumanPart::ALL.len()];
     let mut sum = 0.0;
-    for (e, t) in estimate.parts.iter().zip(&truth.parts) {
+    for (e, t) in estimate.iter().zip(truth) {
         let error = 0.5
             * ((e.capsule.a_W - t.capsule.a_W).length() + (e.capsule.b_W - t.capsule.b_W).length());
         sum += error;
@@ -537,7 +559,7 @@ pub(super) fn perception_error(
         }
     }
     let by_part = per_part.map(|(s, n)| (n > 0).then(|| s / n as f64));
-    Some((sum / truth.parts.len() as f64, by_part))
+    Some((sum / truth.len() as f64, by_part))
 }
 
 #[cfg(test)]
@@ -581,7 +603,7 @@ mod tests {
             part(HumanPart::Forearm, [0.3, 0.03, 1.2], [0.6, 0.0, 1.25]),
             part(HumanPart::Hand, [0.6, 0.0, 1.1], [0.7, 0.0, 1.1]),
         ]);
-        let (mean, by_part) = perception_error(&seen, &truth).expect("same parts");
+        let (mean, by_part) = perception_error(&seen.parts, &truth.parts).expect("same parts");
         assert!((mean - (0.0 + 0.04 + 0.1) / 3.0).abs() < 1e-12, "{mean}");
         let expect = [Some(0.0), None, Some(0.04), Some(0.1), None];
         for (got, want) in by_part.iter().zip(expect) {
@@ -592,7 +614,82 @@ mod tests {
             }
         }
         // No human seen, or other parts than the truth's: no error at all.
-        assert!(perception_error(&estimate(Vec::new()), &truth).is_none());
-        assert!(perception_error(&estimate(seen.parts[..2].to_vec()), &truth).is_none());
+        assert!(perception_error(&[], &truth.parts).is_none());
+        assert!(perception_error(&seen.parts[..2], &truth.parts).is_none());
+    }
+
+    /// What the ground truth is given, tick by tick, in a recorded episode: the other
+    /// arm's three parts after the modelled ones when it is to be seen, none when not; each
+    /// end point's velocity the difference of its positions over the control tick.
+    #[test]
+    fn the_whole_persons_perception_is_given_the_other_arm() {
+        use std::sync::{Arc, Mutex};
+        type Seen = Arc<Mutex<Vec<(f64, Vec<PartEstimate>)>>>;
+        struct Spy(Seen);
+        impl HumanPerception for Spy {
+            fn name(&self) -> String {
+                "spy".into()
+            }
+            fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
+                self.0
+                    .lock()
+                    .expect("lock")
+                    .push((input.t_s, input.other_arm.to_vec()));
+                super::super::GroundTruth.estimate(input, out);
+                assert_eq!(
+                    out.parts.len(),
+                    input.truth.parts.len() + input.other_arm.len()
+                );
+            }
+        }
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate-recorded.toml");
+        let run = |seen: bool| {
+            let (evaluation, _) = Evaluation::from_file_as(
+                &path,
+                Some(crate::evaluate::PerceptionKind::GroundTruth),
+                &["task_s=0.5".into(), format!("other_arm_seen={seen}")],
+            )
+            .expect("evaluation");
+            let log: Seen = Arc::default();
+            let (metrics, _) = run_episode(
+                &evaluation,
+                FilterMode::Qp,
+                0,
+                1,
+                Some(Box::new(Spy(log.clone()))),
+                |_| {},
+            )
+            .expect("episode");
+            let log = log.lock().expect("lock").clone();
+            (metrics, log)
+        };
+        let (metrics, unseen) = run(false);
+        assert!(
+            metrics.other_arm_min_separation_m.is_finite(),
+            "the clip has the arm"
+        );
+        assert!(unseen.iter().all(|(_, other)| other.is_empty()));
+        let (_, seen) = run(true);
+        assert!(seen.len() > 100, "{} ticks", seen.len());
+        assert!(seen.iter().all(|(_, other)| other.len() == 3));
+        let mut moved: f64 = 0.0;
+        for pair in seen.windows(2) {
+            let [(t0, before), (t1, now)] = pair else {
+                unreachable!()
+            };
+            let dt = t1 - t0;
+            for (a, b) in before.iter().zip(now) {
+                assert_eq!(a.part, b.part);
+                for (v, p0, p1) in [
+                    (b.v_a_W, a.capsule.a_W, b.capsule.a_W),
+                    (b.v_b_W, a.capsule.b_W, b.capsule.b_W),
+                ] {
+                    assert!((v - (p1 - p0) / dt).length() < 1e-9, "{v:?}");
+                    moved = moved.max(v.length());
+                }
+            }
+        }
+        assert!(moved > 0.01, "the other arm moves: {moved} m/s at most");
     }
 }

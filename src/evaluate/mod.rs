@@ -70,6 +70,14 @@ pub struct EvaluationConfig {
     /// this file. Episode `i` (seed `s`) plays clip `(s - 1) mod n`. Left out: the cell's own.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub human_recorded: Option<workcell_sim::scenario::RecordedConfig>,
+    /// A recorded clip's other arm (the arm the cell's human does not model;
+    /// [`other_arm`]) is given to the perceptions that see the whole person: ground truth,
+    /// its foresight and the noisy camera report it beside the modelled parts, and the
+    /// filter keeps it beyond `d_min` as it does them. ProcNet and its fit follow one arm
+    /// and do not see it. `false`: it is only measured, as the cell's one-armed human
+    /// leaves it. Either way an episode where it comes below `d_min` is a violation.
+    /// Default true.
+    pub other_arm_seen: bool,
     /// An episode ends unfinished after `timeout_factor * task_s`. Default 3.
     pub timeout_factor: f64,
     /// Control period, s (a multiple of the cell's time step). Default 0.004.
@@ -84,6 +92,15 @@ pub struct EvaluationConfig {
     pub safety: FilterConfig,
 }
 
+impl EvaluationConfig {
+    /// Whether perception is given a recorded person's other arm ([`Self::other_arm_seen`]
+    /// and a perception that sees the whole person: not ProcNet's one-armed fit).
+    #[must_use]
+    pub fn other_arm_is_seen(&self) -> bool {
+        self.other_arm_seen && !matches!(self.perception, PerceptionConfig::Procnet(_))
+    }
+}
+
 impl Default for EvaluationConfig {
     fn default() -> Self {
         Self {
@@ -93,6 +110,7 @@ impl Default for EvaluationConfig {
             human_speeds: None,
             human_model: None,
             human_recorded: None,
+            other_arm_seen: true,
             timeout_factor: 3.0,
             control_period_s: 0.004,
             controller: ControllerConfig::default(),
@@ -521,9 +539,9 @@ pub struct EpisodeMetrics {
     pub fit_error_m: f64,
     /// The recorded person's other arm, which the cell's human neither has nor follows
     /// (`other_arm`): its smallest separation from the robot, m, by the same exact shapes
-    /// as `min_separation_m`. Nothing perceives or guards that arm: these are the approaches
-    /// the rest of the metrics cannot see. NaN without such an arm (the generator's motion,
-    /// a clip with one arm).
+    /// as `min_separation_m`; the rest of the metrics are the modelled human's. The filter
+    /// guards it where perception sees it (`EvaluationConfig::other_arm_seen`). NaN without
+    /// such an arm (the generator's motion, a clip with one arm).
     #[serde(default = "no_error", with = "lossless::f64")]
     pub other_arm_min_separation_m: f64,
     /// Time the other arm spent below d_min, s (0 without one).
@@ -538,6 +556,15 @@ pub struct EpisodeMetrics {
     /// retargeted, the perception with its network loaded), s; 0 in files from before it.
     #[serde(default, with = "lossless::f64")]
     pub setup_s: f64,
+}
+
+impl EpisodeMetrics {
+    /// Whether the episode came below d_min: the modelled human, or a recorded person's
+    /// other arm.
+    #[must_use]
+    pub fn violated(&self) -> bool {
+        self.violations > 0 || self.other_arm_violation_s > 0.0
+    }
 }
 
 /// Per-tick samples of one episode, for plots.

@@ -55,6 +55,11 @@ pub struct RunSettings {
     pub pfl_distance_m: f64,
     /// ISO/TS 15066 transient contact speed per arm part, m/s (empty without robot masses).
     pub contact_speed_limits: Vec<(String, f64)>,
+    /// Perception was given a recorded person's other arm, and the filter guarded it
+    /// (`EvaluationConfig::other_arm_seen` with a perception that sees the whole person).
+    /// Absent in records before it: false.
+    #[serde(default)]
+    pub other_arm_seen: bool,
 }
 
 /// The worst episode's samples over time.
@@ -527,6 +532,7 @@ fn differing_setting(a: &RunSettings, b: &RunSettings) -> &'static str {
         near_m,
         pfl_distance_m,
         contact_speed_limits,
+        other_arm_seen,
     } = a;
     let same_f64 = |x: &f64, y: &f64| x.to_bits() == y.to_bits();
     if *evaluation_toml != b.evaluation_toml {
@@ -557,6 +563,8 @@ fn differing_setting(a: &RunSettings, b: &RunSettings) -> &'static str {
         "the robot"
     } else if *contact_speed_limits != b.contact_speed_limits {
         "the contact speed limits"
+    } else if *other_arm_seen != b.other_arm_seen {
+        "other_arm_seen"
     } else {
         "the settings"
     }
@@ -583,6 +591,7 @@ mod tests {
             near_m: 0.5,
             pfl_distance_m: 0.5,
             contact_speed_limits: vec![("hand".into(), 1.35)],
+            other_arm_seen: false,
         }
     }
 

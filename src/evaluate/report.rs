@@ -252,7 +252,7 @@ fn part_error_line(episodes: &[EpisodeMetrics]) -> Option<String> {
 /// the robot it came and for how long within `d_min_m`, over the episodes that had one;
 /// `None` when none had.
 #[must_use]
-pub fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64) -> Option<String> {
+pub fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64, seen: bool) -> Option<String> {
     let with: Vec<&EpisodeMetrics> = episodes
         .iter()
         .filter(|e| !e.other_arm_min_separation_m.is_nan())
@@ -271,11 +271,17 @@ pub fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64) -> Option<Strin
         .count();
     (!with.is_empty()).then(|| {
         format!(
-            "The recorded person's other arm, which the cell's human does not model (nothing perceives or guards it; {} of {} episodes played one): closest {closest:.4} m, below d_min in {} episodes ({:.3} s), touching the robot in {touched}.",
+            "The recorded person's other arm, which the cell's human does not model ({}; {} of {} episodes played one): closest {closest:.4} m, below d_min in {} episodes ({:.3} s), touching the robot in {touched}.",
+            if seen {
+                "perception sees it and the filter guards it"
+            } else {
+                "nothing perceives or guards it"
+            },
             with.len(),
             episodes.len(),
             below.len(),
-            below.iter().map(|e| e.other_arm_violation_s).sum::<f64>()
+            // From +0: an empty sum of f64 is -0, printed "-0.000".
+            below.iter().fold(0.0, |s, e| s + e.other_arm_violation_s)
         )
     })
 }
@@ -296,6 +302,8 @@ pub struct SummaryContext<'a> {
     /// not permitted.
     pub contact_speed_limits: &'a [(String, f64)],
     pub command: &'a str,
+    /// A recorded person's other arm was seen and guarded (`RunSettings::other_arm_seen`).
+    pub other_arm_seen: bool,
 }
 
 /// `summary.md`.
@@ -316,24 +324,30 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         "- d_min: {:.3} m (true separation: exact robot shapes against the true human)\n",
         context.d_min_m
     );
-    let verdict = if a.violations == 0 {
-        "no violation"
-    } else {
-        "VIOLATIONS"
-    };
-    // The verdict is the modelled human's; a recorded person's other arm is not in it.
+    // Either arm of a recorded person below d_min is a violation; the table below is the
+    // modelled human's, the other arm has a line of its own.
     let other_arm_below = episodes
         .iter()
         .filter(|e| e.other_arm_min_separation_m < context.d_min_m)
         .count();
-    let unguarded = if other_arm_below > 0 {
+    let verdict = if a.violations == 0 && other_arm_below == 0 {
+        "no violation"
+    } else {
+        "VIOLATIONS"
+    };
+    let other_arm = if other_arm_below > 0 {
         format!(
-            " (of the modelled human; the recorded person's other arm, which nothing guards, came below d_min in {other_arm_below} episodes)"
+            " (the recorded person's other arm, {}, came below d_min in {other_arm_below} episodes)",
+            if context.other_arm_seen {
+                "seen and guarded"
+            } else {
+                "which nothing sees or guards"
+            }
         )
     } else {
         String::new()
     };
-    let _ = writeln!(md, "## Verdict: {verdict}{unguarded}\n");
+    let _ = writeln!(md, "## Verdict: {verdict}{other_arm}\n");
     let _ = writeln!(
         md,
         "| episodes | min separation (m) | episodes with violation | violations | time below d_min (s) | of it with the robot moving (s) | finished | task time / unfiltered | peak speed near human (m/s) | peak approach speed (m/s) |"
@@ -373,7 +387,7 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         "Contact (true separation down to 0): {} with the robot moving, {} with the robot at standstill (speed and separation monitoring permits only the second).\n",
         a.contacts_moving, a.contacts_standing
     );
-    if let Some(line) = other_arm_line(episodes, context.d_min_m) {
+    if let Some(line) = other_arm_line(episodes, context.d_min_m, context.other_arm_seen) {
         let _ = writeln!(md, "{line}\n");
     }
     let _ = writeln!(
@@ -644,16 +658,35 @@ mod tests {
             pfl_distance_m: 0.3,
             contact_speed_limits: &[],
             command: "c",
+            other_arm_seen: false,
         };
         let md = summary_markdown(&context, &[near.clone(), far.clone(), none.clone()]);
+        // The modelled human never came near: the other arm alone makes the verdict.
         assert!(
-            md.contains("## Verdict: no violation (of the modelled human; the recorded person's other arm, which nothing guards, came below d_min in 1 episodes)"),
+            md.contains("## Verdict: VIOLATIONS (the recorded person's other arm, which nothing sees or guards, came below d_min in 1 episodes)"),
             "{md}"
+        );
+        assert!(near.violated() && !far.violated() && !none.violated());
+        let seen = summary_markdown(
+            &SummaryContext {
+                other_arm_seen: true,
+                ..context.clone()
+            },
+            &[near.clone(), far.clone()],
+        );
+        assert!(
+            seen.contains("other arm, seen and guarded, came below")
+                && seen.contains("(perception sees it and the filter guards it; 2 of 2"),
+            "{seen}"
         );
         assert!(
             md.contains("2 of 3 episodes played one): closest -0.0100 m, below d_min in 1 episodes (0.008 s), touching the robot in 1."),
             "{md}"
         );
+        // The other arm beyond d_min: no violation, and no "-0.000 s" of the empty sum.
+        let md = summary_markdown(&context, &[far.clone(), none.clone()]);
+        assert!(md.contains("## Verdict: no violation\n"), "{md}");
+        assert!(md.contains("below d_min in 0 episodes (0.000 s)"), "{md}");
         // Without the other arm: the verdict alone, no line.
         let md = summary_markdown(&context, &[none]);
         assert!(

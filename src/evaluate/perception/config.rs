@@ -162,9 +162,15 @@ pub struct ProcNetConfig {
     /// network and the fit run at the camera's rate divided by this, the estimate ages
     /// between their frames as it does between any two (the joints' velocity, the bound
     /// growing with `human_acceleration_m_s2`). For a machine that cannot run them at the
-    /// camera's rate (docs/perception.md, "The network at half the camera's rate").
+    /// camera's rate (docs/perception.md, "Perception in the camera's time").
     /// Default 1.
     pub frame_stride: usize,
+    /// The fit's global search runs on at most one in `search_interval` of the tracker's
+    /// frames (1 to 8; `ArmFitConfig::search_interval`): a person lost for a while costs the
+    /// loop a search (six times a tracked fit's renders) every `search_interval` frames, not
+    /// every frame; the frames between climb their track alone and take the bound of a
+    /// search. Default 1.
+    pub search_interval: usize,
     /// The camera delivers nothing from this time on, s (a failed camera): the last estimate
     /// ages out ([`super::procnet::MAX_AGE_S`]) and the filter then brakes. Left out, never.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -239,6 +245,7 @@ impl PerceptionKind {
                 "hull_outlines",
                 "trunk_downsample",
                 "frame_stride",
+                "search_interval",
                 "camera_fails_at_s",
             ],
         }
@@ -301,6 +308,7 @@ impl Default for ProcNetConfig {
             hull_outlines: None,
             trunk_downsample: None,
             frame_stride: 1,
+            search_interval: 1,
             camera_fails_at_s: None,
         }
     }
@@ -469,6 +477,10 @@ impl ProcNetConfig {
         let stride = match self.frame_stride {
             1 => String::new(),
             k => format!(", 1 in {k} camera frames read"),
+        };
+        let stride = match self.search_interval {
+            1 => stride,
+            k => format!("{stride}, the global search on 1 in {k} frames at most"),
         };
         let masks = match self.masks {
             // The weights' own header says which network they hold (ProcNet or the
@@ -640,6 +652,12 @@ impl PerceptionConfig {
                     return Err(crate::Error::config(
                         "perception.frame_stride",
                         format!("out of range: {} (1 to 8)", c.frame_stride),
+                    ));
+                }
+                if !(1..=8).contains(&c.search_interval) {
+                    return Err(crate::Error::config(
+                        "perception.search_interval",
+                        format!("out of range: {} (1 to 8)", c.search_interval),
                     ));
                 }
                 check_optional("uncertainty_scale", c.uncertainty_scale)?;

@@ -12,6 +12,7 @@ impl HumanPerception for GroundTruth {
     }
     fn estimate(&mut self, input: &PerceptionInput<'_>, out: &mut HumanEstimate) {
         out.clone_from(input.truth);
+        out.parts.extend_from_slice(input.other_arm);
     }
 }
 
@@ -25,7 +26,8 @@ pub(super) const FORESIGHT_INSTANTS: usize = 6;
 
 /// Ground truth, and the arm's parts where they truly will be at [`FORESIGHT_INSTANTS`]
 /// instants evenly spaced up to `foresight_s` ahead, sampled from the cell's scripted human
-/// motion: the oracle of a perfect predictor (`perception.foresight_s`).
+/// motion: the oracle of a perfect predictor (`perception.foresight_s`). A recorded other
+/// arm is told where it is now, after the modelled parts' instants.
 pub struct Foresight {
     horizon_s: f64,
     geometry: workcell_safety::HumanGeometry,
@@ -81,5 +83,6 @@ impl HumanPerception for Foresight {
                 out.parts.extend_from_slice(&self.ahead.parts);
             }
         }
+        out.parts.extend_from_slice(input.other_arm);
     }
 }

@@ -29,6 +29,11 @@ pub struct PerceptionInput<'a> {
     pub state: &'a CellState,
     /// The true human parts (exact capsules and velocities) at `t_s`.
     pub truth: &'a HumanEstimate,
+    /// The recorded person's other arm at `t_s` (true capsules, velocities over the last
+    /// tick), for a perception that sees the whole person; empty where there is none or it
+    /// is not to be seen (`EvaluationConfig::other_arm_seen`). Its parts follow the
+    /// modelled ones in an estimate.
+    pub other_arm: &'a [PartEstimate],
 }
 
 /// A source of human estimates for the safety filter.
@@ -116,6 +121,7 @@ mod tests {
             model: &model,
             state: &state,
             truth: &now,
+            other_arm: &[],
         };
         oracle.estimate(&input, &mut told);
         // The default cell's whole body: upper arm, forearm, hand and head.
@@ -200,5 +206,72 @@ mod tests {
         // Four binomial standard errors (0.00033 each).
         let se = (expected * (1.0 - expected) / n as f64).sqrt();
         assert!((p - expected).abs() < 4.0 * se, "{p} against {expected}");
+    }
+
+    /// A recorded person's other arm, given, is seen by the perceptions of the whole person
+    /// after the modelled parts: ground truth exactly; the noisy camera without noise, 50
+    /// ms late, where its velocity carries it (the hand moving 1 m/s along x: 5 cm on).
+    #[test]
+    fn the_whole_persons_perceptions_see_the_other_arm() {
+        let path =
+            std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/configs/default.toml"));
+        let scenario = workcell_sim::Scenario::from_file(path).expect("scenario");
+        let model = CellModel::new(&scenario, path).expect("cell");
+        let state = CellState::new(&model).expect("state");
+        let part = |part, x: f64, vx: f64| PartEstimate {
+            part,
+            capsule: workcell_safety::Capsule::new(
+                Vector::new(x, 0.0, 1.0),
+                Vector::new(x + 0.2, 0.0, 1.0),
+                0.05,
+            ),
+            v_a_W: Vector::new(vx, 0.0, 0.0),
+            v_b_W: Vector::new(vx, 0.0, 0.0),
+        };
+        let truth = HumanEstimate {
+            parts: vec![part(workcell_safety::HumanPart::Forearm, 0.0, 0.0)],
+            ..HumanEstimate::default()
+        };
+        let other = [part(workcell_safety::HumanPart::Hand, 1.0, 1.0)];
+        let input = |t_s, other_arm| PerceptionInput {
+            t_s,
+            model: &model,
+            state: &state,
+            truth: &truth,
+            other_arm,
+        };
+        let mut out = HumanEstimate::default();
+        GroundTruth.estimate(&input(0.0, &other), &mut out);
+        assert_eq!(out.parts, [truth.parts[0], other[0]]);
+        GroundTruth.estimate(&input(0.0, &[]), &mut out);
+        assert_eq!(out.parts, truth.parts);
+
+        let mut camera = NoisyCamera::new(
+            NoisyConfig {
+                position_noise_m: 0.0,
+                velocity_noise_m_s: 0.0,
+                dropout: 0.0,
+                latency_s: 0.05,
+                ..NoisyConfig::default()
+            },
+            1,
+        );
+        camera.estimate(&input(0.0, &other), &mut out);
+        assert!(out.parts.is_empty(), "nothing has arrived yet");
+        camera.estimate(&input(0.05, &other), &mut out);
+        assert_eq!(out.parts.len(), 2);
+        assert_eq!(out.parts[0], truth.parts[0]);
+        let seen = out.parts[1];
+        assert_eq!(seen.part, workcell_safety::HumanPart::Hand);
+        assert!(
+            (seen.capsule.a_W.x - 1.05).abs() < 1e-12,
+            "{:?}",
+            seen.capsule
+        );
+        assert!(
+            (seen.capsule.b_W.x - 1.25).abs() < 1e-12,
+            "{:?}",
+            seen.capsule
+        );
     }
 }

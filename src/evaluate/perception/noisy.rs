@@ -102,6 +102,7 @@ impl HumanPerception for NoisyCamera {
             if self.rng.random::<f64>() >= self.config.dropout {
                 let (sp, sv) = (self.config.position_noise_m, self.config.velocity_noise_m_s);
                 let mut measured = input.truth.clone();
+                measured.parts.extend_from_slice(input.other_arm);
                 for p in &mut measured.parts {
                     p.capsule.a_W += self.gaussian3(sp);
                     p.capsule.b_W += self.gaussian3(sp);

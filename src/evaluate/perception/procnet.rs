@@ -163,6 +163,9 @@ impl ProcNetCamera {
         fit.hand_region = config.hand_region.unwrap_or(fit.hand_region);
         fit.trunk_downsample = config.trunk_downsample.unwrap_or(fit.trunk_downsample);
         fit.hull_outlines = config.hull_outlines.unwrap_or(fit.hull_outlines);
+        // Not a setting the bound was measured with: a deferred search's fit takes the
+        // bound of a searched one.
+        fit.search_interval = config.search_interval;
         let overridden = config.fit_trunk.is_some()
             || config.reversed_start.is_some()
             || config.depth_start.is_some()
@@ -274,9 +277,10 @@ impl ProcNetCamera {
             Ok(estimate) => {
                 self.counts.estimates += 1;
                 if self.place_fitted(input, &estimate.fit.q) {
-                    if let Some((error, _)) =
-                        super::super::episode::perception_error(&self.fitted, input.truth)
-                    {
+                    if let Some((error, _)) = super::super::episode::perception_error(
+                        &self.fitted.parts,
+                        &input.truth.parts,
+                    ) {
                         self.fit_error.0 += error;
                         self.fit_error.1 += 1;
                     }
@@ -800,6 +804,7 @@ mod tests {
             model,
             state,
             truth,
+            other_arm: &[],
         };
         perception.estimate(&input, out);
     }
@@ -1007,6 +1012,7 @@ mod tests {
                 model: &model,
                 state: &state,
                 truth: &truth,
+                other_arm: &[],
             };
             perception.estimate(&input, &mut out);
             let err = out

@@ -96,6 +96,14 @@ pub struct ArmFitConfig {
     /// this: a track that explains the masks this poorly has likely followed a wrong
     /// optimum. Default 0.55.
     pub search_below_gain: f64,
+    /// The global search runs on at most one in `search_interval` fits: a frame that would
+    /// search within `search_interval - 1` fits of the last search climbs its track and the
+    /// other starts alone, and its fit counts as searched for the bound
+    /// ([`BoundInputs::tracked`] false), not as a kept track. A search renders about six
+    /// times a tracked fit's masks, and a tracker that has lost the person searches on every
+    /// frame; a machine that must keep to the camera's time spreads the searches out.
+    /// Default 1: whenever a track is poor or missing.
+    pub search_interval: usize,
     /// With a depth image: the spread of a part's seen surface about its model's, m.
     /// Default 0.03.
     pub depth_sigma_m: f64,
@@ -179,6 +187,7 @@ impl Default for ArmFitConfig {
             uncertainty_tracked_floors_m: None,
             uncertainty_confident: None,
             search_below_gain: 0.55,
+            search_interval: 1,
             depth_sigma_m: 0.03,
             depth_weight: 0.05,
             trunk_depth_weight: 0.2,

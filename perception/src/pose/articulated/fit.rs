@@ -137,6 +137,8 @@ pub struct ArmFitter<R: Renderer> {
     /// The next fit whose track would be kept runs the global search beside it
     /// ([`Self::search_next`]).
     pub(super) search_next: bool,
+    /// Fits since the global search last ran ([`ArmFitConfig::search_interval`]).
+    pub(super) since_search: usize,
     pub(super) batch: MaskBatch,
     pub(super) spans: SpanBatch,
     pub(super) poses: Vec<Pose>,
@@ -165,6 +167,7 @@ impl<R: Renderer> ArmFitter<R> {
             tracks: Vec::new(),
             last_points: None,
             search_next: false,
+            since_search: usize::MAX,
             batch: MaskBatch::new(),
             spans: SpanBatch::new(),
             poses: Vec::new(),
@@ -194,6 +197,7 @@ impl<R: Renderer> ArmFitter<R> {
         self.tracks.clear();
         self.last_points = None;
         self.search_next = false;
+        self.since_search = usize::MAX;
         if let Some(trunk) = self.arm.trunk.clone() {
             // Finite values within the limits: the kinematics cannot fail.
             let _ = self.arm.hold_trunk(&trunk, &trunk.upright);
@@ -342,7 +346,19 @@ impl<R: Renderer> ArmFitter<R> {
             .map(|(climb, _)| climb.score.gain)
             .fold(f64::NEG_INFINITY, f64::max);
         let poor = climbs.is_empty() || tracked_gain < c.search_below_gain;
-        let reacquired = poor || std::mem::take(&mut self.search_next);
+        // Wanted: a poor or missing track, or a request; it runs when due, and a request
+        // made of a poor track stands until a fit whose track would be kept.
+        let wanted = poor || self.search_next;
+        let due = self.since_search.saturating_add(1) >= c.search_interval.max(1);
+        let reacquired = wanted && due;
+        if reacquired && !poor {
+            self.search_next = false;
+        }
+        self.since_search = if reacquired {
+            0
+        } else {
+            self.since_search.saturating_add(1)
+        };
         if reacquired {
             let searched = self.search(coarse)?;
             if tracing::enabled!(tracing::Level::TRACE) {
@@ -509,7 +525,8 @@ impl<R: Renderer> ArmFitter<R> {
                 hidden_share,
                 gain: climb.score.gain,
                 confirmed,
-                tracked: !reacquired,
+                // A poor track whose search was not due is no kept track.
+                tracked: !wanted,
             }),
             hidden_share,
             sigma_m,

@@ -913,16 +913,7 @@ fn a_poor_track_calls_the_global_search() {
         ..ArmFitConfig::default()
     };
     let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config(0.55));
-    let poor = (1..40)
-        .map(|k| {
-            let d = 0.02 * f64::from(k);
-            vec![truth[0] + d, truth[1] - d, truth[2] + 0.5 * d]
-        })
-        .find(|q| {
-            let gain = fitter.gain_at(&camera, &masks, q).expect("gain");
-            gain.is_some_and(|g| (0.35..0.5).contains(&g.total))
-        })
-        .expect("a configuration that explains the masks poorly");
+    let poor = poor_configuration(&mut fitter, &camera, &masks, &truth);
     fitter.set_prior(&poor);
     let fit = fitter.fit(&camera, &masks).expect("fit").expect("a pose");
     assert!(fit.reacquired);
@@ -960,6 +951,100 @@ fn a_poor_track_calls_the_global_search() {
     assert!(searched(&mut fitter));
     assert!(searched(&mut fitter));
     assert!(!searched(&mut fitter));
+}
+
+/// With `search_interval = 2` a poor track searches on every other fit: the fit between
+/// keeps the poor track and takes the bound of a searched fit (the floor of any fit, 0.5 m
+/// here, not the kept tracks' 1 cm), and a request made between waits for the next search.
+#[test]
+fn a_search_interval_spreads_the_searches_out() {
+    let (arm, camera) = setup();
+    let truth = [0.5, 0.9, 1.0];
+    let masks = ArmMasks::from_classes(&classes(&arm, &camera, &truth), 128, 128).expect("masks");
+    let config = |search_interval| ArmFitConfig {
+        max_iterations: 0,
+        newton_steps: 0,
+        search_interval,
+        uncertainty_floor_m: 0.5,
+        uncertainty_tracked_floors_m: Some([0.01; 4]),
+        ..ArmFitConfig::default()
+    };
+    let mut probe = ArmFitter::new(CpuRenderer::new(), arm.clone(), config(1));
+    let poor = poor_configuration(&mut probe, &camera, &masks, &truth);
+    let fits = |interval: usize, requests: &[bool]| {
+        let mut fitter = ArmFitter::new(CpuRenderer::new(), arm.clone(), config(interval));
+        requests
+            .iter()
+            .map(|&request| {
+                fitter.set_prior(&poor);
+                if request {
+                    fitter.search_next();
+                }
+                fitter.fit(&camera, &masks).expect("fit").expect("a pose")
+            })
+            .collect::<Vec<_>>()
+    };
+    let every = fits(1, &[false; 4]);
+    assert!(every.iter().all(|f| f.reacquired));
+    let spread = fits(2, &[false; 4]);
+    let searched: Vec<bool> = spread.iter().map(|f| f.reacquired).collect();
+    assert_eq!(searched, [true, false, true, false]);
+    for (fit, all) in spread.iter().zip(&every) {
+        if fit.reacquired {
+            // A search's fit is the one the fitter without an interval finds.
+            assert_eq!(fit.q, all.q);
+            let err = distance_cm(&arm, &camera, &fit.q, &truth);
+            assert!(err < 3.0, "{err:.2} cm off");
+        } else {
+            // The track kept, poor, and not trusted as a kept track.
+            assert!(fit.gain < search_gain(), "gain {}", fit.gain);
+            assert!(fit.uncertainty_m >= 0.5, "bound {} m", fit.uncertainty_m);
+        }
+    }
+    // A good track is kept, with the kept tracks' floor: the bounds above tell the two
+    // apart. Asked to search where none is due, the request waits for the next fit.
+    let mut good = ArmFitter::new(CpuRenderer::new(), arm.clone(), config(2));
+    let mut next = |request: bool| {
+        good.set_prior(&truth);
+        if request {
+            good.search_next();
+        }
+        let fit = good.fit(&camera, &masks).expect("fit").expect("a pose");
+        (fit.reacquired, fit.uncertainty_m < 0.5)
+    };
+    assert_eq!(next(false), (false, true));
+    assert_eq!(next(true), (true, false), "asked, and due");
+    assert_eq!(
+        next(true),
+        (false, false),
+        "asked, not due: a searched fit's bound"
+    );
+    assert_eq!(next(false), (true, false), "the request waited");
+    assert_eq!(next(false), (false, true), "and was then spent");
+}
+
+/// A configuration moved off `truth` until it explains the masks poorly: a gain from 0.35
+/// to 0.5, a pose but below the search's threshold.
+fn poor_configuration(
+    fitter: &mut ArmFitter<CpuRenderer>,
+    camera: &Camera,
+    masks: &ArmMasks,
+    truth: &[f64; 3],
+) -> Vec<f64> {
+    (1..40)
+        .map(|k| {
+            let d = 0.02 * f64::from(k);
+            vec![truth[0] + d, truth[1] - d, truth[2] + 0.5 * d]
+        })
+        .find(|q| {
+            let gain = fitter.gain_at(camera, masks, q).expect("gain");
+            gain.is_some_and(|g| (0.35..0.5).contains(&g.total))
+        })
+        .expect("a configuration that explains the masks poorly")
+}
+
+fn search_gain() -> f64 {
+    ArmFitConfig::default().search_below_gain
 }
 
 /// A fit below `min_gain` is a pose only when the frame before put the forearm within
