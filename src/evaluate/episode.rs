@@ -642,15 +642,8 @@ mod tests {
                 );
             }
         }
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate-recorded.toml");
         let run = |seen: bool| {
-            let (evaluation, _) = Evaluation::from_file_as(
-                &path,
-                Some(crate::evaluate::PerceptionKind::GroundTruth),
-                &["task_s=0.5".into(), format!("other_arm_seen={seen}")],
-            )
-            .expect("evaluation");
+            let evaluation = recorded_ground_truth(&["task_s=0.5".into(), seen_key(seen)]);
             let log: Seen = Arc::default();
             let (metrics, _) = run_episode(
                 &evaluation,
@@ -691,5 +684,50 @@ mod tests {
             }
         }
         assert!(moved > 0.01, "the other arm moves: {moved} m/s at most");
+    }
+
+    /// Seed 1 of the whole recorded suite (its first clip, 12 s, ground truth, QP): the
+    /// other arm unguarded comes to 4 cm of the robot, a violation the modelled human's
+    /// metrics do not have; seen and guarded it stays beyond d_min (0.148 m in the run of
+    /// 450 episodes that chose this seed, docs/human.md).
+    #[test]
+    fn the_guarded_other_arm_keeps_d_min_where_the_unguarded_did_not() {
+        let run = |seen: bool| {
+            let evaluation =
+                recorded_ground_truth(&[seen_key(seen), "human_recorded.split=\"all\"".into()]);
+            run_episode(&evaluation, FilterMode::Qp, 0, 1, None, |_| {})
+                .expect("episode")
+                .0
+        };
+        let d_min = 0.1;
+        let unseen = run(false);
+        assert_eq!(unseen.violations, 0);
+        assert!(unseen.other_arm_min_separation_m < d_min);
+        assert!(unseen.violated(), "the other arm's approach is a violation");
+        let seen = run(true);
+        assert_eq!(seen.violations, 0);
+        assert!(
+            seen.other_arm_min_separation_m >= d_min,
+            "{} m",
+            seen.other_arm_min_separation_m
+        );
+        assert!(!seen.violated());
+    }
+
+    /// `configs/evaluate-recorded.toml` with ground truth and `overrides`.
+    fn recorded_ground_truth(overrides: &[String]) -> Evaluation {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/evaluate-recorded.toml");
+        Evaluation::from_file_as(
+            &path,
+            Some(crate::evaluate::PerceptionKind::GroundTruth),
+            overrides,
+        )
+        .expect("evaluation")
+        .0
+    }
+
+    fn seen_key(seen: bool) -> String {
+        format!("other_arm_seen={seen}")
     }
 }

@@ -24,7 +24,7 @@ pub const ROOT_NODE: &str = "cell (Z up)";
 pub const ROBOT_PREFIX: &str = "robot/";
 pub const HUMAN_PREFIX: &str = "human/";
 /// Prefix of a recorded clip's other arm's parts (`Recording::other_arm`): the arm the cell's
-/// human does not model, drawn so that what nothing guards can be seen.
+/// human does not model, drawn apart from it (only some perceptions see it).
 pub const OTHER_ARM_PREFIX: &str = "other arm (not modelled)/";
 /// Its colour: grey, unlike the dressed human.
 const OTHER_ARM_COLOR: [f32; 3] = [0.55, 0.55, 0.6];

@@ -241,8 +241,8 @@ impl Tally {
         });
     }
 
-    /// The recorded person's other arm (not modelled, not guarded) at `separation_m` from
-    /// the robot over a tick `dt`.
+    /// The recorded person's other arm (not modelled; guarded where perception sees it) at
+    /// `separation_m` from the robot over a tick `dt`.
     pub fn other_arm(&mut self, separation_m: f64, dt: f64, d_min_m: f64) {
         let m = &mut self.metrics;
         // NaN (none yet) loses to any number.
