@@ -404,7 +404,7 @@ impl<'a> Run<'a> {
                 model: &self.model,
                 state: &self.state,
                 truth: &self.truth,
-                other_arm: if self.c.other_arm_seen {
+                other_arm: if self.c.other_arm_is_seen() {
                     &self.other_parts
                 } else {
                     &[]

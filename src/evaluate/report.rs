@@ -330,10 +330,10 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         .iter()
         .filter(|e| e.other_arm_min_separation_m < context.d_min_m)
         .count();
-    let verdict = if a.violations == 0 && other_arm_below == 0 {
-        "no violation"
-    } else {
+    let verdict = if episodes.iter().any(EpisodeMetrics::violated) {
         "VIOLATIONS"
+    } else {
+        "no violation"
     };
     let other_arm = if other_arm_below > 0 {
         format!(

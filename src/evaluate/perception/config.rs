@@ -478,9 +478,9 @@ impl ProcNetConfig {
             1 => String::new(),
             k => format!(", 1 in {k} camera frames read"),
         };
-        let stride = match self.search_interval {
-            1 => stride,
-            k => format!("{stride}, the global search on 1 in {k} frames at most"),
+        let search = match self.search_interval {
+            1 => String::new(),
+            k => format!(", the global search on 1 in {k} frames at most"),
         };
         let masks = match self.masks {
             // The weights' own header says which network they hold (ProcNet or the
@@ -500,7 +500,7 @@ impl ProcNetConfig {
             }
         };
         format!(
-            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{stride}{}{}{}{}",
+            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{stride}{search}{}{}{}{}",
             if self.depth {
                 " with depth (RGB-D)"
             } else {

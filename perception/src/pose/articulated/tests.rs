@@ -997,7 +997,8 @@ fn a_search_interval_spreads_the_searches_out() {
             assert!(err < 3.0, "{err:.2} cm off");
         } else {
             // The track kept, poor, and not trusted as a kept track.
-            assert!(fit.gain < search_gain(), "gain {}", fit.gain);
+            let search_below = ArmFitConfig::default().search_below_gain;
+            assert!(fit.gain < search_below, "gain {}", fit.gain);
             assert!(fit.uncertainty_m >= 0.5, "bound {} m", fit.uncertainty_m);
         }
     }
@@ -1041,10 +1042,6 @@ fn poor_configuration(
             gain.is_some_and(|g| (0.35..0.5).contains(&g.total))
         })
         .expect("a configuration that explains the masks poorly")
-}
-
-fn search_gain() -> f64 {
-    ArmFitConfig::default().search_below_gain
 }
 
 /// A fit below `min_gain` is a pose only when the frame before put the forearm within
