@@ -1277,7 +1277,9 @@ fn evaluate_writes_the_report_and_refuses_bad_input() {
         .find(|l| !l.starts_with('#'))
         .expect("a violating episode");
     let fields: Vec<&str> = first.split('\t').collect();
-    let (seed, command) = (fields[0], fields[3]);
+    // Seed, violations, separation, where, the left arm's separation, the command.
+    assert_eq!(fields.len(), 6, "{first}");
+    let (seed, command) = (fields[0], fields[5]);
     // The override with spaces comes back quoted, as a shell needs it.
     assert!(command.contains("'safety.detection_m = 1.2'"), "{command}");
     let words = shell_words(command);

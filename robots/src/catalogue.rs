@@ -162,6 +162,40 @@ impl RobotModel {
         Self::from_urdf_str(entry.urdf, &path, &PackageMap::new())
     }
 
+    /// The catalogue's `human` without its left arm (its `left_*` links and joints): the
+    /// one-armed body of the figures measured before the left arm existed, for comparisons
+    /// with them.
+    ///
+    /// # Errors
+    /// None in practice: the catalogue's text is fixed; as [`RobotModel::from_urdf_str`].
+    pub fn one_armed_human() -> Result<Self> {
+        let text = CATALOGUE
+            .iter()
+            .find(|e| e.name == "human")
+            .map_or("", |e| e.urdf);
+        let mut kept = String::with_capacity(text.len());
+        let mut skipping: Option<&str> = None;
+        for line in text.lines() {
+            let trimmed = line.trim();
+            if let Some(end) = skipping {
+                if trimmed.starts_with(end) {
+                    skipping = None;
+                }
+                continue;
+            }
+            if trimmed.starts_with("<link name=\"left_") && !trimmed.ends_with("/>") {
+                skipping = Some("</link>");
+            } else if trimmed.starts_with("<joint name=\"left_") {
+                skipping = Some("</joint>");
+            } else if !trimmed.starts_with("<link name=\"left_") {
+                kept.push_str(line);
+                kept.push('\n');
+            }
+        }
+        let path = PathBuf::from("catalogue/human/human-one-armed.urdf");
+        Self::from_urdf_str(&kept, &path, &PackageMap::new())
+    }
+
     /// A catalogue name, the name of a robot added to the library, or a path to a URDF file
     /// (see [`RobotSource::locate`]).
     ///

@@ -15,20 +15,73 @@ pub enum HumanPart {
     Forearm,
     Hand,
     Head,
+    LeftUpperArm,
+    LeftForearm,
+    LeftHand,
 }
 
 impl HumanPart {
-    /// Every part, torso first.
-    pub const ALL: [HumanPart; 5] = [
+    /// Every part, torso first, the right arm's before the left arm's (the one-armed
+    /// models' parts are the first five).
+    pub const ALL: [HumanPart; 8] = [
         HumanPart::Torso,
         HumanPart::UpperArm,
         HumanPart::Forearm,
         HumanPart::Hand,
         HumanPart::Head,
+        HumanPart::LeftUpperArm,
+        HumanPart::LeftForearm,
+        HumanPart::LeftHand,
     ];
 
-    /// The parts of the arm, in the order used in tables (the safety layer's capsules).
+    /// The parts of the (right) arm, in the order used in tables (the safety layer's
+    /// capsules): the arm of the one-armed models, the one the articulated fit follows.
     pub const ARM: [HumanPart; 3] = [HumanPart::UpperArm, HumanPart::Forearm, HumanPart::Hand];
+
+    /// The left arm's parts, in [`HumanPart::ARM`]'s order.
+    pub const LEFT_ARM: [HumanPart; 3] = [
+        HumanPart::LeftUpperArm,
+        HumanPart::LeftForearm,
+        HumanPart::LeftHand,
+    ];
+
+    /// The side of the body the part is on: `Some(Side::Right)` for the right arm's parts,
+    /// `Some(Side::Left)` for the left's, `None` for the torso and the head.
+    #[must_use]
+    pub fn side(self) -> Option<Side> {
+        match self {
+            HumanPart::Torso | HumanPart::Head => None,
+            HumanPart::UpperArm | HumanPart::Forearm | HumanPart::Hand => Some(Side::Right),
+            HumanPart::LeftUpperArm | HumanPart::LeftForearm | HumanPart::LeftHand => {
+                Some(Side::Left)
+            }
+        }
+    }
+
+    /// The same part on the other side of the body (the torso and the head are their own).
+    #[must_use]
+    pub fn mirrored(self) -> HumanPart {
+        match self {
+            HumanPart::UpperArm => HumanPart::LeftUpperArm,
+            HumanPart::Forearm => HumanPart::LeftForearm,
+            HumanPart::Hand => HumanPart::LeftHand,
+            HumanPart::LeftUpperArm => HumanPart::UpperArm,
+            HumanPart::LeftForearm => HumanPart::Forearm,
+            HumanPart::LeftHand => HumanPart::Hand,
+            HumanPart::Torso | HumanPart::Head => self,
+        }
+    }
+
+    /// The part of the right arm (or the torso or head) this part is the same limb as: the
+    /// part without its side, for the figures that are the same on both sides (sizes, ISO/TS
+    /// 15066's body regions).
+    #[must_use]
+    pub fn limb(self) -> HumanPart {
+        match self.side() {
+            Some(Side::Left) => self.mirrored(),
+            _ => self,
+        }
+    }
 
     /// Lower-case name, also the link name of the part in the catalogue `human_arm`
     /// (`upper_arm`).
@@ -40,6 +93,9 @@ impl HumanPart {
             HumanPart::Forearm => "forearm",
             HumanPart::Hand => "hand",
             HumanPart::Head => "head",
+            HumanPart::LeftUpperArm => "left_upper_arm",
+            HumanPart::LeftForearm => "left_forearm",
+            HumanPart::LeftHand => "left_hand",
         }
     }
 
@@ -50,12 +106,14 @@ impl HumanPart {
     }
 
     /// The part a human model's link of this name belongs to: the part names themselves,
-    /// and `shoulder` (the upper arm's first joint frame) as the upper arm. Other links
-    /// (the frames between a joint's axes) belong to their parent's part.
+    /// and `shoulder` (the upper arm's first joint frame) as the upper arm, `left_shoulder`
+    /// as the left's. Other links (the frames between a joint's axes) belong to their
+    /// parent's part.
     #[must_use]
     pub fn of_link_name(name: &str) -> Option<HumanPart> {
         match name {
             "shoulder" => Some(HumanPart::UpperArm),
+            "left_shoulder" => Some(HumanPart::LeftUpperArm),
             _ => HumanPart::from_name(name),
         }
     }
@@ -64,6 +122,40 @@ impl HumanPart {
     #[must_use]
     pub fn from_name(name: &str) -> Option<HumanPart> {
         HumanPart::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
+/// A side of the body, as the person sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Side {
+    Right,
+    Left,
+}
+
+impl Side {
+    /// `right` or `left`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Right => "right",
+            Side::Left => "left",
+        }
+    }
+
+    /// The other side.
+    #[must_use]
+    pub fn other(self) -> Self {
+        match self {
+            Side::Left => Side::Right,
+            Side::Right => Side::Left,
+        }
+    }
+}
+
+impl std::fmt::Display for Side {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -163,7 +255,27 @@ mod tests {
             HumanPart::of_link_name("shoulder"),
             Some(HumanPart::UpperArm)
         );
+        assert_eq!(
+            HumanPart::of_link_name("left_shoulder"),
+            Some(HumanPart::LeftUpperArm)
+        );
         assert_eq!(HumanPart::of_link_name("pelvis"), None);
+        for (right, left) in HumanPart::ARM.into_iter().zip(HumanPart::LEFT_ARM) {
+            assert_eq!(right.mirrored(), left);
+            assert_eq!(left.mirrored(), right);
+            assert_eq!(left.limb(), right);
+            assert_eq!(left.name(), format!("left_{}", right.name()));
+            assert_eq!(
+                (right.side(), left.side()),
+                (Some(Side::Right), Some(Side::Left))
+            );
+        }
+        for part in [HumanPart::Torso, HumanPart::Head] {
+            assert_eq!(
+                (part.side(), part.mirrored(), part.limb()),
+                (None, part, part)
+            );
+        }
         assert!("elbow".parse::<HumanPart>().is_err());
     }
 

@@ -39,7 +39,7 @@ pub use catalogue::{
     CATALOGUE, CatalogueEntry, ROBOT_PATH_VAR, RobotSource, added_robots, robot_library,
 };
 pub use error::{Result, RobotError};
-pub use human::{HumanLook, HumanPart};
+pub use human::{HumanLook, HumanPart, Side};
 pub use kinematics::{Jacobian, KinematicState};
 pub use mesh::{DECODER_CRATES, MeshError, TriMesh, gltf_buffer_files, gltf_buffer_path};
 pub use model::{

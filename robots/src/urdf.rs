@@ -5,7 +5,7 @@
 //! non-finite or negative numbers, a zero joint axis, a mimic of an unknown joint, a mesh that
 //! cannot be found or decoded. Each error names the file and the element.
 
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -235,7 +235,9 @@ impl Builder<'_> {
             raw.push(self.joint(j, parent, child)?);
         }
 
-        // The root, then a breadth-first order that reaches every link exactly once.
+        // The root, then a depth-first order that reaches every link exactly once: each
+        // branch's joints together, siblings in the file's order (a two-armed body's right
+        // arm, written first, keeps its coordinates when the left arm is added after it).
         let roots: Vec<usize> = (0..links.len())
             .filter(|&l| links[l].parent_joint.is_none())
             .collect();
@@ -260,14 +262,18 @@ impl Builder<'_> {
             }
         };
         let mut order = Vec::with_capacity(raw.len());
-        let mut queue = VecDeque::from([root]);
-        while let Some(link) = queue.pop_front() {
-            for (j, joint) in raw.iter().enumerate() {
-                if joint.parent == link {
-                    order.push(j);
-                    queue.push_back(joint.child);
-                }
+        // Joints still to visit, the next on top.
+        let mut stack: Vec<usize> = (0..raw.len())
+            .rev()
+            .filter(|&j| raw[j].parent == root)
+            .collect();
+        while let Some(j) = stack.pop() {
+            if order.len() == raw.len() {
+                break; // a cycle below the root would loop: reported below
             }
+            order.push(j);
+            let child = raw[j].child;
+            stack.extend((0..raw.len()).rev().filter(|&k| raw[k].parent == child));
         }
         if order.len() != raw.len() {
             let stuck = (0..raw.len()).find(|j| !order.contains(j)).unwrap_or(0);

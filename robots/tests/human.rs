@@ -68,6 +68,9 @@ fn the_flesh_of_the_arm_and_head_lies_inside_its_collision_envelope() {
                 HumanPart::Forearm,
                 HumanPart::Hand,
                 HumanPart::Head,
+                HumanPart::LeftUpperArm,
+                HumanPart::LeftForearm,
+                HumanPart::LeftHand,
             ][..],
         ),
     ] {
@@ -131,7 +134,7 @@ fn each_look_draws_its_own_visuals_and_the_flesh_has_the_cited_girths() {
 
 /// At every joint's zero the whole body is the arm model: the same link frames for the parts
 /// both have, the same visuals and collision shapes (the head moved to a link of its own and
-/// the same in the world), the same mass in the arm.
+/// the same in the world; the whole body's left arm aside), the same mass in the arm.
 #[test]
 fn the_whole_body_at_zero_is_the_arm_model() {
     use workcell_robots::math::Pose;
@@ -143,6 +146,9 @@ fn the_whole_body_at_zero_is_the_arm_model() {
     let shapes = |model: &RobotModel, k: &workcell_robots::KinematicState| {
         let mut out = Vec::new();
         for (l, link) in model.links().iter().enumerate() {
+            if link.name.starts_with("left_") {
+                continue;
+            }
             let X = k.link_pose(l);
             for g in link.visuals.iter().chain(&link.collisions) {
                 let p = X.transform_point(g.X_LG.translation);
@@ -169,4 +175,94 @@ fn the_whole_body_at_zero_is_the_arm_model() {
         }
     }
     assert!(body.link_id(HumanPart::Head.link_name()).is_some());
+}
+
+/// The whole body's left arm is its right arm's mirror image across the torso's x-z plane at
+/// the same joint values: every left link frame is the right one's mirrored (a point (x, y, z)
+/// of a right link, mirrored, is the point (x, -y, z) of its left twin), in any posture of
+/// the arm and the trunk; the masses and the collision envelopes are the same.
+#[test]
+fn the_left_arm_is_the_right_arms_mirror_image() {
+    use workcell_robots::math::Pose;
+    let body = RobotModel::from_catalogue("human").unwrap();
+    let index = |name: &str| {
+        body.actuated_joints()
+            .iter()
+            .position(|&j| body.joints()[j].name == name)
+            .unwrap_or_else(|| panic!("{name}"))
+    };
+    let arm_joints = [
+        ("shoulder_flexion", [0.3, 1.4, -0.5]),
+        ("shoulder_abduction", [0.2, 0.9, -0.3]),
+        ("shoulder_rotation", [0.4, -0.8, 1.0]),
+        ("elbow_flexion", [1.1, 0.2, 2.0]),
+        ("forearm_rotation", [0.5, 1.5, 0.0]),
+    ];
+    let torso = body.link_id("torso").unwrap();
+    let mirror = |v: Vector| Vector::new(v.x, -v.y, v.z);
+    let points = [
+        Vector::new(0.0, 0.0, 0.0),
+        Vector::new(0.03, 0.02, -0.1),
+        Vector::new(-0.01, -0.04, -0.25),
+    ];
+    for posture in 0..3 {
+        let mut q = vec![0.0; body.dof()];
+        for (name, values) in arm_joints {
+            q[index(name)] = values[posture];
+            q[index(&format!("left_{name}"))] = values[posture];
+        }
+        // A turned and leaning trunk: the mirror is the torso's, not the world's.
+        q[index("trunk_turn")] = 0.4 * posture as f64;
+        q[index("trunk_lean")] = 0.2;
+        let k = body.fk(Pose::IDENTITY, &q).unwrap();
+        let X_WT = *k.link_pose(torso);
+        for right in ["shoulder", "upper_arm", "elbow", "forearm", "hand"] {
+            let (r, l) = (
+                body.link_id(right).unwrap(),
+                body.link_id(&format!("left_{right}")).unwrap(),
+            );
+            for p in points {
+                let p_r = X_WT.inverse_transform_point(k.link_pose(r).transform_point(p));
+                let p_l = X_WT.inverse_transform_point(k.link_pose(l).transform_point(mirror(p)));
+                assert!(
+                    (mirror(p_r) - p_l).length() < 1e-12,
+                    "{right}, posture {posture}: {p_r} mirrored against {p_l}"
+                );
+            }
+            assert_eq!(
+                body.links()[r].inertial,
+                body.links()[l].inertial,
+                "{right}"
+            );
+            if let (Some(a), Some(b)) = (
+                link_bounding_capsule(&body, r),
+                link_bounding_capsule(&body, l),
+            ) {
+                assert_eq!(a.radius_m, b.radius_m, "{right}");
+                assert!(
+                    (mirror(a.a_L) - b.a_L).length() < 1e-12
+                        && (mirror(a.b_L) - b.b_L).length() < 1e-12
+                );
+            }
+        }
+        // The joints share ranges and speeds.
+        for (name, _) in arm_joints {
+            let (r, l) = (
+                &body.joints()[body.joint_id(name).unwrap()],
+                &body.joints()[body.joint_id(&format!("left_{name}")).unwrap()],
+            );
+            assert_eq!(r.limits, l.limits, "{name}");
+        }
+    }
+    // Without its left arm it is the one-armed body of the earlier figures.
+    let one = RobotModel::one_armed_human().unwrap();
+    assert_eq!(one.dof() + 5, body.dof());
+    assert!(one.links().iter().all(|l| !l.name.starts_with("left_")));
+    assert_eq!(one.links().len() + 6, body.links().len());
+    for part in HumanPart::LEFT_ARM {
+        assert_eq!(
+            HumanPart::of_link_name(&body.links()[body.link_id(part.link_name()).unwrap()].name),
+            Some(part)
+        );
+    }
 }

@@ -197,12 +197,12 @@ fn wrong_configuration_is_an_error_not_a_panic() {
 fn catalogue_models_are_complete() {
     // Total masses: UR5e and iiwa 14 specification sheets; the human models are trunk, upper
     // arm, forearm and hand of a 75 kg body (0.497 + 0.028 + 0.016 + 0.006 of the mass), and
-    // `human` its head and neck too (0.081; Winter 2009, Table 4.1).
+    // `human` its head and neck and the left arm too (0.081 + 0.050; Winter 2009, Table 4.1).
     for (name, dof, mass_kg) in [
         ("ur5e_kinematics", 6, 20.6),
         ("iiwa14_kinematics", 7, 29.5),
         ("human_arm", 3, 0.547 * 75.0),
-        ("human", 10, 0.628 * 75.0),
+        ("human", 15, 0.678 * 75.0),
     ] {
         let robot = RobotModel::from_catalogue(name).expect("catalogue");
         assert_eq!(robot.dof(), dof, "{name}");

@@ -277,9 +277,10 @@ def head_geometry(centre):
     return geometry("visual", centre, (0, 0, 0), '<sphere radius="0.09"/>', "skin", "flesh/skin/head")
 
 
-def arm_links():
+def arm_links(prefix="", mirror=1):
     """The upper arm, forearm and hand links (frames at the shoulder, the elbow and the
-    wrist; each limb along its frame's -z)."""
+    wrist; each limb along its frame's -z), their names prefixed by `prefix`; `mirror` -1
+    mirrors every visual across the link frame's x-z plane (the left arm's: `left_arm`)."""
     parts, radius = human_sizes()
     upper_len, fore_len, hand_len = (parts[p][1] for p in ("upper_arm", "forearm", "hand"))
 
@@ -288,12 +289,13 @@ def arm_links():
         collision capsule that encloses the flesh."""
         mass, _, com_frac, gyr = parts[name]
         k = (gyr * length) ** 2 * mass
-        s = f'  <link name="{name}">\n'
+        s = f'  <link name="{prefix}{name}">\n'
         s += inertial(mass, (0, 0, -com_frac * length), k, k, 0.1 * k)
         for (y0, r) in bones:
-            s += rod(("visual",), (0, y0, -0.01), (0, y0, -length + 0.01), r, "bone", name=f"bone/{name}")
+            y0 *= mirror
+            s += rod(("visual",), (0, y0, -0.01), (0, y0, -length + 0.01), r, "bone", name=f"bone/{prefix}{name}")
         role, r0, r1 = flesh
-        s += tapered((0, 0, 0), (0, 0, -length), r0, r1, "shirt" if role == "sleeve" else "skin", f"flesh/{role}/{name}")
+        s += tapered((0, 0, 0), (0, 0, -length), r0, r1, "shirt" if role == "sleeve" else "skin", f"flesh/{role}/{prefix}{name}")
         envelope = math.ceil(max(r0, r1) * 1000) / 1000
         s += rod(("collision",), (0, 0, 0), (0, 0, -length), envelope, None)
         return s + "  </link>\n"
@@ -307,13 +309,14 @@ def arm_links():
     # envelope: a box.
     mass, _, com_frac, gyr = parts["hand"]
     k = (gyr * hand_len) ** 2 * mass
-    out += '  <link name="hand">\n' + inertial(mass, (0, 0, -com_frac * hand_len), k, k, 0.1 * k)
+    out += f'  <link name="{prefix}hand">\n' + inertial(mass, (0, 0, -com_frac * hand_len), k, k, 0.1 * k)
     palm = 0.45 * hand_len
     for y0 in (-0.03, -0.01, 0.01, 0.03):
-        out += rod(("visual",), (0, y0 * 0.6, -0.005), (0, y0, -palm), 0.006, "bone", name="bone/hand")
-        out += rod(("visual",), (0, y0, -palm - 0.01), (0, y0, -hand_len + 0.008), 0.005, "bone", name="bone/hand")
-    out += geometry("visual", (0, 0, -palm / 2), (0, 0, 0), f'<box size="0.03 0.08 {palm:.6g}"/>', "skin", "flesh/skin/hand")
-    out += geometry("visual", (0, 0, -(palm + hand_len) / 2), (0, 0, 0), f'<box size="0.02 0.075 {hand_len - palm:.6g}"/>', "skin", "flesh/skin/hand")
+        y0 *= mirror
+        out += rod(("visual",), (0, y0 * 0.6, -0.005), (0, y0, -palm), 0.006, "bone", name=f"bone/{prefix}hand")
+        out += rod(("visual",), (0, y0, -palm - 0.01), (0, y0, -hand_len + 0.008), 0.005, "bone", name=f"bone/{prefix}hand")
+    out += geometry("visual", (0, 0, -palm / 2), (0, 0, 0), f'<box size="0.03 0.08 {palm:.6g}"/>', "skin", f"flesh/skin/{prefix}hand")
+    out += geometry("visual", (0, 0, -(palm + hand_len) / 2), (0, 0, 0), f'<box size="0.02 0.075 {hand_len - palm:.6g}"/>', "skin", f"flesh/skin/{prefix}hand")
     out += geometry("collision", (0, 0, -hand_len / 2), (0, 0, 0), f'<box size="0.03 0.085 {hand_len:.6g}"/>')
     out += "  </link>\n"
     return out
@@ -375,9 +378,10 @@ def human():
     parts, _ = human_sizes()
     trunk_links = ["pelvis", "pelvis_slide_x", "pelvis_slide_y", "trunk_turned", "trunk_leaned"]
     arm_joint_links = ["shoulder", "shoulder_abducted", "elbow"]
-    spare = JOINT_LINK_KG * (len(trunk_links) + len(arm_joint_links))
+    left_joint_links = [f"left_{name}" for name in arm_joint_links]
+    spare = JOINT_LINK_KG * (len(trunk_links) + len(arm_joint_links) + len(left_joint_links))
     head_mass = 0.081 * HUMAN_MASS_KG
-    out = human_header("human", "A human: trunk moving over the floor, turning and leaning, a head, a right arm with a 3-joint shoulder, elbow and forearm rotation; two looks (bone/*, flesh/*); sizes from anthropometric tables (see generate.py).")
+    out = human_header("human", "A human: trunk moving over the floor, turning and leaning, a head, two arms (the left the right's mirror image) with a 3-joint shoulder, elbow and forearm rotation; two looks (bone/*, flesh/*); sizes from anthropometric tables (see generate.py).")
     for name in trunk_links:
         out += joint_link(name)
     out += torso_link(0.497 * HUMAN_MASS_KG - spare, head_inside=False)
@@ -390,6 +394,9 @@ def human():
     for name in arm_joint_links:
         out += joint_link(name)
     out += arm_links()
+    for name in left_joint_links:
+        out += joint_link(name)
+    out += arm_links("left_", -1)
     r = math.radians
     joints = [
         ("pelvis_x", "prismatic", "pelvis", "pelvis_slide_x", (0, 0, 0), (1, 0, 0), (-0.6, 0.6, 1.5, 500)),
@@ -403,11 +410,34 @@ def human():
         ("elbow_flexion", "revolute", "upper_arm", "elbow", (0, 0, -parts["upper_arm"][1]), (0, -1, 0), (0.0, r(145), 12.0, 60)),
         ("forearm_rotation", "revolute", "elbow", "forearm", (0, 0, 0), (0, 0, 1), (-r(10), r(170), 12.0, 20)),
     ]
+    joints += left_arm(joints)
     for name, kind, parent, child, xyz, axis, limit in joints:
         out += joint_xml(name, kind, parent, child, xyz, axis, limit)
     out += fixed_joint("neck", "torso", "head", (0, 0, 0.60))
     out += fixed_joint("wrist", "forearm", "hand", (0, 0, -parts["forearm"][1]))
+    out += fixed_joint("left_wrist", "left_forearm", "left_hand", (0, 0, -parts["forearm"][1]))
     return out + "</robot>\n"
+
+
+ARM_JOINT_LINKS = ("shoulder", "shoulder_abducted", "upper_arm", "elbow", "forearm")
+ARM_JOINTS = ("shoulder_flexion", "shoulder_abduction", "shoulder_rotation", "elbow_flexion", "forearm_rotation")
+
+
+def left_arm(joints):
+    """The right arm's joints mirrored across the torso's x-z plane (y -> -y): the origins
+    mirrored, each axis a turned into -M a (M the mirror), so that a reflection of the right
+    arm's rotation R(a, q) is the rotation R(-M a, q) by the same angle: the left arm at the
+    right arm's joint values is the right arm's mirror image, and its joints share the right
+    arm's names (prefixed `left_`), ranges and conventions (flexion forward, abduction outward,
+    rotation internal, pronation positive)."""
+    out = []
+    for name, kind, parent, child, xyz, axis, limit in joints:
+        if name not in ARM_JOINTS:
+            continue
+        side = lambda link: f"left_{link}" if link in ARM_JOINT_LINKS else link
+        mirrored_axis = (-axis[0], axis[1], -axis[2])
+        out.append((f"left_{name}", kind, side(parent), side(child), (xyz[0], -xyz[1], xyz[2]), mirrored_axis, limit))
+    return out
 
 
 def main():

@@ -722,11 +722,8 @@ impl SafetyFilter {
 
 /// Index of `part` in [`HumanPart::ALL`].
 fn part_index(part: HumanPart) -> usize {
-    match part {
-        HumanPart::Torso => 0,
-        HumanPart::UpperArm => 1,
-        HumanPart::Forearm => 2,
-        HumanPart::Hand => 3,
-        HumanPart::Head => 4,
-    }
+    HumanPart::ALL
+        .iter()
+        .position(|&p| p == part)
+        .unwrap_or_default()
 }

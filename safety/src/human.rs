@@ -118,7 +118,9 @@ impl HumanGeometry {
     /// Bounding capsules of the `upper_arm`, `forearm` and `hand` links of `human` (the
     /// catalogue's `human` or `human_arm`, or a model with links of those names), then of its
     /// `head` link when it has one with collision geometry (the catalogue's `human`; the
-    /// head of `human_arm` is a part of its torso, which the safety layer does not guard).
+    /// head of `human_arm` is a part of its torso, which the safety layer does not guard),
+    /// then of the left arm's `left_upper_arm`, `left_forearm` and `left_hand` when it has
+    /// them all with collision geometry (the catalogue's `human`).
     ///
     /// # Errors
     /// [`SafetyError::Robot`] when an arm part's link is missing or has no collision
@@ -143,6 +145,13 @@ impl HumanGeometry {
         {
             parts.push((HumanPart::Head, capsule));
         }
+        let left: Option<Vec<(HumanPart, LinkCapsule)>> = (HumanPart::LEFT_ARM.iter())
+            .map(|&part| {
+                let link = human.link_id(part.link_name())?;
+                Some((part, link_bounding_capsule(human, link)?))
+            })
+            .collect();
+        parts.extend(left.into_iter().flatten());
         Ok(Self {
             parts,
             jacobian: Jacobian::zeros(human.dof()),

@@ -139,11 +139,12 @@ impl BodyRegion {
     /// 150 N/mm and 4.4 kg are carried for reports, never for a speed).
     #[must_use]
     pub fn of(part: HumanPart) -> Self {
+        // Either arm's part is the same body region.
         let (force_n, stiffness_n_mm, mass_kg) = match part {
             HumanPart::Head => (130.0, 150.0, 4.4),
-            HumanPart::Forearm => (160.0, 40.0, 2.0),
-            HumanPart::Hand => (140.0, 75.0, 0.6),
-            HumanPart::UpperArm => (150.0, 30.0, 3.0),
+            HumanPart::Forearm | HumanPart::LeftForearm => (160.0, 40.0, 2.0),
+            HumanPart::Hand | HumanPart::LeftHand => (140.0, 75.0, 0.6),
+            HumanPart::UpperArm | HumanPart::LeftUpperArm => (150.0, 30.0, 3.0),
             HumanPart::Torso => (140.0, 25.0, 40.0),
         };
         Self {

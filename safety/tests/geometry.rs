@@ -467,9 +467,9 @@ fn penetrating_capsule_box_pairs_are_never_reported_shallower() {
     );
 }
 
-/// The catalogue's `human` is guarded arm and head (its own link, a 0.095 m sphere at the
-/// head's centre, 0.68 m above the pelvis at rest); `human_arm`, whose head is part of its
-/// torso, arm only.
+/// The catalogue's `human` is guarded arms and head (its own link, a 0.095 m sphere at the
+/// head's centre, 0.68 m above the pelvis at rest), the left arm after the head and at rest
+/// the right's mirror image; `human_arm`, whose head is part of its torso, arm only.
 #[test]
 fn the_whole_body_guards_its_head() {
     use workcell_safety::HumanGeometry;
@@ -482,6 +482,9 @@ fn the_whole_body_guards_its_head() {
                 HumanPart::Forearm,
                 HumanPart::Hand,
                 HumanPart::Head,
+                HumanPart::LeftUpperArm,
+                HumanPart::LeftForearm,
+                HumanPart::LeftHand,
             ][..],
         ),
     ] {
@@ -503,6 +506,32 @@ fn the_whole_body_guards_its_head() {
             );
             assert!((head.capsule.b_W - centre).length() < 1e-9);
             assert!((head.capsule.radius_m - 0.095).abs() < 1e-12);
+        }
+        // The pelvis stands at the origin with the torso unturned: the mirror is y -> -y.
+        let mirror = |v: workcell_robots::math::Vector| {
+            v * workcell_robots::math::Vector::new(1.0, -1.0, 1.0)
+        };
+        for left in estimate
+            .parts
+            .iter()
+            .filter(|p| p.part.side() == Some(workcell_robots::Side::Left))
+        {
+            let right = estimate
+                .parts
+                .iter()
+                .find(|p| p.part == left.part.mirrored())
+                .expect("the right twin");
+            assert!(
+                (mirror(right.capsule.a_W) - left.capsule.a_W).length() < 1e-12,
+                "{:?}",
+                left.part
+            );
+            assert!(
+                (mirror(right.capsule.b_W) - left.capsule.b_W).length() < 1e-12,
+                "{:?}",
+                left.part
+            );
+            assert_eq!(right.capsule.radius_m, left.capsule.radius_m);
         }
     }
 }

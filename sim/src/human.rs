@@ -3,7 +3,11 @@
 //! `shoulder_flexion` and `elbow_flexion` (radians; 0 is the arm hanging straight down), the
 //! first three joints of a model without those names; the catalogue's `human` also turns and
 //! leans its trunk as it reaches and turns its upper arm and forearm (`trunk_turn`,
-//! `trunk_lean`, `shoulder_rotation`, `forearm_rotation`). Other joints stay at 0.
+//! `trunk_lean`, `shoulder_rotation`, `forearm_rotation`), and moves its left arm (`left_*`):
+//! during each phase it rests at the side, holds where it was, or reaches as well (a half,
+//! a quarter and a quarter of the right arm's reaches and rests; during a wave or a
+//! withdrawal it rests or holds), drawn from the reach's and rest's ranges. Other joints stay
+//! at 0.
 //!
 //! Every point-to-point movement follows the minimum-jerk time profile
 //! `s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5` (Flash and Hogan 1985, J. Neurosci. 5(7)
@@ -183,6 +187,9 @@ struct GeneratedJoints {
     arm: [Option<usize>; 3],
     /// Trunk turn, trunk lean, shoulder rotation, forearm rotation.
     extra: [Option<usize>; 4],
+    /// The left arm's shoulder abduction, shoulder flexion, elbow flexion, shoulder rotation
+    /// and forearm rotation (`left_*`), where the model has them all.
+    left: Option<[usize; 5]>,
 }
 
 impl GeneratedJoints {
@@ -207,6 +214,44 @@ impl GeneratedJoints {
                 "forearm_rotation",
             ]
             .map(index),
+            left: {
+                let left = [
+                    "left_shoulder_abduction",
+                    "left_shoulder_flexion",
+                    "left_elbow_flexion",
+                    "left_shoulder_rotation",
+                    "left_forearm_rotation",
+                ]
+                .map(index);
+                left.iter()
+                    .all(Option::is_some)
+                    .then(|| left.map(|j| j.unwrap_or(0)))
+            },
+        }
+    }
+}
+
+/// What the left arm does while the right performs a phase.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LeftArm {
+    /// Hangs at the side (a posture drawn near rest).
+    Rest,
+    /// Stays where it was (holding a part).
+    Hold,
+    /// Reaches too (both hands in the shared space).
+    Reach,
+}
+
+impl LeftArm {
+    /// The left arm's share of each kind of phase: at rest half the time, holding where it
+    /// was a quarter, reaching with the right arm a quarter; during a wave or a withdrawal it
+    /// rests or holds.
+    fn draw(rng: &mut ChaCha8Rng, kind: HumanMotionKind) -> Self {
+        let u: f64 = rng.random();
+        match kind {
+            HumanMotionKind::Reach | HumanMotionKind::Rest if u < 0.25 => LeftArm::Reach,
+            _ if u < 0.5 => LeftArm::Hold,
+            _ => LeftArm::Rest,
         }
     }
 }
@@ -309,7 +354,44 @@ impl HumanMotion {
                 }
             })
         };
-        let rest = clamp([0.08, 0.05, 0.15], [0.0; 4]);
+        let mut rest = clamp([0.08, 0.05, 0.15], [0.0; 4]);
+        // The left arm: drawn from a generator of its own, so that a seed moves the right arm
+        // through the same postures as before the left existed (its timing stretches where
+        // the left is the faster).
+        let mut rng_left = ChaCha8Rng::seed_from_u64(seed ^ 0x4c45_4654_0000_0000); // "LEFT"
+        let left_posture =
+            |rng: &mut ChaCha8Rng, kind: LeftArm, now: &[f64]| -> Option<Vec<(usize, f64)>> {
+                let left = joints.left?;
+                let values: [f64; 5] = match kind {
+                    LeftArm::Hold => left.map(|j| now[j]),
+                    LeftArm::Rest => [
+                        rng.random_range(0.0..0.15),
+                        rng.random_range(-0.1..0.15),
+                        rng.random_range(0.05..0.35),
+                        rng.random_range(REST_EXTRA[2][0]..REST_EXTRA[2][1]),
+                        rng.random_range(REST_EXTRA[3][0]..REST_EXTRA[3][1]),
+                    ],
+                    LeftArm::Reach => [
+                        rng.random_range(0.0..0.35),
+                        rng.random_range(1.0..1.6),
+                        rng.random_range(0.05..0.6),
+                        rng.random_range(REACH_EXTRA[2][0]..REACH_EXTRA[2][1]),
+                        rng.random_range(REACH_EXTRA[3][0]..REACH_EXTRA[3][1]),
+                    ],
+                };
+                Some(
+                    left.into_iter()
+                        .zip(values)
+                        .map(|(j, v)| (j, v.clamp(limits[j][0], limits[j][1])))
+                        .collect(),
+                )
+            };
+        if let Some(left) = joints.left {
+            // At rest as the right arm is: the same angles, mirrored by the model.
+            for (k, j) in left.into_iter().enumerate().take(3) {
+                rest[j] = rest[joints.arm[k].unwrap_or(j)].clamp(limits[j][0], limits[j][1]);
+            }
+        }
         let mut order: Vec<HumanMotionKind> = kinds.iter().copied().cycle().take(PHASES).collect();
         if shuffle {
             // Fisher-Yates with the seeded generator.
@@ -321,7 +403,7 @@ impl HumanMotion {
         let mut t = 0.0;
         let mut q = rest.clone();
         for kind in order {
-            let (q_to, transition_s, hold_s, wave) = match kind {
+            let (mut q_to, transition_s, hold_s, wave) = match kind {
                 HumanMotionKind::Rest => {
                     let arm3 = [
                         rng.random_range(0.0..0.15),
@@ -353,6 +435,10 @@ impl HumanMotion {
                     (clamp(arm3, extra), 0.8, hold, Some(wave))
                 }
             };
+            let left = LeftArm::draw(&mut rng_left, kind);
+            for (j, v) in left_posture(&mut rng_left, left, &q).into_iter().flatten() {
+                q_to[j] = v;
+            }
             // Shorter transitions, and a wave's swings as much quicker (a hammering forearm).
             let scale = match duration_scale {
                 [lo, hi] if lo < hi => rng.random_range(lo..=hi),
@@ -618,6 +704,62 @@ mod tests {
             }
             assert!(fastest > 0.9 * range[1], "{range:?}: fastest {fastest}");
         }
+    }
+
+    /// The whole body's left arm rests, holds and reaches as drawn, within its limits, and
+    /// keeps the speed cap with the rest of the body; its draws leave the right arm's
+    /// postures as they were: the right arm's joints at each phase's end are those of the
+    /// same seed on the body without a left arm.
+    #[test]
+    fn the_left_arm_rests_holds_and_reaches() {
+        let body = RobotModel::from_catalogue("human").expect("catalogue");
+        let one = RobotModel::one_armed_human().expect("one-armed");
+        let joints = GeneratedJoints::of(&body);
+        let left = joints.left.expect("a left arm");
+        assert!(GeneratedJoints::of(&one).left.is_none());
+        let limits = body.position_limits();
+        let kinds = [
+            HumanMotionKind::Rest,
+            HumanMotionKind::Reach,
+            HumanMotionKind::Withdraw,
+            HumanMotionKind::Wave,
+        ];
+        let mut speed = ArmSpeed::new(&body);
+        let (mut q, mut qd) = (vec![0.0; body.dof()], vec![0.0; body.dof()]);
+        let (mut reached, mut rested, mut held) = (0, 0, 0);
+        for seed in 0..6 {
+            let m = HumanMotion::generate(&kinds, true, &body, ISO_13855, AS_DRAWN, seed);
+            for p in &m.phases {
+                let flexion = p.q_to[left[1]];
+                reached += usize::from(flexion >= 1.0);
+                rested += usize::from(flexion < 0.2);
+                held += usize::from(left.iter().all(|&j| p.q_to[j] == p.q_from[j]));
+            }
+            let n = (m.period_s() * 200.0) as usize;
+            for k in 0..n {
+                m.sample(k as f64 / 200.0, &mut q, &mut qd);
+                for &j in &left {
+                    assert!(q[j] >= limits[j][0] - 1e-12 && q[j] <= limits[j][1] + 1e-12);
+                }
+                assert!(speed.fastest(&q, &qd) <= ISO_13855[1], "seed {seed}");
+            }
+            // The right arm's postures are the seed's whatever the left does: those of the
+            // body without a left arm (whose joints come first in the same order).
+            let still = HumanMotion::generate(&kinds, true, &one, ISO_13855, AS_DRAWN, seed);
+            for (a, b) in m.phases.iter().zip(&still.phases) {
+                for j in joints.arm.iter().chain(&joints.extra).flatten() {
+                    assert_eq!(
+                        a.q_to[*j], b.q_to[*j],
+                        "seed {seed} joint {j} phase {:?} at {}",
+                        a.kind, a.t0_s
+                    );
+                }
+            }
+        }
+        assert!(
+            reached > 10 && rested > 10 && held > 5,
+            "{reached} {rested} {held}"
+        );
     }
 
     /// The tracked points are the capsule end points: a pure elbow rotation at 1 rad/s moves

@@ -15,8 +15,12 @@
 //!    (`human_arm`) keeps its torso where it stands.
 //! 4. The followed side's upper arm and forearm directions, in the torso frame, are laid on
 //!    the model's bones from the model's shoulder in its torso: elbow and wrist targets the
-//!    model's arm can reach whatever the person's size.
-//! 5. Damped least squares of the arm's joints on both targets (the wrist weighted 1, the
+//!    model's arm can reach whatever the person's size. The other side's, laid the same way
+//!    from the model's shoulder mirrored across the torso's x-z plane, are the targets of the
+//!    model's left arm where it has one (the catalogue's `human`: `left_upper_arm`,
+//!    `left_forearm`, `left_hand`), and otherwise `RecordedMotion::other_arm` only.
+//! 5. Damped least squares of each arm's joints (those on its chain from the torso) on both
+//!    its targets (the wrist weighted 1, the
 //!    elbow `elbow_weight`), from the previous frame's solution, within the joint limits. A
 //!    shoulder of three joints reaches both targets; a two-joint shoulder (`human_arm`)
 //!    cannot turn the arm about its own axis and leaves an error, which the report states.
@@ -35,45 +39,23 @@ use workcell_robots::{Jacobian, KinematicState, LinkId, RobotModel};
 
 use crate::error::{Result, SimError};
 
-/// The side of the recorded person the model's arm follows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Side {
-    Left,
-    Right,
-}
+/// The side of the recorded person the model's (right) arm follows; the model's left arm, where
+/// it has one, follows the other.
+pub use workcell_robots::Side;
 
-impl Side {
-    fn landmarks(self) -> [Landmark; 3] {
-        match self {
-            Self::Left => [
-                Landmark::LeftShoulder,
-                Landmark::LeftElbow,
-                Landmark::LeftWrist,
-            ],
-            Self::Right => [
-                Landmark::RightShoulder,
-                Landmark::RightElbow,
-                Landmark::RightWrist,
-            ],
-        }
-    }
-
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Left => "left",
-            Self::Right => "right",
-        }
-    }
-
-    /// The other side.
-    #[must_use]
-    pub fn other(self) -> Self {
-        match self {
-            Self::Left => Self::Right,
-            Self::Right => Self::Left,
-        }
+/// A side's shoulder, elbow and wrist in a recording.
+fn landmarks(side: Side) -> [Landmark; 3] {
+    match side {
+        Side::Left => [
+            Landmark::LeftShoulder,
+            Landmark::LeftElbow,
+            Landmark::LeftWrist,
+        ],
+        Side::Right => [
+            Landmark::RightShoulder,
+            Landmark::RightElbow,
+            Landmark::RightWrist,
+        ],
     }
 }
 
@@ -178,6 +160,9 @@ pub struct RetargetReport {
     /// on the model's bones), m.
     pub wrist_error_m: Spread,
     pub elbow_error_m: Spread,
+    /// The model's left wrist's distance from the other arm's target, m, where the model has
+    /// a left arm and the clip the other side.
+    pub left_wrist_error_m: Option<Spread>,
     /// Frames where a joint stopped at its position limit.
     pub clamped_frames: usize,
     /// Frames where a joint was held back by its velocity limit.
@@ -277,6 +262,34 @@ fn arm_links(model: &RobotModel) -> Result<[LinkId; 3]> {
     Ok([find("upper_arm")?, find("forearm")?, find("hand")?])
 }
 
+/// The links of the model's left arm (`left_upper_arm`, `left_forearm`, `left_hand`), where
+/// it has one.
+fn left_arm_links(model: &RobotModel) -> Option<[LinkId; 3]> {
+    Some([
+        model.link_id("left_upper_arm")?,
+        model.link_id("left_forearm")?,
+        model.link_id("left_hand")?,
+    ])
+}
+
+/// Which of the model's coordinates move `link`: the movable joints on its chain from the
+/// root, by their index in a configuration.
+fn chain_dofs(model: &RobotModel, link: LinkId) -> Vec<bool> {
+    let mut on = vec![false; model.dof()];
+    let mut l = link;
+    // A tree: each link has at most one parent joint, and the walk ends at the root.
+    for _ in 0..model.joints().len() {
+        let Some(j) = model.joints().iter().position(|joint| joint.child == l) else {
+            break;
+        };
+        if let Some(d) = model.actuated_joints().iter().position(|&a| a == j) {
+            on[d] = true;
+        }
+        l = model.joints()[j].parent;
+    }
+    on
+}
+
 /// Filtered tracks by landmark.
 type Tracks = std::collections::BTreeMap<Landmark, Vec<Vector>>;
 
@@ -312,7 +325,7 @@ pub fn retarget(
         key: "human.recorded".into(),
         message: format!("{}: {message}", clip.name),
     };
-    let [shoulder, elbow, wrist] = config.side.landmarks();
+    let [shoulder, elbow, wrist] = landmarks(config.side);
     for l in [
         shoulder,
         elbow,
@@ -395,7 +408,7 @@ pub fn retarget(
     }
     let mut targets = Vec::with_capacity(frames);
     // The other side's landmarks, where the clip has them all.
-    let other_tracks = match config.side.other().landmarks().map(|l| tracks.get(&l)) {
+    let other_tracks = match landmarks(config.side.other()).map(|l| tracks.get(&l)) {
         [Some(s), Some(e), Some(w)] => Some([s, e, w]),
         _ => None,
     };
@@ -434,51 +447,88 @@ pub fn retarget(
     }
     let median = |v: &mut Vec<f64>| Spread::of(v).median;
     let recorded_bones_m = [median(&mut upper), median(&mut fore)];
-    // Damped least squares of the arm's joints, warm-started from the previous frame.
-    let free: Vec<bool> = (0..dof).map(|j| !trunk.contains(j)).collect();
-    let mut out: Vec<Vec<f64>> = Vec::with_capacity(frames);
-    let mut clamped_frames = 0;
-    let mut fit = Fit {
-        model,
-        links,
-        limits: &limits,
-        free: &free,
-        elbow_weight: config.elbow_weight,
-        state: KinematicState::new(model),
-        jacobian: Jacobian::zeros(dof),
-        scratch: Scratch::default(),
-    };
-    for (f, &(e_t, w_t)) in targets.iter().enumerate() {
-        trunk.set(&mut q, trunk_q[f]);
-        let mut cost = fit
-            .solve(&mut q, e_t, w_t)
-            .map_err(|e| invalid(e.to_string()))?;
-        // The first frame, and any where the previous frame's solution leaves the wrist far
-        // off (a local minimum at a limit), start again from a grid over the arm joints'
-        // ranges. The wrist's error decides, not the cost: where the recorded elbow lies
-        // beyond the model's reach (a bend no elbow makes), a restart on the cost would jump
-        // between equally poor branches from frame to frame.
-        if f == 0
-            || fit
-                .wrist_error(&q, w_t)
-                .map_err(|e| invalid(e.to_string()))?
-                > 0.05
-        {
-            for seed in grid(&limits, &free, &q) {
-                let mut candidate = seed;
-                let c = fit
-                    .solve(&mut candidate, e_t, w_t)
+    // Each arm by damped least squares of its own joints (the chain from the torso to its
+    // hand), warm-started from the previous frame; the trunk as above. The model's left arm,
+    // where it has one and the clip has the other side, follows the other arm's targets.
+    let mut out: Vec<Vec<f64>> = trunk_q
+        .iter()
+        .map(|values| {
+            let mut q = q.clone();
+            trunk.set(&mut q, *values);
+            q
+        })
+        .collect();
+    let left = left_arm_links(model).filter(|_| !other_arm.is_empty());
+    let left_targets: Vec<(Vector, Vector)> = match left {
+        Some(_) => other_arm
+            .iter()
+            .zip(&out)
+            .map(|([_, e_t, w_t], qf)| {
+                model
+                    .forward_kinematics(qf, &mut state)
                     .map_err(|e| invalid(e.to_string()))?;
-                if c < cost - 1e-9 {
-                    (q, cost) = (candidate, c);
+                let X_BT = *state.link_pose(torso_link);
+                Ok((X_BT.transform_point(*e_t), X_BT.transform_point(*w_t)))
+            })
+            .collect::<Result<_>>()?,
+        None => Vec::new(),
+    };
+    for (arm, arm_targets) in [(Some(links), &targets), (left, &left_targets)] {
+        let Some(arm) = arm else { continue };
+        let free: Vec<bool> = chain_dofs(model, arm[2])
+            .into_iter()
+            .enumerate()
+            .map(|(j, on)| on && !trunk.contains(j))
+            .collect();
+        let mut fit = Fit {
+            model,
+            links: arm,
+            limits: &limits,
+            free: &free,
+            elbow_weight: config.elbow_weight,
+            state: KinematicState::new(model),
+            jacobian: Jacobian::zeros(dof),
+            scratch: Scratch::default(),
+        };
+        let mut q = out[0].clone();
+        for (f, &(e_t, w_t)) in arm_targets.iter().enumerate() {
+            // This frame's other joints; this arm's from the previous frame's solution.
+            for j in (0..dof).filter(|&j| !free[j]) {
+                q[j] = out[f][j];
+            }
+            let mut cost = fit
+                .solve(&mut q, e_t, w_t)
+                .map_err(|e| invalid(e.to_string()))?;
+            // The first frame, and any where the previous frame's solution leaves the wrist
+            // far off (a local minimum at a limit), start again from a grid over the arm
+            // joints' ranges. The wrist's error decides, not the cost: where the recorded
+            // elbow lies beyond the model's reach (a bend no elbow makes), a restart on the
+            // cost would jump between equally poor branches from frame to frame.
+            if f == 0
+                || fit
+                    .wrist_error(&q, w_t)
+                    .map_err(|e| invalid(e.to_string()))?
+                    > 0.05
+            {
+                for seed in grid(&limits, &free, &q) {
+                    let mut candidate = seed;
+                    let c = fit
+                        .solve(&mut candidate, e_t, w_t)
+                        .map_err(|e| invalid(e.to_string()))?;
+                    if c < cost - 1e-9 {
+                        (q, cost) = (candidate, c);
+                    }
                 }
             }
+            for j in (0..dof).filter(|&j| free[j]) {
+                out[f][j] = q[j];
+            }
         }
-        if (0..dof).any(|j| q[j] <= limits[j][0] + 1e-9 || q[j] >= limits[j][1] - 1e-9) {
-            clamped_frames += 1;
-        }
-        out.push(q.clone());
     }
+    let clamped_frames = out
+        .iter()
+        .filter(|q| (0..dof).any(|j| q[j] <= limits[j][0] + 1e-9 || q[j] >= limits[j][1] - 1e-9))
+        .count();
     // The model's velocity limits, frame to frame.
     let dt = 1.0 / piece.rate_hz;
     let joint_speed = (0..dof)
@@ -504,12 +554,16 @@ pub fn retarget(
         velocity_limited_frames += usize::from(limited);
     }
     let (mut wrist_errors, mut elbow_errors) = (Vec::new(), Vec::new());
-    for (qf, &(e_t, w_t)) in out.iter().zip(&targets) {
+    let mut left_wrist_errors = Vec::new();
+    for (f, (qf, &(e_t, w_t))) in out.iter().zip(&targets).enumerate() {
         model
             .forward_kinematics(qf, &mut state)
             .map_err(|e| invalid(e.to_string()))?;
         wrist_errors.push((at(&state, 2) - w_t).length());
         elbow_errors.push((at(&state, 1) - e_t).length());
+        if let (Some(arm), Some(&(_, w_t))) = (left, left_targets.get(f)) {
+            left_wrist_errors.push((state.link_pose(arm[2]).translation - w_t).length());
+        }
     }
     let report = RetargetReport {
         clip: clip.name.clone(),
@@ -518,6 +572,8 @@ pub fn retarget(
         clip_frames: clip.frames(),
         wrist_error_m: Spread::of(&mut wrist_errors),
         elbow_error_m: Spread::of(&mut elbow_errors),
+        left_wrist_error_m: (!left_wrist_errors.is_empty())
+            .then(|| Spread::of(&mut left_wrist_errors)),
         clamped_frames,
         velocity_limited_frames,
         joint_speed,
@@ -932,6 +988,12 @@ mod tests {
                     ("elbow_flexion", 1.0 + 0.4 * (0.9 * t).cos()),
                 ] {
                     q[index(name)] = v;
+                    // The model's left arm at the same values is the right's mirror image:
+                    // the recorded left arm below.
+                    if let Some(j) = model.joint_id(&format!("left_{name}")) {
+                        let d = model.actuated_joints().iter().position(|&a| a == j);
+                        q[d.expect("actuated")] = v;
+                    }
                 }
                 q
             })
@@ -985,6 +1047,9 @@ mod tests {
         let (motion, report) = retarget(&clip, &model, &config).expect("retarget");
         assert!(report.wrist_error_m.peak < 1e-3, "{report:?}");
         assert!(report.elbow_error_m.peak < 1e-3, "{report:?}");
+        // The model's left arm follows the recording's left.
+        let left = report.left_wrist_error_m.expect("a left arm");
+        assert!(left.peak < 1e-3, "{report:?}");
         // The other arm, placed from the model's mirrored shoulder along the recorded
         // directions, is the model's own arm mirrored (away from the filter's padding).
         assert_eq!(motion.other_arm.len(), frames);

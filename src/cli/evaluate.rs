@@ -562,15 +562,23 @@ pub fn write_report(dir: &Path, record: &RunRecord, command: &str, out: &Path) -
     let mut replay = format!(
         "# Episodes that came closer than d_min = {} m (the modelled human, or a recorded \
          person's other arm): seed, violations of the modelled human, its smallest separation, \
-         and the command that replays exactly that episode.\n",
+         where it was (robot link / human part, the side in the part's name: `left_hand`), the \
+         left arm's smallest separation (- without one), and the command that replays exactly \
+         that episode.\n",
         s.d_min_m
     );
     for e in episodes.iter().filter(|e| e.violated()) {
+        let left = if e.other_arm_min_separation_m.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{:.4}", e.other_arm_min_separation_m)
+        };
         replay.push_str(&format!(
-            "{}\t{}\t{:.4}\t{}\n",
+            "{}\t{}\t{:.4}\t{}\t{left}\t{}\n",
             e.seed,
             e.violations,
             e.min_separation_m,
+            e.closest,
             replay_command(s, out, e.seed)
         ));
     }

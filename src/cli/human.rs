@@ -631,11 +631,12 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
     );
     say!();
     say!(
-        "| clip | frames kept | wrist error median (mm) | wrist peak (mm) | elbow median (mm) | elbow peak (mm) | at a joint limit | velocity-limited | recorded bones (m) | trunk turn, lean (deg); pelvis travel (m) |"
+        "| clip | frames kept | wrist error median (mm) | wrist peak (mm) | elbow median (mm) | elbow peak (mm) | left wrist median, peak (mm) | at a joint limit | velocity-limited | recorded bones (m) | trunk turn, lean (deg); pelvis travel (m) |"
     );
-    say!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    say!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     let mut reports = Vec::new();
     let (mut wrist, mut elbow, mut limited, mut frames) = (Vec::new(), Vec::new(), 0, 0);
+    let mut left_wrist = Vec::new();
     for source in &sources {
         let clip = workcell::mocap::read_clip(&source.path, &source.format, source.id.clone())?;
         let (motion, r) = retarget(&clip, &model.human, &config)?;
@@ -653,8 +654,13 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
                 )
             },
         );
+        let left = r.left_wrist_error_m.map_or_else(
+            || "-".to_string(),
+            |e| format!("{:.0}, {:.0}", 1e3 * e.median, 1e3 * e.peak),
+        );
+        left_wrist.extend(r.left_wrist_error_m.map(|e| e.median));
         say!(
-            "| {} | {} of {} | {:.0} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2}, {:.2} | {trunk} |",
+            "| {} | {} of {} | {:.0} | {:.0} | {:.0} | {:.0} | {left} | {} | {} | {:.2}, {:.2} | {trunk} |",
             r.clip,
             r.frames,
             r.clip_frames,
@@ -684,6 +690,15 @@ pub fn retarget(args: &RetargetArgs) -> Result<ExitCode> {
         reports.first().map_or(0.0, |r| r.model_bones_m[0]),
         reports.first().map_or(0.0, |r| r.model_bones_m[1])
     );
+    if !left_wrist.is_empty() {
+        let left = Spread::of(&mut left_wrist);
+        say!(
+            "the left arm (the other side of the recording) on {} clips: the wrist's median error {:.0} mm over clips (worst clip {:.0} mm)",
+            left_wrist.len(),
+            1e3 * left.median,
+            1e3 * left.peak
+        );
+    }
     joint_speed_table(&model.human, &reports);
     if let Some(path) = &args.gltf {
         say!("replay: {}", path.display());

@@ -255,6 +255,9 @@ impl<'a> Run<'a> {
         };
         // The closest pair, with its robot point's velocity when already computed.
         let mut closest: Option<(SignedDistancePair, Option<Vector>)> = None;
+        // The model's own left arm (the two-armed human): its separation, as a recorded other
+        // arm's is below.
+        let mut left = f64::INFINITY;
         for part in &self.truth.parts {
             let Some(pair) =
                 self.filter
@@ -275,9 +278,15 @@ impl<'a> Run<'a> {
                 self.tally.approach(pair.part, -pair.nhat_BA_W.dot(v));
                 velocity = Some(v);
             }
+            if part.part.side() == Some(workcell_robots::Side::Left) {
+                left = left.min(pair.distance_m);
+            }
             if closest.is_none_or(|(b, _)| pair.distance_m < b.distance_m) {
                 closest = Some((pair, velocity));
             }
+        }
+        if left.is_finite() {
+            self.tally.other_arm(left, dt, d_min);
         }
         // The clip's other arm, where the human plays one: how near the robot it came.
         std::mem::swap(&mut self.other_parts, &mut self.other_parts_before);
@@ -412,14 +421,13 @@ impl<'a> Run<'a> {
             },
             &mut self.estimate,
         );
-        // The error is the modelled parts': an estimate of the whole person has the other
-        // arm's after them.
-        let seen = &self.estimate.parts;
-        let modelled = self.truth.parts.len();
-        let tick_error = (seen.len() == modelled
-            || seen.len() == modelled + self.other_parts.len())
-        .then(|| perception_error(&seen[..modelled], &self.truth.parts))
-        .flatten();
+        // The left arm unseen (`other_arm_seen` off, or a perception that does not fit it):
+        // whatever perception made of it is not told to the filter.
+        if !self.c.other_arm_is_seen() {
+            (self.estimate.parts).retain(|p| p.part.side() != Some(workcell_robots::Side::Left));
+        }
+        // The error is the modelled parts' (a recorded other arm's are not in the truth).
+        let tick_error = perception_error(&self.estimate.parts, &self.truth.parts);
         let out = self.filter.tick(
             &self.model.robot,
             self.state.q(),
@@ -536,30 +544,32 @@ fn robot_point_velocity(
 }
 
 /// The mean distance of the estimated parts' end points from the true ones, m, and that of
-/// each part ([`HumanPart::ALL`]'s order; `None` for a part the human lacks); `None` when
-/// perception delivers no human (or other parts than the truth has).
+/// each part ([`HumanPart::ALL`]'s order; `None` for a part the human lacks or the estimate
+/// does not report): each true part against the estimate's first part of its name (an
+/// estimate's look-ahead copies follow its present parts). A part the estimate lacks is not
+/// counted (a perception that does not see it: ProcNet's left arm); `None` when the estimate
+/// has none of the truth's parts (no human seen).
 pub(super) fn perception_error(
     estimate: &[PartEstimate],
     truth: &[PartEstimate],
 ) -> Option<(f64, [Option<f64>; HumanPart::ALL.len()])> {
-    if estimate.len() != truth.len() || estimate.is_empty() {
-        return None;
-    }
-    // Per part the sum and the count: a part the model has twice (two arms) counts as the
-    // mean of both.
     let mut per_part = [(0.0, 0usize); HumanPart::ALL.len()];
-    let mut sum = 0.0;
-    for (e, t) in estimate.iter().zip(truth) {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for t in truth {
+        let Some(e) = estimate.iter().find(|e| e.part == t.part) else {
+            continue;
+        };
         let error = 0.5
             * ((e.capsule.a_W - t.capsule.a_W).length() + (e.capsule.b_W - t.capsule.b_W).length());
         sum += error;
+        n += 1;
         if let Some(i) = HumanPart::ALL.iter().position(|&p| p == t.part) {
             per_part[i].0 += error;
             per_part[i].1 += 1;
         }
     }
     let by_part = per_part.map(|(s, n)| (n > 0).then(|| s / n as f64));
-    Some((sum / truth.len() as f64, by_part))
+    (n > 0).then(|| (sum / n as f64, by_part))
 }
 
 #[cfg(test)]
@@ -605,7 +615,16 @@ mod tests {
         ]);
         let (mean, by_part) = perception_error(&seen.parts, &truth.parts).expect("same parts");
         assert!((mean - (0.0 + 0.04 + 0.1) / 3.0).abs() < 1e-12, "{mean}");
-        let expect = [Some(0.0), None, Some(0.04), Some(0.1), None];
+        let expect = [
+            Some(0.0),
+            None,
+            Some(0.04),
+            Some(0.1),
+            None,
+            None,
+            None,
+            None,
+        ];
         for (got, want) in by_part.iter().zip(expect) {
             match (got, want) {
                 (Some(g), Some(w)) => assert!((g - w).abs() < 1e-12, "{by_part:?}"),
@@ -613,14 +632,23 @@ mod tests {
                 _ => panic!("{by_part:?} against {expect:?}"),
             }
         }
-        // No human seen, or other parts than the truth's: no error at all.
+        // No human seen, or none of the truth's parts: no error at all.
         assert!(perception_error(&[], &truth.parts).is_none());
-        assert!(perception_error(&seen.parts[..2], &truth.parts).is_none());
+        let left = part(HumanPart::LeftHand, [0.6, 0.4, 1.2], [0.7, 0.4, 1.2]);
+        assert!(perception_error(&[left], &truth.parts).is_none());
+        // A part the estimate lacks is not counted; one the truth lacks neither; the order
+        // does not matter.
+        let (mean, by_part) = perception_error(&[seen.parts[2], left, seen.parts[1]], &truth.parts)
+            .expect("two parts seen");
+        assert!((mean - 0.07).abs() < 1e-12, "{mean}");
+        assert!(by_part[0].is_none() && by_part[7].is_none());
     }
 
-    /// What the ground truth is given, tick by tick, in a recorded episode: the other
-    /// arm's three parts after the modelled ones when it is to be seen, none when not; each
-    /// end point's velocity the difference of its positions over the control tick.
+    /// What the ground truth is given, tick by tick, in a recorded episode on the one-armed
+    /// paper's arm (`human_arm`): the other arm's three parts (the left arm's) after the
+    /// modelled ones when it is to be seen, none when not; each end point's velocity the
+    /// difference of its positions over the control tick. The two-armed `human` has its left
+    /// arm in the truth and is given none.
     #[test]
     fn the_whole_persons_perception_is_given_the_other_arm() {
         use std::sync::{Arc, Mutex};
@@ -642,8 +670,12 @@ mod tests {
                 );
             }
         }
-        let run = |seen: bool| {
-            let evaluation = recorded_ground_truth(&["task_s=0.5".into(), seen_key(seen)]);
+        let run_on = |seen: bool, model: &str| {
+            let evaluation = recorded_ground_truth(&[
+                "task_s=0.5".into(),
+                seen_key(seen),
+                format!("human_model=\"{model}\""),
+            ]);
             let log: Seen = Arc::default();
             let (metrics, _) = run_episode(
                 &evaluation,
@@ -657,6 +689,7 @@ mod tests {
             let log = log.lock().expect("lock").clone();
             (metrics, log)
         };
+        let run = |seen: bool| run_on(seen, "human_arm");
         let (metrics, unseen) = run(false);
         assert!(
             metrics.other_arm_min_separation_m.is_finite(),
@@ -665,7 +698,18 @@ mod tests {
         assert!(unseen.iter().all(|(_, other)| other.is_empty()));
         let (_, seen) = run(true);
         assert!(seen.len() > 100, "{} ticks", seen.len());
-        assert!(seen.iter().all(|(_, other)| other.len() == 3));
+        assert!(seen.iter().all(|(_, other)| {
+            other.len() == 3
+                && other
+                    .iter()
+                    .all(|p| p.part.side() == Some(workcell_robots::Side::Left))
+        }));
+        let (two_armed, given) = run_on(true, "human");
+        assert!(given.iter().all(|(_, other)| other.is_empty()));
+        assert!(
+            two_armed.other_arm_min_separation_m.is_finite(),
+            "its own left arm"
+        );
         let mut moved: f64 = 0.0;
         for pair in seen.windows(2) {
             let [(t0, before), (t1, now)] = pair else {
@@ -686,24 +730,25 @@ mod tests {
         assert!(moved > 0.01, "the other arm moves: {moved} m/s at most");
     }
 
-    /// Seed 1 of the whole recorded suite (its first clip, 12 s, ground truth, QP): the
-    /// other arm unguarded comes to 4 cm of the robot, a violation the modelled human's
-    /// metrics do not have; seen and guarded it stays beyond d_min (0.148 m in the run of
-    /// 450 episodes that chose this seed, docs/human.md).
+    /// Seed 46 of the whole recorded suite (ground truth, QP): the two-armed human's left arm
+    /// unguarded (`other_arm_seen` off: perception's estimate of it not told to the filter)
+    /// touches the robot (-9.6 cm, its left hand), a violation named by the side's part; seen
+    /// and guarded it stays beyond d_min (0.147 m), and the episode has no violation
+    /// (measured over seeds 1-90 of the suite, both ways).
     #[test]
     fn the_guarded_other_arm_keeps_d_min_where_the_unguarded_did_not() {
         let run = |seen: bool| {
             let evaluation =
                 recorded_ground_truth(&[seen_key(seen), "human_recorded.split=\"all\"".into()]);
-            run_episode(&evaluation, FilterMode::Qp, 0, 1, None, |_| {})
+            run_episode(&evaluation, FilterMode::Qp, 0, 46, None, |_| {})
                 .expect("episode")
                 .0
         };
         let d_min = 0.1;
         let unseen = run(false);
-        assert_eq!(unseen.violations, 0);
-        assert!(unseen.other_arm_min_separation_m < d_min);
-        assert!(unseen.violated(), "the other arm's approach is a violation");
+        assert!(unseen.other_arm_min_separation_m < 0.0, "{unseen:?}");
+        assert!(unseen.violations > 0 && unseen.violated());
+        assert!(unseen.closest.contains("/ left_"), "{}", unseen.closest);
         let seen = run(true);
         assert_eq!(seen.violations, 0);
         assert!(

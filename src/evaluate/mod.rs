@@ -70,13 +70,13 @@ pub struct EvaluationConfig {
     /// this file. Episode `i` (seed `s`) plays clip `(s - 1) mod n`. Left out: the cell's own.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub human_recorded: Option<workcell_sim::scenario::RecordedConfig>,
-    /// A recorded clip's other arm (the arm the cell's human does not model;
-    /// [`other_arm`]) is given to the perceptions that see the whole person: ground truth,
-    /// its foresight and the noisy camera report it beside the modelled parts, and the
-    /// filter keeps it beyond `d_min` as it does them. ProcNet and its fit follow one arm
-    /// and do not see it. `false`: it is only measured, as the cell's one-armed human
-    /// leaves it. Either way an episode where it comes below `d_min` is a violation.
-    /// Default true.
+    /// The left arm (the two-armed human's own, or beside a one-armed model a recorded
+    /// clip's other arm: [`other_arm`]) is seen by the perceptions that see the whole
+    /// person: ground truth, its foresight and the noisy camera report it with the other
+    /// parts, and the filter keeps it beyond `d_min` as it does them. ProcNet's fit follows
+    /// the right arm and does not see it. `false`: it is only measured, as a one-armed view
+    /// of the person leaves it. Either way an episode where it comes below `d_min` is a
+    /// violation. Default true.
     pub other_arm_seen: bool,
     /// An episode ends unfinished after `timeout_factor * task_s`. Default 3.
     pub timeout_factor: f64,
@@ -93,8 +93,8 @@ pub struct EvaluationConfig {
 }
 
 impl EvaluationConfig {
-    /// Whether perception is given a recorded person's other arm ([`Self::other_arm_seen`]
-    /// and a perception that sees the whole person: not ProcNet's one-armed fit).
+    /// Whether perception sees the left arm ([`Self::other_arm_seen`] and a perception that
+    /// sees the whole person: not ProcNet's one-armed fit).
     #[must_use]
     pub fn other_arm_is_seen(&self) -> bool {
         self.other_arm_seen && !matches!(self.perception, PerceptionConfig::Procnet(_))
@@ -537,14 +537,15 @@ pub struct EpisodeMetrics {
     /// (the noisy camera, the oracles) or fitted none.
     #[serde(default = "no_error", with = "lossless::f64")]
     pub fit_error_m: f64,
-    /// The recorded person's other arm, which the cell's human neither has nor follows
-    /// (`other_arm`): its smallest separation from the robot, m, by the same exact shapes
-    /// as `min_separation_m`; the rest of the metrics are the modelled human's. The filter
-    /// guards it where perception sees it (`EvaluationConfig::other_arm_seen`). NaN without
-    /// such an arm (the generator's motion, a clip with one arm).
+    /// The left arm: the two-armed human's own (its parts are also in `min_separation_m` and
+    /// the rest), or, beside a one-armed model, the recorded person's other arm (`other_arm`),
+    /// which the rest of the metrics leave out: its smallest separation from the robot, m, by
+    /// the same exact shapes as `min_separation_m`. The filter guards it where perception
+    /// sees it (`EvaluationConfig::other_arm_seen`). NaN without such an arm (a one-armed
+    /// model with the generator's motion or a clip with one arm).
     #[serde(default = "no_error", with = "lossless::f64")]
     pub other_arm_min_separation_m: f64,
-    /// Time the other arm spent below d_min, s (0 without one).
+    /// Time the left arm spent below d_min, s (0 without one).
     #[serde(default, with = "lossless::f64")]
     pub other_arm_violation_s: f64,
     #[serde(with = "lossless::f64")]

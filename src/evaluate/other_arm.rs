@@ -1,4 +1,6 @@
-//! The recorded person's other arm: the one a one-armed human model neither has nor follows.
+//! The recorded person's other arm: the one a one-armed human model (`human_arm`, a model of
+//! one's own) neither has nor follows; the catalogue's `human` has both arms and follows
+//! both.
 //!
 //! A clip records both arms, but the cell's human moves only the arm it models; the robot
 //! can come near the other one and nothing sees it, the filter included. To count what the
@@ -33,9 +35,13 @@ pub struct OtherArm {
 
 impl OtherArm {
     /// The sizes of `human`'s arm at its neutral configuration; `None` for a model without
-    /// the links `upper_arm`, `forearm` and `hand` with collision geometry.
+    /// the links `upper_arm`, `forearm` and `hand` with collision geometry, and for one with a
+    /// left arm of its own (`left_upper_arm`: the model follows the other arm itself).
     #[must_use]
     pub fn new(human: &RobotModel) -> Option<Self> {
+        if human.link_id(HumanPart::LeftUpperArm.link_name()).is_some() {
+            return None;
+        }
         let links: [LinkId; 3] = [
             human.link_id("upper_arm")?,
             human.link_id("forearm")?,
@@ -61,9 +67,9 @@ impl OtherArm {
         Some(Self {
             torso,
             parts: [
-                size(HumanPart::UpperArm, links[0], s, upper)?,
-                size(HumanPart::Forearm, links[1], e, fore)?,
-                size(HumanPart::Hand, links[2], w, fore)?,
+                size(HumanPart::LeftUpperArm, links[0], s, upper)?,
+                size(HumanPart::LeftForearm, links[1], e, fore)?,
+                size(HumanPart::LeftHand, links[2], w, fore)?,
             ],
         })
     }
@@ -107,7 +113,13 @@ mod tests {
     /// the arm's own and the bone lines are where its capsules lie.
     #[test]
     fn placed_on_the_modelled_arm_the_parts_are_its_capsules() {
+        // The two-armed catalogue human follows its left arm itself: no other arm.
         let human = RobotModel::from_catalogue("human").expect("catalogue");
+        assert!(OtherArm::new(&human).is_none());
+        // The one-armed human: the two-armed one without its left arm.
+        let one = RobotModel::one_armed_human().expect("one-armed");
+        assert_eq!(one.dof() + 5, human.dof());
+        let human = one;
         let arm = OtherArm::new(&human).expect("an arm");
         let mut geometry = workcell_safety::HumanGeometry::new(&human).expect("geometry");
         let mut state = KinematicState::new(&human);
@@ -133,10 +145,11 @@ mod tests {
         arm.place_into(&X_WT, joints_T, &mut placed);
         assert_eq!(placed.len(), 3);
         for p in &placed {
+            assert_eq!(p.part.side(), Some(workcell_robots::Side::Left));
             let t = truth
                 .parts
                 .iter()
-                .find(|t| t.part == p.part)
+                .find(|t| t.part == p.part.mirrored())
                 .expect("the part is modelled");
             for (got, want) in [
                 (p.capsule.a_W, t.capsule.a_W),

@@ -137,7 +137,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,fit_error_m,other_arm_min_separation_m,other_arm_violation_s,simulated_s,wall_s,setup_s";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,fit_error_m,other_arm_min_separation_m,other_arm_violation_s,simulated_s,wall_s,setup_s,perception_error_left_upper_arm_m,perception_error_left_forearm_m,perception_error_left_hand_m";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -152,7 +152,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3},{:.3}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5}",
             e.episode,
             e.seed,
             e.filter,
@@ -191,7 +191,10 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             e.other_arm_violation_s,
             e.simulated_s,
             e.wall_s,
-            e.setup_s
+            e.setup_s,
+            part_error(e, HumanPart::LeftUpperArm),
+            part_error(e, HumanPart::LeftForearm),
+            part_error(e, HumanPart::LeftHand),
         );
     }
     csv
@@ -248,7 +251,7 @@ fn part_error_line(episodes: &[EpisodeMetrics]) -> Option<String> {
     })
 }
 
-/// The recorded person's other arm (`EpisodeMetrics::other_arm_min_separation_m`): how near
+/// The left arm (`EpisodeMetrics::other_arm_min_separation_m`): how near
 /// the robot it came and for how long within `d_min_m`, over the episodes that had one;
 /// `None` when none had.
 #[must_use]
@@ -271,7 +274,7 @@ pub fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64, seen: bool) -> 
         .count();
     (!with.is_empty()).then(|| {
         format!(
-            "The recorded person's other arm, which the cell's human does not model ({}; {} of {} episodes played one): closest {closest:.4} m, below d_min in {} episodes ({:.3} s), touching the robot in {touched}.",
+            "The left arm (the two-armed human's own, or a recorded person's other arm placed beside a one-armed model; {}; {} of {} episodes had one): closest {closest:.4} m, below d_min in {} episodes ({:.3} s), touching the robot in {touched}.",
             if seen {
                 "perception sees it and the filter guards it"
             } else {
@@ -324,8 +327,8 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         "- d_min: {:.3} m (true separation: exact robot shapes against the true human)\n",
         context.d_min_m
     );
-    // Either arm of a recorded person below d_min is a violation; the table below is the
-    // modelled human's, the other arm has a line of its own.
+    // Either arm below d_min is a violation; the left arm has a line of its own (a recorded
+    // other arm beside a one-armed model is not in the table below).
     let other_arm_below = episodes
         .iter()
         .filter(|e| e.other_arm_min_separation_m < context.d_min_m)
@@ -337,7 +340,7 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
     };
     let other_arm = if other_arm_below > 0 {
         format!(
-            " (the recorded person's other arm, {}, came below d_min in {other_arm_below} episodes)",
+            " (the left arm, {}, came below d_min in {other_arm_below} episodes)",
             if context.other_arm_seen {
                 "seen and guarded"
             } else {
@@ -663,7 +666,7 @@ mod tests {
         let md = summary_markdown(&context, &[near.clone(), far.clone(), none.clone()]);
         // The modelled human never came near: the other arm alone makes the verdict.
         assert!(
-            md.contains("## Verdict: VIOLATIONS (the recorded person's other arm, which nothing sees or guards, came below d_min in 1 episodes)"),
+            md.contains("## Verdict: VIOLATIONS (the left arm, which nothing sees or guards, came below d_min in 1 episodes)"),
             "{md}"
         );
         assert!(near.violated() && !far.violated() && !none.violated());
@@ -675,12 +678,12 @@ mod tests {
             &[near.clone(), far.clone()],
         );
         assert!(
-            seen.contains("other arm, seen and guarded, came below")
-                && seen.contains("(perception sees it and the filter guards it; 2 of 2"),
+            seen.contains("left arm, seen and guarded, came below")
+                && seen.contains("; perception sees it and the filter guards it; 2 of 2"),
             "{seen}"
         );
         assert!(
-            md.contains("2 of 3 episodes played one): closest -0.0100 m, below d_min in 1 episodes (0.008 s), touching the robot in 1."),
+            md.contains("2 of 3 episodes had one): closest -0.0100 m, below d_min in 1 episodes (0.008 s), touching the robot in 1."),
             "{md}"
         );
         // The other arm beyond d_min: no violation, and no "-0.000 s" of the empty sum.
@@ -690,7 +693,7 @@ mod tests {
         // Without the other arm: the verdict alone, no line.
         let md = summary_markdown(&context, &[none]);
         assert!(
-            md.contains("## Verdict: no violation\n") && !md.contains("other arm"),
+            md.contains("## Verdict: no violation\n") && !md.contains("left arm"),
             "{md}"
         );
     }
@@ -700,7 +703,19 @@ mod tests {
         let mut tally = crate::evaluate::tally::Tally::new(0, 7, "qp".into(), 10.0);
         tally.tick(
             0.0,
-            Some((0.07, [Some(0.0), None, Some(0.04), Some(0.1), None])),
+            Some((
+                0.07,
+                [
+                    Some(0.0),
+                    None,
+                    Some(0.04),
+                    Some(0.1),
+                    None,
+                    None,
+                    None,
+                    None,
+                ],
+            )),
             1.0,
             0.0,
             0.0,

@@ -123,9 +123,10 @@ impl Tally {
     }
 
     /// The robot's approach speed toward `part` within the power and force limiting
-    /// distance, m/s (its body region's contact speed applies there).
+    /// distance, m/s (its body region's contact speed applies there: both arms' parts count
+    /// as their limb's).
     pub fn approach(&mut self, part: HumanPart, approach_m_s: f64) {
-        if let Some(i) = crate::evaluate::PFL_PARTS.iter().position(|&p| p == part) {
+        if let Some(i) = (crate::evaluate::PFL_PARTS.iter()).position(|&p| p == part.limb()) {
             let peak = &mut self.metrics.peak_approach_by_part_m_s[i];
             *peak = peak.max(approach_m_s);
         }

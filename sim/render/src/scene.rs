@@ -9,7 +9,13 @@ use workcell_robots::{HumanPart, LinkId, RobotModel};
 use crate::RenderMesh;
 
 /// The segmentation classes (the class-index PNGs store these numbers). The human's classes
-/// are its [`HumanPart`]s; files name every class in `snake_case` (`upper_arm`).
+/// are its [`HumanPart`]s; files name every class in `snake_case` (`upper_arm`). The arms'
+/// classes carry their side (`forearm` the right's, `left_forearm` the left's): the fit needs
+/// each arm's own mask, and a side is what the body's layout in the image tells a network
+/// (the left arm hangs from the left shoulder), where instance masks would leave the
+/// network to number arms and the fit to match the numbers to sides. The right arm keeps the
+/// numbers of the one-armed datasets, so their labels and the networks trained on them read
+/// as before.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 #[repr(u8)]
@@ -20,16 +26,22 @@ pub enum Class {
     UpperArm = 3,
     Forearm = 4,
     Hand = 5,
+    LeftUpperArm = 6,
+    LeftForearm = 7,
+    LeftHand = 8,
 }
 
 impl Class {
-    pub const ALL: [Class; 6] = [
+    pub const ALL: [Class; 9] = [
         Class::Background,
         Class::Robot,
         Class::Torso,
         Class::UpperArm,
         Class::Forearm,
         Class::Hand,
+        Class::LeftUpperArm,
+        Class::LeftForearm,
+        Class::LeftHand,
     ];
 
     /// Lower-case name (`upper_arm`); a human class is named as its part.
@@ -63,6 +75,9 @@ impl Class {
             Class::UpperArm => Some(HumanPart::UpperArm),
             Class::Forearm => Some(HumanPart::Forearm),
             Class::Hand => Some(HumanPart::Hand),
+            Class::LeftUpperArm => Some(HumanPart::LeftUpperArm),
+            Class::LeftForearm => Some(HumanPart::LeftForearm),
+            Class::LeftHand => Some(HumanPart::LeftHand),
         }
     }
 
@@ -83,6 +98,9 @@ impl Class {
             Class::UpperArm => [60, 200, 90],
             Class::Forearm => [230, 40, 60],
             Class::Hand => [240, 220, 40],
+            Class::LeftUpperArm => [30, 110, 50],
+            Class::LeftForearm => [140, 20, 140],
+            Class::LeftHand => [150, 120, 20],
         }
     }
 }
@@ -94,6 +112,9 @@ impl From<HumanPart> for Class {
             HumanPart::UpperArm => Class::UpperArm,
             HumanPart::Forearm => Class::Forearm,
             HumanPart::Hand => Class::Hand,
+            HumanPart::LeftUpperArm => Class::LeftUpperArm,
+            HumanPart::LeftForearm => Class::LeftForearm,
+            HumanPart::LeftHand => Class::LeftHand,
         }
     }
 }

@@ -124,9 +124,9 @@ mod tests {
             other_arm: &[],
         };
         oracle.estimate(&input, &mut told);
-        // The default cell's whole body: upper arm, forearm, hand and head.
+        // The default cell's whole body: upper arm, forearm, hand, head and the left arm's.
         let parts = now.parts.len();
-        assert_eq!(parts, 4);
+        assert_eq!(parts, 7);
         assert_eq!(told.parts.len(), parts * (1 + FORESIGHT_INSTANTS));
         assert_eq!(told.parts[..parts], now.parts[..]);
         for _ in 0..300 {

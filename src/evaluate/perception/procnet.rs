@@ -314,6 +314,7 @@ impl ProcNetCamera {
         }
         self.geometry
             .estimate_into(human, &self.kinematics, &self.still_qd, &mut self.fitted);
+        self.fitted.parts.retain(|p| is_fitted(p.part));
         true
     }
 
@@ -463,6 +464,7 @@ impl HumanPerception for ProcNetCamera {
         }
         self.geometry
             .estimate_into(&input.model.human, &self.kinematics, &self.qd, out);
+        out.parts.retain(|p| is_fitted(p.part));
         out.uncertainty_m = self.ageing.aged_uncertainty(m.uncertainty_m, 0.0, age);
         out.uncertainty_rate_m_s = 0.0;
         if tracing::enabled!(tracing::Level::TRACE) {
@@ -648,12 +650,18 @@ pub fn head_places_unseen(model: &CellModel, camera: &Camera) -> Result<usize> {
     Ok(unseen)
 }
 
+/// Whether the fit places `part`: the torso, the head and the right arm; not yet the left arm,
+/// whose joints stay where the fit starts them (an estimate of it would be a guess).
+fn is_fitted(part: workcell_safety::HumanPart) -> bool {
+    part.side() != Some(workcell_robots::Side::Left)
+}
+
 /// `part:error_mm` of each part's end points against the truth's (mean of the two ends).
 fn part_errors(estimate: &HumanEstimate, truth: &HumanEstimate) -> String {
     estimate
         .parts
         .iter()
-        .zip(&truth.parts)
+        .filter_map(|e| Some((e, truth.parts.iter().find(|t| t.part == e.part)?)))
         .map(|(e, t)| {
             let mm = 500.0
                 * ((e.capsule.a_W - t.capsule.a_W).length()

@@ -142,11 +142,24 @@ impl ArticulatedArm {
             trunk.push(j);
             link = human.joints()[j].parent;
         }
+        // The fitted joints: those between the torso and the fitted parts (the right arm's;
+        // a left arm's joints are held).
+        let mut on_chain = vec![false; human.joints().len()];
+        for &part_link in &links {
+            let mut link = part_link;
+            while link != torso {
+                let Some(j) = human.links()[link].parent_joint else {
+                    break;
+                };
+                on_chain[j] = true;
+                link = human.joints()[j].parent;
+            }
+        }
         let fitted: Vec<usize> = human
             .actuated_joints()
             .iter()
             .enumerate()
-            .filter(|(_, j)| !trunk.contains(j))
+            .filter(|(_, j)| on_chain[**j] && !trunk.contains(j))
             .map(|(i, _)| i)
             .collect();
         if fitted.is_empty() {
