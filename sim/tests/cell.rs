@@ -483,6 +483,54 @@ fn the_default_cell_renders_every_class_it_shows_at_any_supported_size() {
     }
 }
 
+/// The whole body's two arms, seen from in front of the default cell's person at the start
+/// (over the robot's side of the table): each arm's pixels carry its side's classes and lie
+/// around the projection of its own hand, on the side of the image where that arm hangs
+/// (the person faces the camera: their left arm is on the image's right).
+#[test]
+fn the_camera_sees_each_arm_with_its_sides_classes() {
+    use workcell_sim::render::Class;
+    let model = default_model();
+    let state = CellState::new(&model).expect("state");
+    let mut cell = workcell_sim::CellScene::new(&model);
+    cell.update(&state);
+    let cam = workcell_sim::render::Camera::look_at(
+        [0.5, -0.15, 1.9],
+        [1.35, -0.15, 1.2],
+        [0.0, 0.0, 1.0],
+        320,
+        240,
+        60.0,
+    )
+    .unwrap();
+    let mut frame = workcell_sim::render::Frame::new();
+    workcell_sim::render::CpuRenderer::new()
+        .render(&cell.scene, &cam, &mut frame)
+        .unwrap();
+    let classes = frame.classes(&cell.scene);
+    let hand_px = |link: &str| {
+        let l = model.human.link_id(link).expect(link);
+        let p_W = state.human_link_poses()[l].translation;
+        cam.project(cam.X_WC.inverse_transform_point(p_W)).expect("in front")
+    };
+    let centroid = |class: Class| {
+        let (mut sum, mut n) = ([0.0, 0.0], 0.0);
+        for (i, _) in classes.iter().enumerate().filter(|(_, c)| **c == class as u8) {
+            sum[0] += (i % 320) as f64 + 0.5;
+            sum[1] += (i / 320) as f64 + 0.5;
+            n += 1.0;
+        }
+        assert!(n > 20.0, "{class:?}: {n} pixels");
+        [sum[0] / n, sum[1] / n]
+    };
+    let (right, left) = (centroid(Class::Forearm), centroid(Class::LeftForearm));
+    let (right_hand, left_hand) = (hand_px("hand"), hand_px("left_hand"));
+    let d = |a: [f64; 2], b: [f64; 2]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+    assert!(d(right, right_hand) < d(right, left_hand), "{right:?}");
+    assert!(d(left, left_hand) < d(left, right_hand), "{left:?}");
+    assert!(left[0] > right[0], "left {left:?}, right {right:?}");
+}
+
 /// Settings that asked for hours of work or gigabytes (and hung or aborted) are refused with
 /// their key and limit.
 #[test]

@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use workcell_render::RenderMesh;
 use workcell_robots::math::{Pose, Vector};
-use workcell_robots::{Coordinate, Joint, LinkId, RobotModel, Shape};
+use workcell_robots::{Coordinate, HumanPart, Joint, LinkId, RobotModel, Shape, Side};
 
 use super::*;
 use crate::error::{PerceptionError, Result};
@@ -22,6 +22,8 @@ const IK_DONE_M: f64 = 1e-3;
 pub struct ArticulatedArm {
     pub(super) human: RobotModel,
     pub(super) X_WH: Pose,
+    /// The arm's parts: [`FITTED_PARTS`] (the right arm's), or the left arm's.
+    pub(super) parts: [HumanPart; 3],
     pub(super) links: [LinkId; 3],
     /// What the fit renders of each part: its visuals' outside pieces.
     pub(super) meshes: [Option<Arc<RenderMesh>>; 3],
@@ -79,13 +81,26 @@ enum PoseOf {
 const MAX_MOVING: usize = 16;
 
 impl ArticulatedArm {
-    /// The arm of `human` (in the look it is seen in: its visuals are what is rendered)
-    /// standing with its base at `X_WH`.
+    /// The (right) arm of `human` (in the look it is seen in: its visuals are what is
+    /// rendered) standing with its base at `X_WH`.
     ///
     /// # Errors
     /// [`PerceptionError::Input`] when the model has no joints, an arm part has no link of
     /// its name, or the forearm has no visual geometry.
     pub fn new(human: &RobotModel, X_WH: &Pose) -> Result<Self> {
+        Self::of_side(human, X_WH, Side::Right)
+    }
+
+    /// The arm on `side` of `human`: the right arm's parts ([`FITTED_PARTS`]) or the left's
+    /// ([`HumanPart::LEFT_ARM`]); the fit moves the joints between the torso and them.
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn of_side(human: &RobotModel, X_WH: &Pose, side: Side) -> Result<Self> {
+        let parts = match side {
+            Side::Right => FITTED_PARTS,
+            Side::Left => HumanPart::LEFT_ARM,
+        };
         let missing = |message: String| PerceptionError::Input {
             message: format!("human model {}: {message}", human.name()),
         };
@@ -96,7 +111,7 @@ impl ArticulatedArm {
         let mut meshes: [Option<Arc<RenderMesh>>; 3] = [None, None, None];
         let mut hulls: [Option<Arc<RenderMesh>>; 3] = [None, None, None];
         let mut models: [Option<RigidModel>; 3] = [None, None, None];
-        for (i, part) in FITTED_PARTS.into_iter().enumerate() {
+        for (i, part) in parts.into_iter().enumerate() {
             let link = human
                 .link_id(part.link_name())
                 .ok_or_else(|| missing(format!("no link named {part}")))?;
@@ -208,6 +223,7 @@ impl ArticulatedArm {
             trunk,
             human: human.clone(),
             X_WH: *X_WH,
+            parts,
             links,
             meshes,
             hulls,
@@ -296,10 +312,17 @@ impl ArticulatedArm {
             .collect()
     }
 
-    /// The links of the upper arm, the forearm and the hand ([`FITTED_PARTS`]).
+    /// The links of the upper arm, the forearm and the hand ([`Self::parts`]).
     #[must_use]
     pub fn part_links(&self) -> [LinkId; 3] {
         self.links
+    }
+
+    /// The arm's upper arm, forearm and hand: [`FITTED_PARTS`] for the right arm, the left
+    /// arm's parts for the left ([`Self::of_side`]).
+    #[must_use]
+    pub fn parts(&self) -> [HumanPart; 3] {
+        self.parts
     }
 
     /// The forearm as the paper's pose search and its error metric see it.

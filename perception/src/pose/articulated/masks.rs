@@ -11,7 +11,8 @@ use crate::error::{PerceptionError, Result};
 pub struct ArmMasks {
     pub width: usize,
     pub height: usize,
-    /// Upper arm, forearm, hand ([`FITTED_PARTS`]), row-major, values in [0, 1].
+    /// Upper arm, forearm, hand (of one arm: [`FITTED_PARTS`], or
+    /// [`ArticulatedArm::parts`] where built for an arm), row-major, values in [0, 1].
     pub parts: [Vec<f32>; 3],
     /// That a pixel shows nothing that could hide the arm.
     pub background: Vec<f32>,
@@ -29,6 +30,20 @@ impl ArmMasks {
     /// # Errors
     /// [`PerceptionError::Input`] when `classes` is not `width x height`.
     pub fn from_classes(classes: &[u8], width: usize, height: usize) -> Result<Self> {
+        Self::from_classes_of(FITTED_PARTS, classes, width, height)
+    }
+
+    /// From a class image, the planes of `parts` (an arm's: [`ArticulatedArm::parts`]). The
+    /// other arm's pixels are neither the parts' nor the background: they may hide the arm.
+    ///
+    /// # Errors
+    /// As [`Self::from_classes`].
+    pub fn from_classes_of(
+        parts: [HumanPart; 3],
+        classes: &[u8],
+        width: usize,
+        height: usize,
+    ) -> Result<Self> {
         check_len(classes.len(), width, height)?;
         let plane = |c: Class| -> Vec<f32> {
             classes
@@ -39,7 +54,7 @@ impl ArmMasks {
         Ok(Self {
             width,
             height,
-            parts: FITTED_PARTS.map(|p| plane(Class::of_part(p))),
+            parts: parts.map(|p| plane(Class::of_part(p))),
             background: plane(Class::Background),
             torso: plane(Class::Torso),
             depth_m: None,
@@ -53,6 +68,21 @@ impl ArmMasks {
     /// # Errors
     /// [`PerceptionError::Input`] when a plane is not `width x height`.
     pub fn from_planes(width: usize, height: usize, planes: &[(Class, &[f32])]) -> Result<Self> {
+        Self::from_planes_of(FITTED_PARTS, width, height, planes)
+    }
+
+    /// From a network's per-class probabilities, the planes of `parts` (an arm's:
+    /// [`ArticulatedArm::parts`]); a network without the left arm's classes gives the left
+    /// arm empty planes.
+    ///
+    /// # Errors
+    /// As [`Self::from_planes`].
+    pub fn from_planes_of(
+        parts: [HumanPart; 3],
+        width: usize,
+        height: usize,
+        planes: &[(Class, &[f32])],
+    ) -> Result<Self> {
         let n = width * height;
         for (_, p) in planes {
             check_len(p.len(), width, height)?;
@@ -76,7 +106,7 @@ impl ArmMasks {
         Ok(Self {
             width,
             height,
-            parts: FITTED_PARTS.map(part),
+            parts: parts.map(part),
             background,
             torso,
             depth_m: None,
