@@ -16,12 +16,11 @@ use workcell_render::roi::{self, Roi, RoiKind};
 use workcell_render::{Camera, Class, CpuRenderer};
 use workcell_robots::collision::{LinkCapsule, end_away_from, link_bounding_capsule};
 use workcell_robots::math::{Pose, Vector};
-use workcell_robots::{HumanPart, RobotModel};
+use workcell_robots::{HumanPart, RobotModel, Side};
 
 use crate::error::{PerceptionError, Result};
 use crate::pose::{
-    ArmFit, ArmFitConfig, ArmFitter, ArmMasks, ArmModel, ArticulatedArm, FITTED_PARTS, NoPose,
-    PartCapsule,
+    ArmFit, ArmFitConfig, ArmFitter, ArmMasks, ArmModel, ArticulatedArm, NoPose, PartCapsule,
 };
 
 /// What the tracker knows of the arm in one frame.
@@ -177,8 +176,22 @@ impl ArmTracker {
     /// # Errors
     /// As [`ArmModel::new`] and [`ArticulatedArm::new`].
     pub fn new(human: &RobotModel, X_WH: &Pose, config: ArmFitConfig) -> Result<Self> {
-        let arm = ArmModel::new(human, X_WH)?;
-        let articulated = ArticulatedArm::new(human, X_WH)?;
+        Self::of_side(human, X_WH, config, Side::Right)
+    }
+
+    /// A tracker of the arm on `side` of `human` (the left arm: its own parts and classes,
+    /// [`ArticulatedArm::of_side`]); otherwise as [`ArmTracker::new`].
+    ///
+    /// # Errors
+    /// As [`ArmTracker::new`].
+    pub fn of_side(
+        human: &RobotModel,
+        X_WH: &Pose,
+        config: ArmFitConfig,
+        side: Side,
+    ) -> Result<Self> {
+        let arm = ArmModel::of_side(human, X_WH, side)?;
+        let articulated = ArticulatedArm::of_side(human, X_WH, side)?;
         let capsules = articulated
             .part_links()
             .map(|l| link_bounding_capsule(human, l));
@@ -199,12 +212,13 @@ impl ArmTracker {
     /// The same tracker segmenting frames with `net` ([`ArmTracker::track`]).
     ///
     /// # Errors
-    /// [`PerceptionError::Input`] when the network has no forearm class.
+    /// [`PerceptionError::Input`] when the network has no class for the arm's forearm.
     pub fn with_network(mut self, net: ProcNet) -> Result<Self> {
-        if net.config().class_index(Class::Forearm).is_none() {
+        let forearm = Class::of_part(self.fitter.arm().parts()[1]);
+        if net.config().class_index(forearm).is_none() {
             return Err(PerceptionError::Input {
                 message: format!(
-                    "the network has no forearm class (it has {:?})",
+                    "the network has no {forearm} class (it has {:?})",
                     net.config().classes
                 ),
             });
@@ -350,7 +364,7 @@ impl ArmTracker {
         self.last_fx = Some(roi_camera.fx);
         let planes = net.planes(planar, s, s)?;
         let refs: Vec<(Class, &[f32])> = planes.iter().map(|(c, p)| (*c, p.as_slice())).collect();
-        ArmMasks::from_planes(s, s, &refs)
+        ArmMasks::from_planes_of(self.fitter.arm().parts(), s, s, &refs)
     }
 
     /// One frame already read through the region of interest the tracker asked for
@@ -481,7 +495,8 @@ impl ArmTracker {
             }
         };
         let X_WL = self.fitter.arm().part_poses(&fit.q, &Pose::IDENTITY)?;
-        let parts: Vec<PartCapsule> = FITTED_PARTS
+        let arm_parts = self.fitter.arm().parts();
+        let parts: Vec<PartCapsule> = arm_parts
             .iter()
             .zip(&self.capsules)
             .zip(&X_WL)
@@ -506,8 +521,8 @@ impl ArmTracker {
                 .find(|p| p.part == part)
                 .map(|p| end_away_from(p.a_W, p.b_W, elbow))
         };
-        let wrist = away(HumanPart::Forearm).unwrap_or(X_WL[2].translation);
-        let hand = away(HumanPart::Hand).unwrap_or(wrist);
+        let wrist = away(arm_parts[1]).unwrap_or(X_WL[2].translation);
+        let hand = away(arm_parts[2]).unwrap_or(wrist);
         self.joints_W = Some([X_WL[0].translation, X_WL[1].translation, wrist, hand]);
         self.cut = if self.fitter.config().hand_region {
             edge_mass(masks, CUT_RING_PX, FOREARM_AND_HAND) >= CUT_MASS_PX
@@ -584,6 +599,7 @@ mod tests {
     use std::sync::Arc;
 
     use super::*;
+    use crate::pose::FITTED_PARTS;
     use workcell_render::RenderMesh;
     use workcell_render::Renderer as _;
     use workcell_robots::math::pose_from_xyz_rpy;

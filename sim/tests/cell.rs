@@ -511,11 +511,16 @@ fn the_camera_sees_each_arm_with_its_sides_classes() {
     let hand_px = |link: &str| {
         let l = model.human.link_id(link).expect(link);
         let p_W = state.human_link_poses()[l].translation;
-        cam.project(cam.X_WC.inverse_transform_point(p_W)).expect("in front")
+        cam.project(cam.X_WC.inverse_transform_point(p_W))
+            .expect("in front")
     };
     let centroid = |class: Class| {
         let (mut sum, mut n) = ([0.0, 0.0], 0.0);
-        for (i, _) in classes.iter().enumerate().filter(|(_, c)| **c == class as u8) {
+        for (i, _) in classes
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| **c == class as u8)
+        {
             sum[0] += (i % 320) as f64 + 0.5;
             sum[1] += (i / 320) as f64 + 0.5;
             n += 1.0;

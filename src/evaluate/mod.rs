@@ -94,10 +94,17 @@ pub struct EvaluationConfig {
 
 impl EvaluationConfig {
     /// Whether perception sees the left arm ([`Self::other_arm_seen`] and a perception that
-    /// sees the whole person: not ProcNet's one-armed fit).
+    /// sees the whole person: not ProcNet's fit of the right arm, unless it fits the left
+    /// too, `perception.fit_left_arm`, or is the true pose).
     #[must_use]
     pub fn other_arm_is_seen(&self) -> bool {
-        self.other_arm_seen && !matches!(self.perception, PerceptionConfig::Procnet(_))
+        self.other_arm_seen
+            && match &self.perception {
+                PerceptionConfig::Procnet(c) => {
+                    c.masks == perception::MaskKind::TruePose || c.fit_left_arm
+                }
+                _ => true,
+            }
     }
 }
 

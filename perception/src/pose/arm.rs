@@ -10,7 +10,7 @@ use std::sync::Arc;
 use workcell_render::RenderMesh;
 use workcell_robots::collision::link_bounding_capsule;
 use workcell_robots::math::{Pose, Vector};
-use workcell_robots::{HumanPart, JointKind, LinkId, RobotModel};
+use workcell_robots::{HumanPart, JointKind, LinkId, RobotModel, Side};
 
 use super::{Anchor, RigidModel};
 use crate::error::{PerceptionError, Result};
@@ -49,7 +49,8 @@ pub struct ArmModel {
     /// The shoulder in the world and the upper arm's length with every joint at zero (clamped
     /// to its limits): where a human whose trunk moves stands at rest.
     pub rest_shoulder_W: (Vector, f64),
-    /// The arm's parts in [`HumanPart::ARM`] order, with their radii.
+    /// The arm's parts in [`HumanPart::ARM`] order (the left arm's: [`HumanPart::LEFT_ARM`]),
+    /// with their radii.
     parts: Vec<(HumanPart, Placement, f64)>,
 }
 
@@ -66,6 +67,19 @@ impl ArmModel {
     /// [`PerceptionError::Input`] when a part of the arm has no link of its name, no
     /// collision geometry, or the forearm has no visual geometry.
     pub fn new(human: &RobotModel, X_WH: &Pose) -> Result<Self> {
+        Self::of_side(human, X_WH, Side::Right)
+    }
+
+    /// The arm on `side` of `human` (the left arm's parts: [`HumanPart::LEFT_ARM`]).
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn of_side(human: &RobotModel, X_WH: &Pose, side: Side) -> Result<Self> {
+        let arm_parts = match side {
+            Side::Right => HumanPart::ARM,
+            Side::Left => HumanPart::LEFT_ARM,
+        };
+        let [upper_arm, forearm_part, _] = arm_parts;
         let missing = |message: String| PerceptionError::Input {
             message: format!("human model {}: {message}", human.name()),
         };
@@ -74,7 +88,7 @@ impl ArmModel {
                 .link_id(part.link_name())
                 .ok_or_else(|| missing(format!("no link named {part}")))
         };
-        let forearm = link(HumanPart::Forearm)?;
+        let forearm = link(forearm_part)?;
         let mut mesh = RenderMesh::default();
         for g in &human.links()[forearm].visuals {
             mesh.append(
@@ -119,19 +133,19 @@ impl ArmModel {
         let reference = human.fk(*X_WH, &q_ref)?;
         let X_FW = reference.link_pose(forearm).inverse();
         let rest_shoulder_W = {
-            let s = reference.link_pose(link(HumanPart::UpperArm)?).translation;
+            let s = reference.link_pose(link(upper_arm)?).translation;
             (s, (reference.link_pose(forearm).translation - s).length())
         };
         let mut parts = Vec::with_capacity(HumanPart::ARM.len());
-        for part in HumanPart::ARM {
+        for part in arm_parts {
             let l = link(part)?;
             let capsule = link_bounding_capsule(human, l)
                 .ok_or_else(|| missing(format!("the {part} link has no collision geometry")))?;
-            let placement = if part == HumanPart::UpperArm && shoulder_W.is_some() {
+            let placement = if part == upper_arm && shoulder_W.is_some() {
                 Placement::ShoulderToElbow
             } else {
                 let X_FL = X_FW * *reference.link_pose(l);
-                if !rigid_with(human, l, forearm) && part != HumanPart::UpperArm {
+                if !rigid_with(human, l, forearm) && part != upper_arm {
                     tracing::debug!("{part} moves against the forearm; placed at q = 0");
                 }
                 Placement::Rigid {
@@ -169,7 +183,7 @@ impl ArmModel {
             .parts
             .iter()
             .find_map(|(part, placement, _)| match placement {
-                Placement::Rigid { a_F, b_F } if *part == HumanPart::Forearm => {
+                Placement::Rigid { a_F, b_F } if part.limb() == HumanPart::Forearm => {
                     Some(a_F.length().max(b_F.length()))
                 }
                 _ => None,

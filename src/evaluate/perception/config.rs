@@ -141,6 +141,12 @@ pub struct ProcNetConfig {
     /// an oracle, for the bound of a perfect trunk (the arm still fitted to the masks).
     /// Default false.
     pub true_trunk: bool,
+    /// The two-armed human's left arm fitted too, after the right arm on the right's trunk,
+    /// with the perfect segmenter's masks (`masks = "ground_truth"`; the shipped networks
+    /// have no left arm's classes): its parts join the estimate where its fit finds a pose.
+    /// Default false: from the cell's camera the left arm is mostly hidden behind the body
+    /// and its fit is not yet to be trusted (docs/human.md, "Both arms").
+    pub fit_left_arm: bool,
     /// The tracked region of interest holds the hand's far end as well as the shoulder,
     /// elbow and wrist, and a frame whose forearm or hand reached its edge sends the next one
     /// to the workspace (`ArmFitConfig::hand_region`; docs/perception.md, "The region that
@@ -241,6 +247,7 @@ impl PerceptionKind {
                 "human_acceleration_m_s2",
                 "velocity_fits",
                 "true_trunk",
+                "fit_left_arm",
                 "hand_region",
                 "hull_outlines",
                 "trunk_downsample",
@@ -304,6 +311,7 @@ impl Default for ProcNetConfig {
             human_acceleration_m_s2: 10.0,
             velocity_fits: 2,
             true_trunk: false,
+            fit_left_arm: false,
             hand_region: None,
             hull_outlines: None,
             trunk_downsample: None,
@@ -500,7 +508,7 @@ impl ProcNetConfig {
             }
         };
         format!(
-            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{stride}{search}{}{}{}{}",
+            "{masks} + articulated render-and-compare{}{}, latency {latency_ms:.0} ms{velocity}{stride}{search}{}{}{}{}{}",
             if self.depth {
                 " with depth (RGB-D)"
             } else {
@@ -513,6 +521,11 @@ impl ProcNetConfig {
             },
             if self.true_trunk {
                 ", the true trunk (an oracle)"
+            } else {
+                ""
+            },
+            if self.fit_left_arm {
+                ", the left arm fitted too"
             } else {
                 ""
             },

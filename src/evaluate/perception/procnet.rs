@@ -18,7 +18,7 @@ use workcell_perception::pose::{
 };
 use workcell_perception::{ArmTracker, NoEstimate};
 use workcell_procnet::{Backend, ProcNet};
-use workcell_safety::{HumanEstimate, HumanGeometry};
+use workcell_safety::{HumanEstimate, HumanGeometry, HumanPart};
 use workcell_sim::render::occlusion::{OCCLUDER_DEPTH_M, Occluder, OccluderKind, fit_occluder};
 use workcell_sim::render::{Camera, Class, CpuRenderer, Frame, Renderer};
 use workcell_sim::retarget::TrunkJoints;
@@ -26,11 +26,17 @@ use workcell_sim::{CellModel, CellScene, Scenario};
 
 use super::{AgeingBound, HumanPerception, MaskKind, PerceptionInput, ProcNetConfig};
 use crate::error::{Error, Result};
-use crate::robots::KinematicState;
+use crate::robots::{KinematicState, Side};
 
 /// An estimate older than this is dropped, s: the filter then brakes (about ten frames at
 /// 30 Hz; by then the aged bound has grown by 0.45 m at the default 10 m/s^2).
 pub const MAX_AGE_S: f64 = 0.3;
+
+/// The left arm's fit is taken where its masks show at least this much forearm, px of the
+/// camera's image: below it (a few pixels past the body's edge) the fit's poses were 0.7 m
+/// off in the median and none within its bound; above 100 px they were 17-42 mm off and
+/// within it (docs/human.md, "Both arms").
+const LEFT_MIN_SHOWN_PX: f32 = 100.0;
 
 /// One measurement: the fitted joints and the pose uncertainty.
 #[derive(Debug, Clone)]
@@ -40,6 +46,9 @@ struct Measured {
     /// The fit came from the global search, not the track: where the fits before it put
     /// the arm says nothing of how it moves.
     reacquired: bool,
+    /// The left arm's joints in `q` are measured (its own fit, or the true pose); else they
+    /// are a guess and its parts are left out of the estimate.
+    left_seen: bool,
 }
 
 /// Frames measured, and why those without an estimate had none.
@@ -62,6 +71,9 @@ pub struct ProcNetCamera {
     rate_hz: f64,
     ageing: AgeingBound,
     tracker: ArmTracker,
+    /// The two-armed human's left arm, fitted after the right on the right's trunk: with the
+    /// perfect segmenter's masks (a network of the left arm's classes is still to come).
+    left: Option<ArmTracker>,
     camera: Camera,
     scene: CellScene,
     renderer: CpuRenderer,
@@ -183,6 +195,30 @@ impl ProcNetCamera {
                 );
             }
         }
+        // The left arm on the right's trunk: its own fit of the trunk would be the same work
+        // twice.
+        let has_left = model
+            .human
+            .link_id(HumanPart::LeftForearm.link_name())
+            .is_some();
+        if config.fit_left_arm && (!has_left || config.masks != MaskKind::GroundTruth) {
+            return Err(Error::config(
+                "perception.fit_left_arm",
+                "the left arm is fitted on a two-armed human (`human`) with the perfect \
+                 segmenter's masks (perception.masks = \"ground_truth\"): the shipped networks \
+                 have no left arm's classes"
+                    .to_string(),
+            ));
+        }
+        let left = (config.fit_left_arm && net.is_none())
+            .then(|| {
+                let held = ArmFitConfig {
+                    fit_trunk: false,
+                    ..fit.clone()
+                };
+                ArmTracker::of_side(&model.human, &model.X_WH, held, Side::Left)
+            })
+            .transpose()?;
         let mut tracker = ArmTracker::new(&model.human, &model.X_WH, fit)?;
         if let Some(net) = net {
             tracker = tracker.with_network(net)?;
@@ -196,6 +232,7 @@ impl ProcNetCamera {
             rate_hz,
             ageing: config.ageing(rate_hz),
             tracker,
+            left,
             camera,
             scene: CellScene::new(model),
             renderer: CpuRenderer::new(),
@@ -241,6 +278,7 @@ impl ProcNetCamera {
                 q: input.state.human_q().to_vec(),
                 uncertainty_m: 0.0,
                 reacquired: false,
+                left_seen: true,
             }));
         }
         self.scene.update(input.state);
@@ -264,19 +302,70 @@ impl ProcNetCamera {
         // The region this frame is read through, for the trace.
         let region =
             tracing::enabled!(tracing::Level::TRACE).then(|| self.tracker.region(&self.camera));
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
         let outcome = if network {
             self.tracker.track(&self.camera, &self.frame.rgb, depth)?
         } else {
             // The perfect segmenter: each part's pixels in the frame.
-            let (w, h) = (self.camera.width as usize, self.camera.height as usize);
             let mut masks = ArmMasks::from_classes(&classes, w, h)?;
             masks.depth_m = depth.map(<[f32]>::to_vec);
             self.tracker.track_masks(&self.camera, &masks)?
         };
         Ok(match outcome {
-            Ok(estimate) => {
+            Ok(mut estimate) => {
                 self.counts.estimates += 1;
-                if self.place_fitted(input, &estimate.fit.q) {
+                // The left arm on the right's trunk, its joints into the same configuration;
+                // the bound the larger of the two.
+                let mut left_seen = false;
+                if let Some(left) = &mut self.left {
+                    left.hold_trunk_at(&estimate.fit.q)?;
+                    let mut masks = ArmMasks::from_classes_of(HumanPart::LEFT_ARM, &classes, w, h)?;
+                    masks.depth_m = depth.map(<[f32]>::to_vec);
+                    let shown_px: f32 = masks.parts[1].iter().sum();
+                    let outcome = left.track_masks(&self.camera, &masks)?;
+                    if tracing::enabled!(tracing::Level::DEBUG) {
+                        let at = |part: HumanPart| {
+                            input
+                                .truth
+                                .parts
+                                .iter()
+                                .find(|p| p.part == part)
+                                .map(|p| p.capsule)
+                        };
+                        let error_mm = match (&outcome, at(HumanPart::LeftForearm)) {
+                            (Ok(found), Some(truth)) => (found.parts.iter())
+                                .find(|p| p.part == HumanPart::LeftForearm)
+                                .map_or(f64::NAN, |p| {
+                                    500.0
+                                        * ((p.a_W - truth.a_W).length()
+                                            + (p.b_W - truth.b_W).length())
+                                }),
+                            _ => f64::NAN,
+                        };
+                        tracing::debug!(
+                            t = input.t_s,
+                            shown_px,
+                            pose = outcome.is_ok(),
+                            bound_mm = outcome.as_ref().map_or(f64::NAN, |e| 1e3 * e.uncertainty_m),
+                            error_mm,
+                            "left arm"
+                        );
+                    }
+                    // Too little of the arm shown: any pose would be made up (from the cell's
+                    // camera the left arm is mostly behind the body: docs/human.md).
+                    if let (Ok(found), true) = (outcome, shown_px >= LEFT_MIN_SHOWN_PX) {
+                        for &i in left.articulated().fitted() {
+                            if let (Some(q), Some(v)) =
+                                (estimate.fit.q.get_mut(i), found.fit.q.get(i))
+                            {
+                                *q = *v;
+                            }
+                        }
+                        estimate.uncertainty_m = estimate.uncertainty_m.max(found.uncertainty_m);
+                        left_seen = true;
+                    }
+                }
+                if self.place_fitted(input, &estimate.fit.q, left_seen) {
                     if let Some((error, _)) = super::super::episode::perception_error(
                         &self.fitted.parts,
                         &input.truth.parts,
@@ -292,6 +381,7 @@ impl ProcNetCamera {
                     reacquired: estimate.fit.reacquired,
                     q: estimate.fit.q,
                     uncertainty_m: estimate.uncertainty_m,
+                    left_seen,
                 })
             }
             Err(reason) => {
@@ -307,14 +397,14 @@ impl ProcNetCamera {
 
     /// Places the human's parts where the fitted joints `q` put them into `fitted` (at
     /// rest); false where the model's kinematics fail.
-    fn place_fitted(&mut self, input: &PerceptionInput<'_>, q: &[f64]) -> bool {
+    fn place_fitted(&mut self, input: &PerceptionInput<'_>, q: &[f64], left_seen: bool) -> bool {
         let human = &input.model.human;
         if human.forward_kinematics(q, &mut self.kinematics).is_err() {
             return false;
         }
         self.geometry
             .estimate_into(human, &self.kinematics, &self.still_qd, &mut self.fitted);
-        self.fitted.parts.retain(|p| is_fitted(p.part));
+        self.fitted.parts.retain(|p| is_fitted(p.part, left_seen));
         true
     }
 
@@ -464,7 +554,7 @@ impl HumanPerception for ProcNetCamera {
         }
         self.geometry
             .estimate_into(&input.model.human, &self.kinematics, &self.qd, out);
-        out.parts.retain(|p| is_fitted(p.part));
+        out.parts.retain(|p| is_fitted(p.part, m.left_seen));
         out.uncertainty_m = self.ageing.aged_uncertainty(m.uncertainty_m, 0.0, age);
         out.uncertainty_rate_m_s = 0.0;
         if tracing::enabled!(tracing::Level::TRACE) {
@@ -650,10 +740,11 @@ pub fn head_places_unseen(model: &CellModel, camera: &Camera) -> Result<usize> {
     Ok(unseen)
 }
 
-/// Whether the fit places `part`: the torso, the head and the right arm; not yet the left arm,
-/// whose joints stay where the fit starts them (an estimate of it would be a guess).
-fn is_fitted(part: workcell_safety::HumanPart) -> bool {
-    part.side() != Some(workcell_robots::Side::Left)
+/// Whether the fit places `part`: the torso, the head and the right arm; the left arm where
+/// its own fit found it (`left_seen`), else its joints stay where the fit starts them (an
+/// estimate of it would be a guess).
+fn is_fitted(part: HumanPart, left_seen: bool) -> bool {
+    left_seen || part.side() != Some(Side::Left)
 }
 
 /// `part:error_mm` of each part's end points against the truth's (mean of the two ends).
@@ -1239,6 +1330,35 @@ mod tests {
             at_exposure > 0.0 && at_exposure < at_exposure_m,
             "{human_model}: {at_exposure} m"
         );
+    }
+
+    /// The left arm's fit needs a left arm and the perfect segmenter's masks: a one-armed
+    /// human, or a network's masks (the shipped networks have no left arm's classes), are
+    /// refused with the key; on the whole body with true masks it is built.
+    #[test]
+    fn the_left_arms_fit_needs_a_left_arm_and_true_masks() {
+        let path =
+            std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/configs/default.toml"));
+        let build = |human_model: &str, masks: MaskKind| {
+            let mut scenario = Scenario::from_file(path).expect("scenario");
+            scenario.set_human_model(human_model, path);
+            let model = CellModel::new(&scenario, path).expect("cell");
+            let config = ProcNetConfig {
+                fit_left_arm: true,
+                masks,
+                depth: true,
+                ..ProcNetConfig::default()
+            };
+            ProcNetCamera::new(&config, &scenario, &model).map(|p| p.left.is_some())
+        };
+        for (model, masks) in [
+            ("human_arm", MaskKind::GroundTruth),
+            ("human", MaskKind::Network),
+        ] {
+            let e = build(model, masks).err().expect("refused");
+            assert!(e.to_string().contains("perception.fit_left_arm"), "{e}");
+        }
+        assert!(build("human", MaskKind::GroundTruth).expect("built"));
     }
 
     /// A camera that stops delivering frames: the estimate ages out after `MAX_AGE_S` and
