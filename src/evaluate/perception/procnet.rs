@@ -1355,7 +1355,7 @@ mod tests {
             ("human_arm", MaskKind::GroundTruth),
             ("human", MaskKind::Network),
         ] {
-            let e = build(model, masks).err().expect("refused");
+            let e = build(model, masks).expect_err("refused");
             assert!(e.to_string().contains("perception.fit_left_arm"), "{e}");
         }
         assert!(build("human", MaskKind::GroundTruth).expect("built"));

@@ -59,14 +59,14 @@ fn render_classes(
     mut scene: workcell_render::Scene,
 ) -> (Vec<u8>, Vec<f32>) {
     let poses = arm.part_poses(q, &camera.X_WC).expect("poses");
-    for p in 0..3 {
-        let Some(mesh) = &arm.meshes[p] else { continue };
+    for ((part, mesh), pose) in arm.parts().into_iter().zip(&arm.meshes).zip(poses) {
+        let Some(mesh) = mesh else { continue };
         scene.push(workcell_render::SceneObject {
-            name: arm.parts()[p].name().into(),
-            class: Class::of_part(arm.parts()[p]),
+            name: part.name().into(),
+            class: Class::of_part(part),
             mesh: mesh.clone(),
             texture: 0.0,
-            X_WO: camera.X_WC * poses[p],
+            X_WO: camera.X_WC * pose,
         });
     }
     let mut frame = workcell_render::Frame::new();
