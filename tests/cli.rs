@@ -157,8 +157,8 @@ fn simulate_writes_csv_and_plot_and_replays_by_seed() {
     let human = std::fs::read_to_string(a.join("human_poses.csv")).expect("csv");
     assert_eq!(
         human.lines().count(),
-        1 + 21 * 13,
-        "13 human links per sample (the default cell's whole body)"
+        1 + 21 * 19,
+        "19 human links per sample (the default cell's whole body: 13, and the left arm's 6)"
     );
     assert!(
         std::fs::read_to_string(a.join("trajectories.svg"))
@@ -1721,7 +1721,7 @@ fn shards_merge_into_the_report_of_one_process() {
     assert_eq!(single_replays, replays(&merged));
     // summary.html lists them (worst first) beside the report's tables.
     let page = read(&merged, "summary.html");
-    assert!(page.contains("<h2>Verdict: VIOLATIONS</h2>"), "{page}");
+    assert!(page.contains("<h2>Verdict: VIOLATIONS"), "{page}");
     let links: Vec<&str> = page
         .match_indices("<a href=\"replays/episode-")
         .map(|(k, _)| &page[k + 9..k + 9 + page[k + 9..].find('"').expect("quote")])

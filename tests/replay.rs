@@ -37,14 +37,13 @@ fn recorded_episode(
     file: &str,
     task_s: u32,
     seed: u64,
+    overrides: &[&str],
 ) -> (Evaluation, EpisodeMetrics, Recording, Scenario, CellModel) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
-    let (evaluation, _) = Evaluation::from_file_as(
-        &path,
-        Some(PerceptionKind::Noisy),
-        &[format!("task_s={task_s}")],
-    )
-    .expect("evaluation");
+    let mut all = vec![format!("task_s={task_s}")];
+    all.extend(overrides.iter().map(|o| (*o).to_string()));
+    let (evaluation, _) =
+        Evaluation::from_file_as(&path, Some(PerceptionKind::Noisy), &all).expect("evaluation");
     let (metrics, _, recording) =
         record_episode(&evaluation, FilterMode::Qp, 0, seed, 1.0 / 30.0).expect("episode");
     let mut scenario = evaluation.scenario.clone();
@@ -82,12 +81,20 @@ fn tracks_of(bytes: &[u8]) -> HashMap<String, Track> {
     tracks
 }
 
-/// A recorded clip's other arm (the one the cell's human does not model) is drawn: each
-/// part's node at every key lies on the recorded capsule's segment (its centre, its axis along
-/// the segment), with the capsule's length; the generator's episodes have none.
+/// A recorded clip's other arm beside a one-armed human (`human_arm`) is drawn: each part's
+/// node at every key lies on the recorded capsule's segment (its centre, its axis along the
+/// segment), with the capsule's length; the generator's episodes have none, and neither has
+/// the two-armed `human`, which draws its own left arm.
 #[test]
 fn a_recorded_clips_other_arm_is_drawn_where_it_was() {
-    let (_, _, recording, _, model) = recorded_episode("configs/evaluate-recorded.toml", 2, 1);
+    let (_, _, two_armed, _, _) = recorded_episode("configs/evaluate-recorded.toml", 1, 1, &[]);
+    assert!(two_armed.other_arm.iter().all(Vec::is_empty));
+    let (_, _, recording, _, model) = recorded_episode(
+        "configs/evaluate-recorded.toml",
+        2,
+        1,
+        &["human_model=\"human_arm\""],
+    );
     let bytes = episode_glb(&model, &[], &recording, 0.1, "test");
     let tracks = tracks_of(&bytes);
     let samples = recording.t_s.len();
@@ -116,7 +123,7 @@ fn a_recorded_clips_other_arm_is_drawn_where_it_was() {
 #[test]
 fn an_episode_reads_back_with_the_simulations_poses() {
     let (evaluation, metrics, recording, scenario, model) =
-        recorded_episode("configs/evaluate.toml", 3, 2);
+        recorded_episode("configs/evaluate.toml", 3, 2, &[]);
     let cameras: Vec<_> = scenario
         .cameras
         .iter()

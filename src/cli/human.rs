@@ -285,6 +285,9 @@ fn generated(
             (Landmark::RightWrist, "hand"),
             (Landmark::RightElbow, "forearm"),
             (Landmark::RightShoulder, "upper_arm"),
+            (Landmark::LeftWrist, "left_hand"),
+            (Landmark::LeftElbow, "left_forearm"),
+            (Landmark::LeftShoulder, "left_upper_arm"),
         ]
         .into_iter()
         .filter_map(|(l, name)| human.link_id(name).map(|id| (l, id)))

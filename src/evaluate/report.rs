@@ -137,7 +137,7 @@ impl Aggregate {
 }
 
 /// Header of `metrics.csv`.
-pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,fit_error_m,other_arm_min_separation_m,other_arm_violation_s,simulated_s,wall_s,setup_s,perception_error_left_upper_arm_m,perception_error_left_forearm_m,perception_error_left_hand_m";
+pub const CSV_HEADER: &str = "episode,seed,filter,min_separation_m,closest,violations,violation_s,violation_moving_s,task_time_s,nominal_task_s,task_ratio,peak_speed_near_human_m_s,peak_approach_speed_m_s,peak_human_speed_m_s,peak_human_acceleration_m_s2,peak_approach_upper_arm_m_s,peak_approach_forearm_m_s,peak_approach_hand_m_s,peak_approach_head_m_s,contacts_moving,contacts_standing,ticks_pass,ticks_modified,ticks_relaxed,ticks_braking,braking_reasons,perception_error_m,perception_error_torso_m,perception_error_upper_arm_m,perception_error_forearm_m,perception_error_hand_m,perception_error_head_m,perception_error_left_upper_arm_m,perception_error_left_forearm_m,perception_error_left_hand_m,fit_error_m,other_arm_min_separation_m,other_arm_violation_s,simulated_s,wall_s,setup_s";
 
 /// `metrics.csv`: one row per episode.
 #[must_use]
@@ -152,7 +152,7 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5}",
+            "{},{},{},{:.6},\"{}\",{},{:.3},{:.3},{},{:.3},{},{:.4},{:.4},{:.4},{:.2},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{},\"{}\",{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.3},{:.3}",
             e.episode,
             e.seed,
             e.filter,
@@ -186,15 +186,15 @@ pub fn metrics_csv(episodes: &[EpisodeMetrics]) -> String {
             part_error(e, HumanPart::Forearm),
             part_error(e, HumanPart::Hand),
             part_error(e, HumanPart::Head),
+            part_error(e, HumanPart::LeftUpperArm),
+            part_error(e, HumanPart::LeftForearm),
+            part_error(e, HumanPart::LeftHand),
             e.fit_error_m,
             e.other_arm_min_separation_m,
             e.other_arm_violation_s,
             e.simulated_s,
             e.wall_s,
-            e.setup_s,
-            part_error(e, HumanPart::LeftUpperArm),
-            part_error(e, HumanPart::LeftForearm),
-            part_error(e, HumanPart::LeftHand),
+            e.setup_s
         );
     }
     csv
@@ -276,9 +276,9 @@ pub fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64, seen: bool) -> 
         format!(
             "The left arm (the two-armed human's own, or a recorded person's other arm placed beside a one-armed model; {}; {} of {} episodes had one): closest {closest:.4} m, below d_min in {} episodes ({:.3} s), touching the robot in {touched}.",
             if seen {
-                "perception sees it and the filter guards it"
+                "perception sees it, as it does the other parts"
             } else {
-                "nothing perceives or guards it"
+                "perception does not see it"
             },
             with.len(),
             episodes.len(),
@@ -305,7 +305,8 @@ pub struct SummaryContext<'a> {
     /// not permitted.
     pub contact_speed_limits: &'a [(String, f64)],
     pub command: &'a str,
-    /// A recorded person's other arm was seen and guarded (`RunSettings::other_arm_seen`).
+    /// Perception saw the left arm (`RunSettings::other_arm_seen`): the filter, where one
+    /// runs, guards it as the other parts.
     pub other_arm_seen: bool,
 }
 
@@ -342,9 +343,9 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         format!(
             " (the left arm, {}, came below d_min in {other_arm_below} episodes)",
             if context.other_arm_seen {
-                "seen and guarded"
+                "seen by perception"
             } else {
-                "which nothing sees or guards"
+                "unseen by perception"
             }
         )
     } else {
@@ -666,7 +667,7 @@ mod tests {
         let md = summary_markdown(&context, &[near.clone(), far.clone(), none.clone()]);
         // The modelled human never came near: the other arm alone makes the verdict.
         assert!(
-            md.contains("## Verdict: VIOLATIONS (the left arm, which nothing sees or guards, came below d_min in 1 episodes)"),
+            md.contains("## Verdict: VIOLATIONS (the left arm, unseen by perception, came below d_min in 1 episodes)"),
             "{md}"
         );
         assert!(near.violated() && !far.violated() && !none.violated());
@@ -678,8 +679,8 @@ mod tests {
             &[near.clone(), far.clone()],
         );
         assert!(
-            seen.contains("left arm, seen and guarded, came below")
-                && seen.contains("; perception sees it and the filter guards it; 2 of 2"),
+            seen.contains("left arm, seen by perception, came below")
+                && seen.contains("; perception sees it, as it does the other parts; 2 of 2"),
             "{seen}"
         );
         assert!(
