@@ -427,7 +427,11 @@ impl<'a> Run<'a> {
             (self.estimate.parts).retain(|p| p.part.side() != Some(workcell_robots::Side::Left));
         }
         // The error is the modelled parts' (a recorded other arm's are not in the truth).
-        let tick_error = perception_error(&self.estimate.parts, &self.truth.parts);
+        let tick_error = perception_error(
+            &self.estimate.parts,
+            &self.truth.parts,
+            self.perception.unseen_parts(),
+        );
         let out = self.filter.tick(
             &self.model.robot,
             self.state.q(),
@@ -547,15 +551,17 @@ fn robot_point_velocity(
 /// each part ([`HumanPart::ALL`]'s order; `None` for a part the human lacks or the estimate
 /// does not report): each true part against the estimate's first part of its name (an
 /// estimate's look-ahead copies follow its present parts). A part the estimate lacks is not
-/// counted (a perception that does not see it: ProcNet's left arm); `None` when the estimate
-/// has none of the truth's parts (no human seen).
+/// counted (a perception that does not see it), nor are the `unseen` parts, which are a
+/// region the part may be in rather than a pose (ProcNet's left arm where no fit saw it);
+/// `None` when the estimate has none of the truth's parts (no human seen).
 pub(super) fn perception_error(
     estimate: &[PartEstimate],
     truth: &[PartEstimate],
+    unseen: &[HumanPart],
 ) -> Option<(f64, [Option<f64>; HumanPart::ALL.len()])> {
     let mut per_part = [(0.0, 0usize); HumanPart::ALL.len()];
     let (mut sum, mut n) = (0.0, 0usize);
-    for t in truth {
+    for t in truth.iter().filter(|t| !unseen.contains(&t.part)) {
         let Some(e) = estimate.iter().find(|e| e.part == t.part) else {
             continue;
         };
@@ -613,7 +619,7 @@ mod tests {
             part(HumanPart::Forearm, [0.3, 0.03, 1.2], [0.6, 0.0, 1.25]),
             part(HumanPart::Hand, [0.6, 0.0, 1.1], [0.7, 0.0, 1.1]),
         ]);
-        let (mean, by_part) = perception_error(&seen.parts, &truth.parts).expect("same parts");
+        let (mean, by_part) = perception_error(&seen.parts, &truth.parts, &[]).expect("same parts");
         assert!((mean - (0.0 + 0.04 + 0.1) / 3.0).abs() < 1e-12, "{mean}");
         let expect = [
             Some(0.0),
@@ -633,15 +639,21 @@ mod tests {
             }
         }
         // No human seen, or none of the truth's parts: no error at all.
-        assert!(perception_error(&[], &truth.parts).is_none());
+        assert!(perception_error(&[], &truth.parts, &[]).is_none());
         let left = part(HumanPart::LeftHand, [0.6, 0.4, 1.2], [0.7, 0.4, 1.2]);
-        assert!(perception_error(&[left], &truth.parts).is_none());
+        assert!(perception_error(&[left], &truth.parts, &[]).is_none());
         // A part the estimate lacks is not counted; one the truth lacks neither; the order
         // does not matter.
-        let (mean, by_part) = perception_error(&[seen.parts[2], left, seen.parts[1]], &truth.parts)
-            .expect("two parts seen");
+        let (mean, by_part) =
+            perception_error(&[seen.parts[2], left, seen.parts[1]], &truth.parts, &[])
+                .expect("two parts seen");
         assert!((mean - 0.07).abs() < 1e-12, "{mean}");
         assert!(by_part[0].is_none() && by_part[7].is_none());
+        // An unseen part (a region, not a pose) is not counted either.
+        let (mean, by_part) = perception_error(&seen.parts, &truth.parts, &[HumanPart::Hand])
+            .expect("two parts seen");
+        assert!((mean - 0.02).abs() < 1e-12, "{mean}");
+        assert!(by_part[3].is_none());
     }
 
     /// What the ground truth is given, tick by tick, in a recorded episode on the one-armed

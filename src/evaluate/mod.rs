@@ -93,18 +93,14 @@ pub struct EvaluationConfig {
 }
 
 impl EvaluationConfig {
-    /// Whether perception sees the left arm ([`Self::other_arm_seen`] and a perception that
-    /// sees the whole person: not ProcNet's fit of the right arm, unless it fits the left
-    /// too, `perception.fit_left_arm`, or is the true pose).
+    /// Whether perception reports the left arm ([`Self::other_arm_seen`]): ground truth and
+    /// the noisy camera as they see it; ProcNet where its fit found it
+    /// (`perception.fit_left_arm`, or the true pose), and otherwise the reach of the arm
+    /// around its shoulder; beside a one-armed model, the recorded other arm to the
+    /// perceptions of the whole person only.
     #[must_use]
     pub fn other_arm_is_seen(&self) -> bool {
         self.other_arm_seen
-            && match &self.perception {
-                PerceptionConfig::Procnet(c) => {
-                    c.masks == perception::MaskKind::TruePose || c.fit_left_arm
-                }
-                _ => true,
-            }
     }
 }
 

@@ -276,9 +276,9 @@ pub fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64, seen: bool) -> 
         format!(
             "The left arm (the two-armed human's own, or a recorded person's other arm placed beside a one-armed model; {}; {} of {} episodes had one): closest {closest:.4} m, below d_min in {} episodes ({:.3} s), touching the robot in {touched}.",
             if seen {
-                "perception sees it, as it does the other parts"
+                "perception reports it with the other parts (ProcNet, where no fit saw it: the arm's reach about its shoulder)"
             } else {
-                "perception does not see it"
+                "not reported to the filter"
             },
             with.len(),
             episodes.len(),
@@ -343,9 +343,9 @@ pub fn summary_markdown(context: &SummaryContext<'_>, episodes: &[EpisodeMetrics
         format!(
             " (the left arm, {}, came below d_min in {other_arm_below} episodes)",
             if context.other_arm_seen {
-                "seen by perception"
+                "reported by perception"
             } else {
-                "unseen by perception"
+                "not reported to the filter"
             }
         )
     } else {
@@ -667,7 +667,7 @@ mod tests {
         let md = summary_markdown(&context, &[near.clone(), far.clone(), none.clone()]);
         // The modelled human never came near: the other arm alone makes the verdict.
         assert!(
-            md.contains("## Verdict: VIOLATIONS (the left arm, unseen by perception, came below d_min in 1 episodes)"),
+            md.contains("## Verdict: VIOLATIONS (the left arm, not reported to the filter, came below d_min in 1 episodes)"),
             "{md}"
         );
         assert!(near.violated() && !far.violated() && !none.violated());
@@ -679,8 +679,8 @@ mod tests {
             &[near.clone(), far.clone()],
         );
         assert!(
-            seen.contains("left arm, seen by perception, came below")
-                && seen.contains("; perception sees it, as it does the other parts; 2 of 2"),
+            seen.contains("left arm, reported by perception, came below")
+                && seen.contains("; perception reports it with the other parts (ProcNet, where no fit saw it: the arm's reach about its shoulder); 2 of 2"),
             "{seen}"
         );
         assert!(

@@ -48,6 +48,11 @@ pub trait HumanPerception {
     fn fit_error_m(&self) -> Option<f64> {
         None
     }
+    /// The parts of the last estimate that are a region the part may be in (an arm no fit
+    /// saw, guarded over its reach), not a pose: the perception error leaves them out.
+    fn unseen_parts(&self) -> &[workcell_safety::HumanPart] {
+        &[]
+    }
 }
 
 /// A perception that reports no human from `at_s` on (`perception.camera_fails_at_s`).

@@ -38,6 +38,54 @@ pub const MAX_AGE_S: f64 = 0.3;
 /// within it (docs/human.md, "Both arms").
 const LEFT_MIN_SHOWN_PX: f32 = 100.0;
 
+/// The left arm where no fit found it: each of its parts somewhere within its reach of the
+/// shoulder, which the fitted trunk places (an arm unseen is guarded where it could be).
+#[derive(Debug, Clone)]
+struct UnseenArm {
+    /// The left upper arm's link, whose origin is the shoulder.
+    shoulder: crate::robots::LinkId,
+    /// Each part's reach: its farthest point from the shoulder with the arm straight (its
+    /// capsule's far end and radius), m.
+    parts: [(HumanPart, f64); 3],
+}
+
+impl UnseenArm {
+    /// The left arm of `human`, where it has one with collision geometry.
+    fn of(human: &crate::robots::RobotModel) -> Option<Self> {
+        let shoulder = human.link_id(HumanPart::LeftUpperArm.link_name())?;
+        let q: Vec<f64> = (human.position_limits().iter())
+            .map(|[lo, hi]| 0.0_f64.clamp(*lo, *hi))
+            .collect();
+        let k = human.fk(crate::robots::math::Pose::IDENTITY, &q).ok()?;
+        let s = k.link_pose(shoulder).translation;
+        let reach = |part: HumanPart| -> Option<(HumanPart, f64)> {
+            let link = human.link_id(part.link_name())?;
+            let c = crate::robots::collision::link_bounding_capsule(human, link)?;
+            let (a, b) = c.segment_in_world(k.link_pose(link));
+            Some((part, (a - s).length().max((b - s).length()) + c.radius_m))
+        };
+        let [u, f, h] = HumanPart::LEFT_ARM;
+        Some(Self {
+            shoulder,
+            parts: [reach(u)?, reach(f)?, reach(h)?],
+        })
+    }
+
+    /// The parts as spheres about the shoulder where `kinematics` puts it, at rest, into
+    /// `out`.
+    fn place_into(&self, kinematics: &KinematicState, out: &mut HumanEstimate) {
+        let s = kinematics.link_pose(self.shoulder).translation;
+        for (part, reach_m) in self.parts {
+            out.parts.push(workcell_safety::PartEstimate {
+                part,
+                capsule: workcell_safety::Capsule::new(s, s, reach_m),
+                v_a_W: crate::robots::math::Vector::ZERO,
+                v_b_W: crate::robots::math::Vector::ZERO,
+            });
+        }
+    }
+}
+
 /// One measurement: the fitted joints and the pose uncertainty.
 #[derive(Debug, Clone)]
 struct Measured {
@@ -74,6 +122,8 @@ pub struct ProcNetCamera {
     /// The two-armed human's left arm, fitted after the right on the right's trunk: with the
     /// perfect segmenter's masks (a network of the left arm's classes is still to come).
     left: Option<ArmTracker>,
+    /// The left arm's reach, guarded where no fit saw it.
+    unseen_left: Option<UnseenArm>,
     camera: Camera,
     scene: CellScene,
     renderer: CpuRenderer,
@@ -233,6 +283,7 @@ impl ProcNetCamera {
             ageing: config.ageing(rate_hz),
             tracker,
             left,
+            unseen_left: UnseenArm::of(&model.human),
             camera,
             scene: CellScene::new(model),
             renderer: CpuRenderer::new(),
@@ -369,6 +420,7 @@ impl ProcNetCamera {
                     if let Some((error, _)) = super::super::episode::perception_error(
                         &self.fitted.parts,
                         &input.truth.parts,
+                        &[],
                     ) {
                         self.fit_error.0 += error;
                         self.fit_error.1 += 1;
@@ -555,6 +607,11 @@ impl HumanPerception for ProcNetCamera {
         self.geometry
             .estimate_into(&input.model.human, &self.kinematics, &self.qd, out);
         out.parts.retain(|p| is_fitted(p.part, m.left_seen));
+        if !m.left_seen
+            && let Some(unseen) = &self.unseen_left
+        {
+            unseen.place_into(&self.kinematics, out);
+        }
         out.uncertainty_m = self.ageing.aged_uncertainty(m.uncertainty_m, 0.0, age);
         out.uncertainty_rate_m_s = 0.0;
         if tracing::enabled!(tracing::Level::TRACE) {
@@ -579,6 +636,13 @@ impl HumanPerception for ProcNetCamera {
                 held = %part_errors(&held, input.truth),
                 "estimate error"
             );
+        }
+    }
+
+    fn unseen_parts(&self) -> &[HumanPart] {
+        match (&self.latest, &self.unseen_left) {
+            (Some((_, m)), Some(_)) if !m.left_seen => &HumanPart::LEFT_ARM,
+            _ => &[],
         }
     }
 
@@ -1330,6 +1394,65 @@ mod tests {
             at_exposure > 0.0 && at_exposure < at_exposure_m,
             "{human_model}: {at_exposure} m"
         );
+    }
+
+    /// The unseen left arm's spheres hold its parts in any posture of the arm and the trunk
+    /// (random configurations within the limits: every capsule inside its part's sphere
+    /// about the shoulder), and are no larger than the straight arm's reach (the arm hanging
+    /// straight touches them); a one-armed human has none.
+    #[test]
+    fn the_unseen_arms_reach_holds_it_in_any_posture() {
+        use rand::{Rng, SeedableRng};
+        let human = crate::robots::RobotModel::from_catalogue("human").expect("human");
+        assert!(
+            UnseenArm::of(&crate::robots::RobotModel::from_catalogue("human_arm").expect("arm"))
+                .is_none()
+        );
+        let unseen = UnseenArm::of(&human).expect("a left arm");
+        let mut geometry = HumanGeometry::new(&human).expect("geometry");
+        let limits = human.position_limits();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut kinematics = KinematicState::new(&human);
+        let mut tightest = [f64::INFINITY; 3];
+        for k in 0..200 {
+            let q: Vec<f64> = if k == 0 {
+                limits
+                    .iter()
+                    .map(|[lo, hi]| 0.0_f64.clamp(*lo, *hi))
+                    .collect()
+            } else {
+                limits
+                    .iter()
+                    .map(|[lo, hi]| rng.random_range(*lo..=*hi))
+                    .collect()
+            };
+            human.forward_kinematics(&q, &mut kinematics).expect("fk");
+            let mut truth = HumanEstimate::default();
+            geometry.estimate_into(&human, &kinematics, &vec![0.0; q.len()], &mut truth);
+            let mut spheres = HumanEstimate::default();
+            unseen.place_into(&kinematics, &mut spheres);
+            assert_eq!(spheres.parts.len(), 3);
+            for (i, sphere) in spheres.parts.iter().enumerate() {
+                let part = truth
+                    .parts
+                    .iter()
+                    .find(|p| p.part == sphere.part)
+                    .expect("part");
+                let s = sphere.capsule.a_W;
+                let far = (part.capsule.a_W - s)
+                    .length()
+                    .max((part.capsule.b_W - s).length())
+                    + part.capsule.radius_m;
+                assert!(
+                    far <= sphere.capsule.radius_m + 1e-9,
+                    "{:?}: {far} m",
+                    sphere.part
+                );
+                tightest[i] = tightest[i].min(sphere.capsule.radius_m - far);
+            }
+        }
+        // At the straight arm (the first configuration) the spheres touch.
+        assert!(tightest.iter().all(|&g| g.abs() < 1e-9), "{tightest:?}");
     }
 
     /// The left arm's fit needs a left arm and the perfect segmenter's masks: a one-armed
