@@ -94,13 +94,20 @@ pub struct EvaluationConfig {
 
 impl EvaluationConfig {
     /// Whether perception reports the left arm ([`Self::other_arm_seen`]): ground truth and
-    /// the noisy camera as they see it; ProcNet where its fit found it
-    /// (`perception.fit_left_arm`, or the true pose), and otherwise the reach of the arm
-    /// around its shoulder; beside a one-armed model, the recorded other arm to the
-    /// perceptions of the whole person only.
+    /// the noisy camera as they see it; ProcNet only where its fit follows it
+    /// (`perception.fit_left_arm`, the true pose) or guards its reach
+    /// (`perception.guard_unseen_left_arm`), not with its network's right arm alone.
     #[must_use]
     pub fn other_arm_is_seen(&self) -> bool {
         self.other_arm_seen
+            && match &self.perception {
+                PerceptionConfig::Procnet(c) => {
+                    c.masks == perception::MaskKind::TruePose
+                        || c.fit_left_arm
+                        || c.guard_unseen_left_arm
+                }
+                _ => true,
+            }
     }
 }
 

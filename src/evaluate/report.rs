@@ -276,7 +276,7 @@ pub fn other_arm_line(episodes: &[EpisodeMetrics], d_min_m: f64, seen: bool) -> 
         format!(
             "The left arm (the two-armed human's own, or a recorded person's other arm placed beside a one-armed model; {}; {} of {} episodes had one): closest {closest:.4} m, below d_min in {} episodes ({:.3} s), touching the robot in {touched}.",
             if seen {
-                "perception reports it with the other parts (ProcNet, where no fit saw it: the arm's reach about its shoulder)"
+                "perception reports it with the other parts"
             } else {
                 "not reported to the filter"
             },
@@ -680,7 +680,7 @@ mod tests {
         );
         assert!(
             seen.contains("left arm, reported by perception, came below")
-                && seen.contains("; perception reports it with the other parts (ProcNet, where no fit saw it: the arm's reach about its shoulder); 2 of 2"),
+                && seen.contains("; perception reports it with the other parts; 2 of 2"),
             "{seen}"
         );
         assert!(

@@ -283,7 +283,10 @@ impl ProcNetCamera {
             ageing: config.ageing(rate_hz),
             tracker,
             left,
-            unseen_left: UnseenArm::of(&model.human),
+            unseen_left: config
+                .guard_unseen_left_arm
+                .then(|| UnseenArm::of(&model.human))
+                .flatten(),
             camera,
             scene: CellScene::new(model),
             renderer: CpuRenderer::new(),
@@ -1457,7 +1460,8 @@ mod tests {
 
     /// The left arm's fit needs a left arm and the perfect segmenter's masks: a one-armed
     /// human, or a network's masks (the shipped networks have no left arm's classes), are
-    /// refused with the key; on the whole body with true masks it is built.
+    /// refused with the key; on the whole body with true masks it is built. The unseen arm's
+    /// reach is guarded where asked for on a human that has one.
     #[test]
     fn the_left_arms_fit_needs_a_left_arm_and_true_masks() {
         let path =
@@ -1482,6 +1486,19 @@ mod tests {
             assert!(e.to_string().contains("perception.fit_left_arm"), "{e}");
         }
         assert!(build("human", MaskKind::GroundTruth).expect("built"));
+        // The unseen arm's reach is guarded only when asked for, and only on a left arm.
+        let guard = |human_model: &str, guard_unseen_left_arm: bool| {
+            let mut scenario = Scenario::from_file(path).expect("scenario");
+            scenario.set_human_model(human_model, path);
+            let model = CellModel::new(&scenario, path).expect("cell");
+            let config = ProcNetConfig {
+                guard_unseen_left_arm,
+                ..perfect_masks()
+            };
+            let p = ProcNetCamera::new(&config, &scenario, &model).expect("perception");
+            p.unseen_left.is_some()
+        };
+        assert!(guard("human", true) && !guard("human", false) && !guard("human_arm", true));
     }
 
     /// A camera that stops delivering frames: the estimate ages out after `MAX_AGE_S` and
