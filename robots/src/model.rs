@@ -89,6 +89,13 @@ impl RobotModel {
     pub fn joint_id(&self, name: &str) -> Option<JointId> {
         self.joints.iter().position(|j| j.name == name)
     }
+    /// The joints that move `link`: its parent joint, then that joint's parent link's, up to
+    /// the root (none for the root).
+    pub fn joints_above(&self, link: LinkId) -> impl Iterator<Item = JointId> + '_ {
+        std::iter::successors(self.links.get(link).and_then(|l| l.parent_joint), |&j| {
+            self.links[self.joints[j].parent].parent_joint
+        })
+    }
     /// Total mass of all inertials, in kg.
     #[must_use]
     pub fn mass_kg(&self) -> f64 {

@@ -266,3 +266,37 @@ fn the_left_arm_is_the_right_arms_mirror_image() {
         );
     }
 }
+
+/// The joints that move a link, from its own up to the root: the whole body's hand hangs from
+/// the wrist, the arm's five joints and the trunk's five; the left hand from the left arm's and
+/// the same trunk; the root from none.
+#[test]
+fn the_joints_above_a_link_run_from_it_to_the_root() {
+    let body = RobotModel::from_catalogue("human").unwrap();
+    let names = |link: &str| -> Vec<&str> {
+        body.joints_above(body.link_id(link).unwrap())
+            .map(|j| body.joints()[j].name.as_str())
+            .collect()
+    };
+    let trunk = [
+        "trunk_side",
+        "trunk_lean",
+        "trunk_turn",
+        "pelvis_y",
+        "pelvis_x",
+    ];
+    let arm = [
+        "wrist",
+        "forearm_rotation",
+        "elbow_flexion",
+        "shoulder_rotation",
+        "shoulder_abduction",
+        "shoulder_flexion",
+    ];
+    assert_eq!(names("hand"), [&arm[..], &trunk[..]].concat());
+    let left: Vec<String> = arm.iter().map(|j| format!("left_{j}")).collect();
+    let mut want: Vec<&str> = left.iter().map(String::as_str).collect();
+    want.extend(trunk);
+    assert_eq!(names("left_hand"), want);
+    assert!(names("pelvis").is_empty());
+}

@@ -176,6 +176,11 @@ impl<'a> ArmSpeed<'a> {
 /// Ranges the extra joints (trunk turn, trunk lean, shoulder rotation, forearm rotation,
 /// rad) are drawn from at rest, in a reach and in a wave: a reach turns the trunk a little
 /// towards either side and leans it forward, as people reaching over a table do.
+/// Ranges the arm's three angles (shoulder abduction, shoulder flexion, elbow flexion, rad)
+/// are drawn from at rest and in a reach: either arm's.
+const REST_ARM: [[f64; 2]; 3] = [[0.0, 0.15], [-0.1, 0.15], [0.05, 0.35]];
+const REACH_ARM: [[f64; 2]; 3] = [[0.0, 0.35], [1.0, 1.6], [0.05, 0.6]];
+
 const REST_EXTRA: [[f64; 2]; 4] = [[-0.1, 0.1], [0.0, 0.1], [-0.2, 0.2], [0.6, 1.6]];
 const REACH_EXTRA: [[f64; 2]; 4] = [[-0.25, 0.25], [0.05, 0.3], [-0.4, 0.4], [0.8, 2.2]];
 const WAVE_EXTRA: [[f64; 2]; 4] = [[-0.1, 0.1], [0.0, 0.05], [-0.6, -0.2], [0.0, 0.4]];
@@ -359,33 +364,6 @@ impl HumanMotion {
         // through the same postures as before the left existed (its timing stretches where
         // the left is the faster).
         let mut rng_left = ChaCha8Rng::seed_from_u64(seed ^ 0x4c45_4654_0000_0000); // "LEFT"
-        let left_posture =
-            |rng: &mut ChaCha8Rng, kind: LeftArm, now: &[f64]| -> Option<Vec<(usize, f64)>> {
-                let left = joints.left?;
-                let values: [f64; 5] = match kind {
-                    LeftArm::Hold => left.map(|j| now[j]),
-                    LeftArm::Rest => [
-                        rng.random_range(0.0..0.15),
-                        rng.random_range(-0.1..0.15),
-                        rng.random_range(0.05..0.35),
-                        rng.random_range(REST_EXTRA[2][0]..REST_EXTRA[2][1]),
-                        rng.random_range(REST_EXTRA[3][0]..REST_EXTRA[3][1]),
-                    ],
-                    LeftArm::Reach => [
-                        rng.random_range(0.0..0.35),
-                        rng.random_range(1.0..1.6),
-                        rng.random_range(0.05..0.6),
-                        rng.random_range(REACH_EXTRA[2][0]..REACH_EXTRA[2][1]),
-                        rng.random_range(REACH_EXTRA[3][0]..REACH_EXTRA[3][1]),
-                    ],
-                };
-                Some(
-                    left.into_iter()
-                        .zip(values)
-                        .map(|(j, v)| (j, v.clamp(limits[j][0], limits[j][1])))
-                        .collect(),
-                )
-            };
         if let Some(left) = joints.left {
             // At rest as the right arm is: the same angles, mirrored by the model.
             for (k, j) in left.into_iter().enumerate().take(3) {
@@ -405,22 +383,14 @@ impl HumanMotion {
         for kind in order {
             let (mut q_to, transition_s, hold_s, wave) = match kind {
                 HumanMotionKind::Rest => {
-                    let arm3 = [
-                        rng.random_range(0.0..0.15),
-                        rng.random_range(-0.1..0.15),
-                        rng.random_range(0.05..0.35),
-                    ];
+                    let arm3 = REST_ARM.map(|[lo, hi]| rng.random_range(lo..hi));
                     let (transition, hold) =
                         (rng.random_range(0.6..1.0), rng.random_range(0.8..2.0));
                     let extra = extra(&mut rng, REST_EXTRA);
                     (clamp(arm3, extra), transition, hold, None)
                 }
                 HumanMotionKind::Reach => {
-                    let arm3 = [
-                        rng.random_range(0.0..0.35),
-                        rng.random_range(1.0..1.6),
-                        rng.random_range(0.05..0.6),
-                    ];
+                    let arm3 = REACH_ARM.map(|[lo, hi]| rng.random_range(lo..hi));
                     let (transition, hold) =
                         (rng.random_range(0.7..1.2), rng.random_range(0.5..1.5));
                     let extra = extra(&mut rng, REACH_EXTRA);
@@ -435,9 +405,22 @@ impl HumanMotion {
                     (clamp(arm3, extra), 0.8, hold, Some(wave))
                 }
             };
-            let left = LeftArm::draw(&mut rng_left, kind);
-            for (j, v) in left_posture(&mut rng_left, left, &q).into_iter().flatten() {
-                q_to[j] = v;
+            if let Some(left) = joints.left {
+                // Its three angles, then its shoulder's and forearm's rotation, drawn from
+                // the right arm's ranges (holding: where it was).
+                let ranges = match LeftArm::draw(&mut rng_left, kind) {
+                    LeftArm::Hold => None,
+                    LeftArm::Rest => Some((REST_ARM, REST_EXTRA)),
+                    LeftArm::Reach => Some((REACH_ARM, REACH_EXTRA)),
+                };
+                let values: [f64; 5] = match ranges {
+                    None => left.map(|j| q[j]),
+                    Some((arm, extra)) => [arm[0], arm[1], arm[2], extra[2], extra[3]]
+                        .map(|[lo, hi]| rng_left.random_range(lo..hi)),
+                };
+                for (j, v) in left.into_iter().zip(values) {
+                    q_to[j] = v.clamp(limits[j][0], limits[j][1]);
+                }
             }
             // Shorter transitions, and a wave's swings as much quicker (a hammering forearm).
             let scale = match duration_scale {

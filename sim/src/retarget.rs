@@ -276,16 +276,10 @@ fn left_arm_links(model: &RobotModel) -> Option<[LinkId; 3]> {
 /// root, by their index in a configuration.
 fn chain_dofs(model: &RobotModel, link: LinkId) -> Vec<bool> {
     let mut on = vec![false; model.dof()];
-    let mut l = link;
-    // A tree: each link has at most one parent joint, and the walk ends at the root.
-    for _ in 0..model.joints().len() {
-        let Some(j) = model.joints().iter().position(|joint| joint.child == l) else {
-            break;
-        };
-        if let Some(d) = model.actuated_joints().iter().position(|&a| a == j) {
-            on[d] = true;
+    for j in model.joints_above(link) {
+        if let workcell_robots::Coordinate::Own { index } = model.joints()[j].coordinate {
+            on[index] = true;
         }
-        l = model.joints()[j].parent;
     }
     on
 }

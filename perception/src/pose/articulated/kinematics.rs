@@ -151,24 +151,12 @@ impl ArticulatedArm {
             .collect::<Vec<_>>();
         // The trunk's joints: those that move the torso (the links from the root to it).
         let torso = human.link_id(HumanPart::Torso.link_name()).unwrap_or(0);
-        let mut trunk = Vec::new();
-        let mut link = torso;
-        while let Some(j) = human.links()[link].parent_joint {
-            trunk.push(j);
-            link = human.joints()[j].parent;
-        }
+        let trunk: Vec<usize> = human.joints_above(torso).collect();
         // The fitted joints: those between the torso and the fitted parts (the right arm's;
         // a left arm's joints are held).
         let mut on_chain = vec![false; human.joints().len()];
-        for &part_link in &links {
-            let mut link = part_link;
-            while link != torso {
-                let Some(j) = human.links()[link].parent_joint else {
-                    break;
-                };
-                on_chain[j] = true;
-                link = human.joints()[j].parent;
-            }
+        for j in links.iter().flat_map(|&l| human.joints_above(l)) {
+            on_chain[j] = true;
         }
         let fitted: Vec<usize> = human
             .actuated_joints()
@@ -528,12 +516,8 @@ fn moving_joints(
 ) -> (Vec<MovingJoint>, [PoseOf; 3]) {
     let joints = human.joints();
     let mut needed = vec![false; joints.len()];
-    for &part in parts {
-        let mut link = part;
-        while let Some(j) = human.links()[link].parent_joint {
-            needed[j] = true;
-            link = joints[j].parent;
-        }
+    for j in parts.iter().flat_map(|&l| human.joints_above(l)) {
+        needed[j] = true;
     }
     // Per link: the moving joint (its index among them) whose child it is.
     let mut moved_by: Vec<Option<usize>> = vec![None; human.links().len()];

@@ -219,12 +219,7 @@ impl TrunkModel {
             return Ok(None);
         };
         let actuated = human.actuated_joints();
-        let mut chain = Vec::new();
-        let mut link = torso;
-        while let Some(j) = human.links()[link].parent_joint {
-            chain.push(j);
-            link = human.joints()[j].parent;
-        }
+        let chain: Vec<usize> = human.joints_above(torso).collect();
         let in_chain = |prismatic: bool| -> Vec<usize> {
             (0..actuated.len())
                 .filter(|&i| {
